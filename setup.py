@@ -1,0 +1,40 @@
+"""ament_python package ball_balance: the application and controller_manager_py."""
+import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "ball_balance"
+
+# `ros2 run ball_balance <name>`: the executables of DESIGN.md section 4 plus tools.
+EXECUTABLES = {
+    "ball_tracker": "ball_balance.nodes.ball_tracker_node:main",
+    "ball_balance_controller": "ball_balance.nodes.pid_controller_node:main",
+    "ball_balance_mpc": "ball_balance.nodes.mpc_controller_node:main",
+    "ball_balance_visualizer": "ball_balance.nodes.visualizer_node:main",
+    "robot_state_publisher": "ball_balance.nodes.robot_state_publisher_node:main",
+    "ros2_control_node": "controller_manager_py.ros2_control_node:main",
+    "spawner": "controller_manager_py.spawner:main",
+    "ros2py": "ball_balance.cli.main:main",
+}
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(include=["ball_balance", "ball_balance.*",
+                                    "controller_manager_py", "controller_manager_py.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", sorted(f for f in glob.glob("config/*") if "." in f)),
+        (f"share/{PACKAGE}/scripts", sorted(glob.glob("scripts/*.sh"))),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="ball_balance team",
+    maintainer_email="team@ball-balance.invalid",
+    description="Balance a ball on a plate held by a UR arm (ROS 2 Jazzy, rclpy).",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [f"{name} = {target}" for name, target in EXECUTABLES.items()],
+    },
+)
