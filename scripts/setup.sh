@@ -18,6 +18,10 @@ STAMPS="$VENV/.ball_balance_stamps"
 FORCE=0
 [[ "${1:-}" == "--force" ]] && FORCE=1
 
+# One set-up at a time per checkout (parallel runs would race in colcon's build folder).
+exec 9>"/tmp/ball_balance_setup_$(printf '%s' "$ROOT" | sha256sum | cut -c1-12).lock"
+flock 9
+
 say() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }
 die() { printf '[setup] error: %s\n' "$*" >&2; exit 1; }
 
@@ -134,7 +138,9 @@ export BALL_BALANCE_ROOT="$ROOT"
 export VIRTUAL_ENV="$VENV"
 export PATH="$ROOT/install/lib/ball_balance:$VENV/bin:\$PATH"
 $( [[ $MODE == wheels ]] && echo "export AMENT_PREFIX_PATH=\"$VENV\${AMENT_PREFIX_PATH:+:\$AMENT_PREFIX_PATH}\"" )
+case $- in *u*) _bb_nounset=1; set +u;; *) _bb_nounset=0;; esac
 source "$ROOT/install/local_setup.bash"
+((_bb_nounset)) && set -u; unset _bb_nounset
 export MUJOCO_GL="\${MUJOCO_GL:-egl}"
 export PYOPENGL_PLATFORM="\${PYOPENGL_PLATFORM:-\$MUJOCO_GL}"
 EOF

@@ -1,0 +1,63 @@
+"""The few lines every executable's main() shares: init, spin, clean shutdown, clear errors.
+
+A node that cannot start (a malformed parameter file, a bad parameter value, a missing
+resource) prints one line naming the problem and exits non-zero, instead of a traceback.
+"""
+from __future__ import annotations
+
+import sys
+from typing import Any, Callable, Optional, Sequence
+
+from controller_manager_py.parameters import ParameterError
+
+
+class StartupError(RuntimeError):
+    """Configuration that stops a node at start-up (the message is shown as is)."""
+
+
+def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
+             multithreaded: bool = False) -> int:
+    """Create the node, spin it until Ctrl-C or shutdown, and return the exit code."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+
+    name = getattr(make_node, "__name__", "node")
+    try:
+        rclpy.init(args=args)
+    except Exception as error:  # rcl reports a malformed --params-file here
+        print(f"{name}: cannot start: {_first_line(error)}", file=sys.stderr)
+        return 2
+    node = None
+    try:
+        node = make_node()
+        executor = MultiThreadedExecutor() if multithreaded else SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (ParameterError, StartupError) as error:
+        print(f"{name}: cannot start: {error}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            try:
+                node.destroy_node()
+            except Exception:  # noqa: BLE001 - best effort at shutdown
+                pass
+        if rclpy.ok():
+            rclpy.try_shutdown()
+    return 0
+
+
+def main_for(make_node, multithreaded: bool = False) -> Callable[[], None]:
+    """Build a console-script main(): `main = main_for(MyNode)`."""
+
+    def main(args=None):
+        sys.exit(run_node(make_node, args, multithreaded))
+
+    return main
+
+
+def _first_line(error: BaseException) -> str:
+    text = str(error).strip() or type(error).__name__
+    return text.splitlines()[0]
