@@ -24,6 +24,7 @@ flock 9
 
 say() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }
 die() { printf '[setup] error: %s\n' "$*" >&2; exit 1; }
+trap 'die "step failed at scripts/setup.sh line $LINENO"' ERR
 
 # --- which ROS: a sourced Jazzy installation, or the PyPI wheels ---------------------
 if [[ "${ROS_DISTRO:-}" == "jazzy" && -n "${AMENT_PREFIX_PATH:-}" ]]; then
@@ -37,7 +38,7 @@ else
   PYTHON=""
   for candidate in python3 python3.12 python3.11; do
     if command -v "$candidate" >/dev/null 2>&1 && "$candidate" 2>/dev/null -c 'import sys; sys.exit(sys.version_info[:2] not in ((3, 11), (3, 12)))'; then
-      PYTHON="$(command -v "$candidate")"; break
+      PYTHON="$("$candidate" -c 'import sys; print(sys.executable)')"; break
     fi
   done
   [[ -n "$PYTHON" ]] || die "needs Python 3.11 or 3.12 (the ROS 2 Jazzy wheels exist only for those)"
@@ -110,7 +111,7 @@ done
 build_inputs=$(cd "$ROOT" && find "${PACKAGE_PATHS[@]}" -maxdepth 3 \
     \( -name package.xml -o -name CMakeLists.txt -o -name '*.msg' -o -name '*.srv' -o -name setup.py -o -name setup.cfg \) \
     -not -path './.venv/*' -not -path './build/*' -not -path './install/*' | sort)
-want="$MODE ${PACKAGE_PATHS[*]} $(cd "$ROOT" && digest $build_inputs) $(cd "$ROOT" && find config -type f | sort | digest -)"
+want="$MODE ${PACKAGE_PATHS[*]} $(cd "$ROOT" && digest $build_inputs) $(cd "$ROOT" && find config -type f 2>/dev/null | sort | digest -)"
 if ! stamp_ok build "$want" || [[ ! -f "$ROOT/install/setup.bash" ]]; then
   say "building the workspace with colcon (${PACKAGE_PATHS[*]})"
   mkdir -p "$ROOT/build"
