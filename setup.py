@@ -17,6 +17,23 @@ EXECUTABLES = {
     "ros2py": "ball_balance.cli.main:main",
 }
 
+# controller_manager_py plugins (hardware components and controllers), by plugin string.
+CMPY_HARDWARE = {
+    "mock_components/GenericSystem": "controller_manager_py.hardware_interface.mock_components:GenericSystem",
+}
+CMPY_CONTROLLERS = {
+    "joint_state_broadcaster/JointStateBroadcaster":
+        "controller_manager_py.controllers.joint_state_broadcaster:JointStateBroadcaster",
+    "position_controllers/JointGroupPositionController":
+        "controller_manager_py.controllers.forward_command:JointGroupPositionController",
+    "forward_command_controller/ForwardCommandController":
+        "controller_manager_py.controllers.forward_command:ForwardCommandController",
+    "joint_trajectory_controller/JointTrajectoryController":
+        "controller_manager_py.controllers.joint_trajectory:JointTrajectoryController",
+    "chained_controllers/PassthroughController":
+        "controller_manager_py.controllers.passthrough:PassthroughController",
+}
+
 setup(
     name=PACKAGE,
     version="0.1.0",
@@ -36,5 +53,8 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [f"{name} = {target}" for name, target in EXECUTABLES.items()],
+        # controller_manager_py's pluginlib: entry name = the plugin string (see plugins.py)
+        "controller_manager_py.hardware": [f"{n} = {t}" for n, t in CMPY_HARDWARE.items()],
+        "controller_manager_py.controllers": [f"{n} = {t}" for n, t in CMPY_CONTROLLERS.items()],
     },
 )
