@@ -11,6 +11,10 @@ from typing import Dict, Tuple
 PLATE_FRAME = "plate_center"
 PLATE_SIDE_M = 0.457
 PLATE_THICKNESS_M = 0.006
+# plate_center sits this far along tool0 z (10 mm standoff + half the thickness); the URDF
+# (config/ur5e_ball_balance.urdf, joint tool0-plate_center) carries the same number.
+PLATE_MOUNT_OFFSET_M = 0.013
+PLATE_MASS_KG = 1.0            # 6 mm acrylic
 
 ARUCO_DICTIONARY = "DICT_4X4_50"
 MARKER_SIDE_M = 0.040          # black border included
