@@ -111,7 +111,7 @@ done
 build_inputs=$(cd "$ROOT" && find "${PACKAGE_PATHS[@]}" -maxdepth 3 \
     \( -name package.xml -o -name CMakeLists.txt -o -name '*.msg' -o -name '*.srv' -o -name setup.py -o -name setup.cfg \) \
     -not -path './.venv/*' -not -path './build/*' -not -path './install/*' | sort)
-want="$MODE ${PACKAGE_PATHS[*]} $(cd "$ROOT" && digest $build_inputs) $(cd "$ROOT" && find config -type f 2>/dev/null | sort | digest -)"
+want="$MODE ${PACKAGE_PATHS[*]} $(cd "$ROOT" && digest $build_inputs) $(cd "$ROOT" && { find config -type f 2>/dev/null || true; } | sort | digest -)"
 if ! stamp_ok build "$want" || [[ ! -f "$ROOT/install/setup.bash" ]]; then
   say "building the workspace with colcon (${PACKAGE_PATHS[*]})"
   mkdir -p "$ROOT/build"
