@@ -1,0 +1,249 @@
+"""Plate kinematics: forward kinematics from the robot description, the rotational Jacobian
+J_r of the wrist joints, the (u_x, u_y) -> world-rotation wiring and least-squares IK
+(DESIGN.md section 6, steps 3-5). No ROS import.
+
+Chain: the URDF joints from `base_link` to `plate_center`, each joint transform being
+T_origin(xyz, rpy) * Rot(axis, q) as in URDF (rpy = fixed-axis roll, pitch, yaw:
+R = Rz(yaw) Ry(pitch) Rx(roll)). We walk the chain ourselves (xml.etree) rather than
+depend on a URDF library: ~40 lines, no mesh loading, the same convention the
+robot_state_publisher applies, so FK(joint_states) equals TF base_link -> plate_center.
+
+Wiring (DESIGN.md section 5): u_x is the tilt about the plate y axis and u_y the tilt about
+the plate x axis, signed so that positive u drives the ball toward negative x / y under
+x'' = -k g u. A right-handed rotation by +a about plate +y lowers the +x edge and rolls the
+ball toward +x, so the plate-frame rotation vector for (u_x, u_y) is
+
+    omega_P = (u_y, -u_x, 0)        and   R_WP_des = R_WP_home @ exp([omega_P]x)
+
+i.e. tilts are measured from the home orientation (the level plate).
+"""
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from typing import List, Optional, Sequence, Tuple
+
+import numpy as np
+
+
+class KinematicsError(ValueError):
+    """The robot description lacks the chain or joints we need."""
+
+
+def rot_x(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+
+
+def rot_y(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def rot_z(a):
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def rpy_matrix(roll, pitch, yaw) -> np.ndarray:
+    return rot_z(yaw) @ rot_y(pitch) @ rot_x(roll)
+
+
+def axis_angle(axis, angle) -> np.ndarray:
+    """Rodrigues: rotation by `angle` [rad] about unit `axis`."""
+    return rotvec_to_matrix(np.asarray(axis, dtype=float) * angle)
+
+
+def rotvec_to_matrix(w) -> np.ndarray:
+    w = np.asarray(w, dtype=float)
+    theta = float(np.linalg.norm(w))
+    K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
+    if theta < 1e-12:
+        return np.eye(3) + K
+    K /= theta
+    return np.eye(3) + math.sin(theta) * K + (1 - math.cos(theta)) * K @ K
+
+
+def matrix_to_rotvec(R) -> np.ndarray:
+    """Inverse of rotvec_to_matrix for angles below pi."""
+    cos_t = min(1.0, max(-1.0, (np.trace(R) - 1.0) / 2.0))
+    theta = math.acos(cos_t)
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if theta < 1e-9:
+        return 0.5 * v
+    return theta / (2.0 * math.sin(theta)) * v
+
+
+@dataclass(frozen=True)
+class ChainJoint:
+    name: str
+    kind: str               # revolute | continuous | fixed
+    origin_R: np.ndarray    # 3x3, parent link -> joint frame at q = 0
+    origin_p: np.ndarray    # (3,)
+    axis: np.ndarray        # (3,), in the joint frame
+    lower: float = -math.inf
+    upper: float = math.inf
+
+
+class Chain:
+    """Serial chain base -> tip; `fk(q)` takes the movable joints in `joint_names` order."""
+
+    def __init__(self, joints: Sequence[ChainJoint], joint_names: Sequence[str]):
+        self.joints = list(joints)
+        movable = [j.name for j in self.joints if j.kind != "fixed"]
+        missing = [n for n in joint_names if n not in movable]
+        if missing:
+            raise KinematicsError(f"joints {missing} are not on the chain (movable: {movable})")
+        extra = [n for n in movable if n not in joint_names]
+        if extra:
+            raise KinematicsError(f"chain has movable joints not in joint_names: {extra}")
+        self.joint_names = list(joint_names)
+        self._index = {j.name: joint_names.index(j.name) for j in self.joints if j.kind != "fixed"}
+        by_name = {j.name: j for j in self.joints}
+        self.lower = np.array([by_name[n].lower for n in joint_names])
+        self.upper = np.array([by_name[n].upper for n in joint_names])
+
+    @classmethod
+    def from_urdf(cls, urdf_xml: str, joint_names: Sequence[str], base: str = "base_link",
+                  tip: str = "plate_center") -> Chain:
+        try:
+            root = ET.fromstring(urdf_xml)
+        except ET.ParseError as error:
+            raise KinematicsError(f"robot description is not valid XML: {error}") from None
+        by_child = {}
+        for j in root.findall("joint"):
+            child = j.find("child").get("link")
+            by_child[child] = j
+        chain: List[ChainJoint] = []
+        link = tip
+        while link != base:
+            j = by_child.get(link)
+            if j is None:
+                raise KinematicsError(f"no chain from '{base}' to '{tip}' (link '{link}' has no parent joint)")
+            kind = j.get("type")
+            if kind not in ("revolute", "continuous", "fixed"):
+                raise KinematicsError(f"joint '{j.get('name')}' has unsupported type '{kind}'")
+            origin = j.find("origin")
+            xyz = _floats(origin.get("xyz") if origin is not None else None, 3)
+            rpy = _floats(origin.get("rpy") if origin is not None else None, 3)
+            axis_el = j.find("axis")
+            axis = np.array(_floats(axis_el.get("xyz") if axis_el is not None else "1 0 0", 3))
+            limit = j.find("limit")
+            lower, upper = -math.inf, math.inf
+            if kind == "revolute" and limit is not None:
+                lower, upper = float(limit.get("lower", "-inf")), float(limit.get("upper", "inf"))
+            chain.append(ChainJoint(j.get("name"), kind, rpy_matrix(*rpy), np.array(xyz),
+                                    axis / np.linalg.norm(axis), lower, upper))
+            link = j.find("parent").get("link")
+        return cls(list(reversed(chain)), joint_names)
+
+    def frames(self, q: Sequence[float]):
+        """World (base) pose of each movable joint frame and of the tip.
+
+        Returns (joint_R: {name: 3x3}, joint_p: {name: (3,)}, R_tip, p_tip)."""
+        R, p = np.eye(3), np.zeros(3)
+        joint_R, joint_p = {}, {}
+        for j in self.joints:
+            p = p + R @ j.origin_p
+            R = R @ j.origin_R
+            if j.kind != "fixed":
+                joint_R[j.name], joint_p[j.name] = R, p
+                R = R @ axis_angle(j.axis, q[self._index[j.name]])
+        return joint_R, joint_p, R, p
+
+    def fk(self, q: Sequence[float]) -> Tuple[np.ndarray, np.ndarray]:
+        """(R_WP, p_WP): the tip orientation and position in the base frame."""
+        _, _, R, p = self.frames(q)
+        return R, p
+
+    def rotational_jacobian(self, q: Sequence[float], names: Sequence[str]) -> np.ndarray:
+        """J_r (3 x len(names)): world angular velocity of the tip per unit rate of each joint."""
+        joint_R, _, _, _ = self.frames(q)
+        by_name = {j.name: j for j in self.joints}
+        return np.stack([joint_R[n] @ by_name[n].axis for n in names], axis=1)
+
+
+def _floats(text: Optional[str], n: int) -> List[float]:
+    if not text:
+        return [0.0] * n
+    values = [float(v) for v in text.split()]
+    if len(values) != n:
+        raise KinematicsError(f"expected {n} numbers, got '{text}'")
+    return values
+
+
+@dataclass(frozen=True)
+class ShaperConfig:
+    max_joint_step_rad: float = 0.02     # per tick, per joint
+    lowpass_alpha: float = 1.0           # 1 = no filtering; y += alpha (x - y)
+    max_tilt_rad: float = 0.20           # total plate tilt from home
+    joint_margin_rad: float = 0.05       # stay this far inside the URDF limits
+
+
+class PlateKinematics:
+    """Tilt pair -> 6 joint positions: wiring, IK on the wrist joints, shaping and limits.
+
+    `wrist` are the joints the IK moves (the others stay at home). `home_q` (6,) defines
+    the level plate (zero tilt).
+    """
+
+    def __init__(self, chain: Chain, home_q: Sequence[float],
+                 wrist: Sequence[str] = ("wrist_1_joint", "wrist_2_joint", "wrist_3_joint"),
+                 shaper: ShaperConfig = ShaperConfig(), damping: float = 1e-4):
+        self.chain, self.shaper, self.damping = chain, shaper, damping
+        self.home_q = np.asarray(home_q, dtype=float)
+        self.wrist = list(wrist)
+        self.wrist_idx = [chain.joint_names.index(n) for n in wrist]
+        self.R_WP_home, _ = chain.fk(self.home_q)
+        m = shaper.joint_margin_rad
+        self.q_min = np.where(np.isfinite(chain.lower), chain.lower + m, -math.inf)
+        self.q_max = np.where(np.isfinite(chain.upper), chain.upper - m, math.inf)
+
+    # --- wiring ---------------------------------------------------------------------
+    @staticmethod
+    def plate_rotvec(u_x: float, u_y: float) -> np.ndarray:
+        """omega_P for the tilt pair (see the module docstring)."""
+        return np.array([u_y, -u_x, 0.0])
+
+    def desired_rotation(self, u_x: float, u_y: float) -> np.ndarray:
+        """R_WP_des for the tilt pair, limited to max_tilt_rad in total."""
+        w = self.plate_rotvec(u_x, u_y)
+        norm = float(np.linalg.norm(w))
+        if norm > self.shaper.max_tilt_rad:
+            w *= self.shaper.max_tilt_rad / norm
+        return self.R_WP_home @ rotvec_to_matrix(w)
+
+    def tilt_of(self, q: Sequence[float]) -> Tuple[float, float]:
+        """(u_x, u_y) of the plate at joint positions q, measured from home."""
+        w = matrix_to_rotvec(self.R_WP_home.T @ self.chain.fk(q)[0])
+        return float(-w[1]), float(w[0])
+
+    # --- IK -------------------------------------------------------------------------
+    def ik(self, q_start: Sequence[float], R_des: np.ndarray, iterations: int = 3) -> np.ndarray:
+        """Damped least squares on the wrist joints: dq = J_r^T (J_r J_r^T + l I)^-1 e,
+        e = log(R_des R_WP^T) (world frame). Non-wrist joints are set to home."""
+        q = np.asarray(q_start, dtype=float).copy()
+        others = [i for i in range(len(q)) if i not in self.wrist_idx]
+        q[others] = self.home_q[others]
+        for _ in range(iterations):
+            R, _ = self.chain.fk(q)
+            e = matrix_to_rotvec(R_des @ R.T)
+            if np.linalg.norm(e) < 1e-10:
+                break
+            J_r = self.chain.rotational_jacobian(q, self.wrist)
+            dq = J_r.T @ np.linalg.solve(J_r @ J_r.T + self.damping * np.eye(3), e)
+            q[self.wrist_idx] += dq
+        return q
+
+    # --- shaping --------------------------------------------------------------------
+    def shape(self, q_target: np.ndarray, q_prev: np.ndarray) -> np.ndarray:
+        """Low-pass toward q_target, then per-joint step clip, then joint limits."""
+        s = self.shaper
+        step = s.lowpass_alpha * (q_target - q_prev)
+        step = np.clip(step, -s.max_joint_step_rad, s.max_joint_step_rad)
+        return np.clip(q_prev + step, self.q_min, self.q_max)
+
+    def command(self, u_x: float, u_y: float, q_prev: np.ndarray) -> np.ndarray:
+        """The shaped 6-joint command for the tilt pair, starting from the last command."""
+        return self.shape(self.ik(q_prev, self.desired_rotation(u_x, u_y)), q_prev)

@@ -1,0 +1,62 @@
+"""Latency compensation: the delayed plant is controlled better with forward prediction."""
+import numpy as np
+import pytest
+from control_plant import K_G, DelayedPlant
+
+from ball_balance.control.mpc import MpcConfig, PlateMpc, preview
+from ball_balance.control.pid import PidGains, PlatePid
+from ball_balance.control.prediction import TiltHistory, predict
+from ball_balance.control.references import Circle
+
+
+def test_prediction_is_exact_for_piecewise_constant_tilts():
+    hist = TiltHistory()
+    hist.record(0.0, 0.1, 0.0)
+    hist.record(0.05, -0.1, 0.02)
+    plant = DelayedPlant(dt_s=0.0005)
+    plant.advance((0.1, 0.0), 0.05)
+    plant.advance((-0.1, 0.02), 0.05)
+    p, v = predict(np.zeros(2), np.zeros(2), 0.0, 0.1, hist, K_G)
+    np.testing.assert_allclose(p, plant.p, atol=1e-9)
+    np.testing.assert_allclose(v, plant.v, atol=1e-9)
+
+
+def _tracking_rmse(controller, compensate, delay_s=0.1, dt=0.02, seconds=12.0):
+    """Plant with a measurement delay (state seen delay_s late) and actuation delay 0.02 s."""
+    plant = DelayedPlant(x0=(0.05, 0.0), delay_s=0.02)
+    ref = Circle(0.08, 8.0)
+    hist = TiltHistory()
+    past = []
+    u = np.zeros(2)
+    errors = []
+    lag = int(round(delay_s / dt))
+    for i in range(int(seconds / dt)):
+        t = i * dt
+        past.append((t, plant.p.copy(), plant.v.copy()))
+        t_meas, p, v = past[max(0, len(past) - 1 - lag)]
+        if compensate:
+            p, v = predict(p, v, t_meas, t + 0.02, hist, K_G, actuation_delay_s=0.02)
+        if controller == "pid":
+            u = np.array(PID.step(p, v, ref.sample(t), dt))
+        else:
+            pr, vr, ar = preview(ref, t, dt, 25)
+            u = np.array(MPC.solve(p, v, pr, vr, ar, u))
+        hist.record(t, *u)
+        plant.advance(u, dt)
+        if not np.all(np.abs(plant.p) < 0.3):
+            return np.inf
+        if t > 4.0:
+            errors.append(np.linalg.norm(plant.p - ref.sample(t + dt).p))
+    return float(np.sqrt(np.mean(np.square(errors))))
+
+
+@pytest.mark.parametrize("controller", ["pid", "mpc"])
+def test_latency_compensation_improves_a_delayed_plant(controller):
+    global PID, MPC
+    results = {}
+    for compensate in (False, True):
+        PID = PlatePid(PidGains(), K_G)
+        MPC = PlateMpc(MpcConfig(k_g=K_G))
+        results[compensate] = _tracking_rmse(controller, compensate)
+    assert results[True] < 0.5 * results[False], results
+    assert results[True] < 0.005, results
