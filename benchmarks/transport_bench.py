@@ -58,6 +58,10 @@ def measure(rate: float, seconds: float, reliable: bool) -> list:
     return latencies_us
 
 
+def quantile(sorted_values: list, q: float) -> float:
+    return sorted_values[min(len(sorted_values) - 1, int(q * len(sorted_values)))]
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rate", type=float, default=100.0)
@@ -74,10 +78,9 @@ def main():
         if not lat:
             print(f"{'reliable' if reliable else 'sensor data (BE)':<22}{'0':>10}")
             continue
-        pick = lambda q: lat[min(len(lat) - 1, int(q * len(lat)))]  # noqa: E731
         name = "reliable, depth 10" if reliable else "sensor data (BE, 5)"
         print(f"{name:<22}{len(lat):>6}/{expected:<4}{statistics.median(lat):>10.0f}"
-              f"{pick(0.9):>9.0f}{pick(0.99):>9.0f}{lat[-1]:>9.0f}")
+              f"{quantile(lat, 0.9):>9.0f}{quantile(lat, 0.99):>9.0f}{lat[-1]:>9.0f}")
     rclpy.shutdown()
 
 

@@ -1,9 +1,9 @@
 """BallState between processes: our message, real DDS, the test's private domain."""
 import textwrap
 
+from ball_tracker_msgs.msg import BallState
 from rclpy.qos import qos_profile_sensor_data
 
-from ball_tracker_msgs.msg import BallState
 from harness import python_cmd
 
 PUBLISHER = textwrap.dedent("""
