@@ -60,4 +60,5 @@ def main_for(make_node, multithreaded: bool = False) -> Callable[[], None]:
 
 def _first_line(error: BaseException) -> str:
     text = str(error).strip() or type(error).__name__
-    return text.splitlines()[0]
+    # rcl appends the C source location (", at /project/src/...") to its messages
+    return text.splitlines()[0].split(", at /")[0]
