@@ -1,6 +1,28 @@
-"""`ball_balance_controller` node (issue #6)."""
-from ball_balance.nodes.pending import exit_not_implemented
+"""`ball_balance_controller`: PID balance controller (DESIGN.md section 4).
+
+/ball_state -> 6 joint positions on /forward_position_controller/commands
+(std_msgs/Float64MultiArray, JOINT_NAMES order), plus /plate_cmd and /ball_reference (see
+balance_node_base). Gains kp, ki, kd, i_limit_rad, i_zone_m, deadband_m,
+antiwindup_time_s and the reference_* parameters can be changed at run time
+(`ros2 param set /ball_balance_controller kp 2.0`); config/pid.yaml holds the defaults we run.
+"""
+from std_msgs.msg import Float64MultiArray
+
+from ball_balance.control.config import PID_SCHEMA
+from ball_balance.nodes.balance_node_base import BalanceControllerNode
+from ball_balance.ros.node_main import main_for
 
 
-def main(args=None):
-    exit_not_implemented("ball_balance_controller", 6)
+class PidControllerNode(BalanceControllerNode):
+    SCHEMA = PID_SCHEMA
+    CONTROLLER = "pid"
+
+    def __init__(self):
+        super().__init__("ball_balance_controller")
+        self.command_pub = self.create_publisher(Float64MultiArray, "/forward_position_controller/commands", 10)
+
+    def publish_joints(self, q_cmd, stamp) -> None:
+        self.command_pub.publish(Float64MultiArray(data=[float(v) for v in q_cmd]))
+
+
+main = main_for(PidControllerNode)

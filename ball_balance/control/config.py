@@ -1,0 +1,137 @@
+"""Parameter schemas of the balance controllers (one source of defaults, units, bounds) and
+their conversion to the pure config dataclasses. No ROS import: the nodes declare these
+schemas, the benchmark validates the same YAML values with `validate`.
+
+Runtime-changeable (through `ros2 param set`): the PID gains and the reference_* parameters;
+everything else is read once at start-up.
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+from ball_balance.control.kinematics import ShaperConfig
+from ball_balance.control.mpc import MpcConfig
+from ball_balance.control.pid import PidGains
+from ball_balance.control.pipeline import PipelineConfig
+from ball_balance.control.references import KINDS, Delayed, Reference, make_reference
+from ball_balance.control.safety import SafetyConfig
+from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL
+from ball_balance.robot import HOME_POSITIONS_RAD
+from controller_manager_py.parameters import Param
+
+
+def _pair(value) -> str | None:
+    return None if len(value) == 2 else "must have 2 elements [x, y]"
+
+
+def _six(value) -> str | None:
+    return None if len(value) == 6 else "must have 6 elements (one per joint)"
+
+
+REFERENCE_SCHEMA = [
+    Param("reference_kind", "stationary", "what the ball tracks", choices=KINDS),
+    Param("reference_radius_m", 0.10, "circle/figure-eight radius, square half side, step amplitude", "m",
+          0.0, 0.2),
+    Param("reference_period_s", 10.0, "one lap (circle, figure-eight, square) or 5 steps", "s", 0.5, 600.0),
+    Param("reference_centre_m", [0.0, 0.0], "centre of the reference, plate frame [x, y]", "m", check=_pair),
+    Param("reference_csv_path", "", "CSV path t_s,x_m,y_m (reference_kind=csv)"),
+    Param("reference_start_delay_s", 0.0, "hold the centre this long after engaging, then start", "s",
+          0.0, 600.0),
+]
+
+PID_GAINS_SCHEMA = [
+    Param("kp", PidGains.kp, "proportional gain", "rad/m", 0.0, 20.0),
+    Param("ki", PidGains.ki, "integral gain", "rad/(m s)", 0.0, 20.0),
+    Param("kd", PidGains.kd, "derivative gain on the measured velocity", "rad/(m/s)", 0.0, 20.0),
+    Param("i_limit_rad", PidGains.i_limit_rad, "clamp on ki*integral", "rad", 0.0, 0.5),
+    Param("i_zone_m", PidGains.i_zone_m, "integrate only while |error| below this", "m", 0.0, 1.0),
+    Param("deadband_m", PidGains.deadband_m, "error deadband", "m", 0.0, 0.05),
+    Param("antiwindup_time_s", PidGains.antiwindup_time_s, "back-calculation time constant", "s", 0.0, 10.0),
+]
+
+MPC_SCHEMA = [
+    Param("mpc_horizon", MpcConfig.horizon, "prediction horizon N (steps of one control period)", "", 2, 200,
+          read_only=True),
+    Param("mpc_q_pos", MpcConfig.q_pos, "weight on position error", "1/m^2", 0.0, 1e6, read_only=True),
+    Param("mpc_q_vel", MpcConfig.q_vel, "weight on velocity error", "1/(m/s)^2", 0.0, 1e6, read_only=True),
+    Param("mpc_r_u", MpcConfig.r_u, "weight on tilt minus feed-forward", "1/rad^2", 1e-6, 1e6, read_only=True),
+    Param("mpc_r_du", MpcConfig.r_du, "weight on tilt change per step", "1/rad^2", 0.0, 1e6, read_only=True),
+    Param("max_tilt_rate_rad_s", MpcConfig.du_max_rad_s, "tilt-rate constraint", "rad/s", 0.01, 20.0,
+          read_only=True),
+]
+
+COMMON_SCHEMA = [
+    Param("control_rate_hz", 50.0, "control tick rate", "Hz", 5.0, 500.0, read_only=True),
+    Param("rolling_factor", ROLLING_FACTOR_SHELL, "k in x'' = k g sin(tilt): 0.6 shell, 0.714 solid", "",
+          0.1, 1.0, read_only=True),
+    Param("gravity_m_s2", GRAVITY_M_S2, "g", "m/s^2", 0.1, 30.0, read_only=True),
+    Param("max_tilt_cmd_rad", 0.15, "per-axis tilt command limit (controller output clip)", "rad", 0.0, 0.35,
+          read_only=True),
+    Param("max_total_tilt_rad", 0.20, "limit on the plate's total tilt from home", "rad", 0.0, 0.5,
+          read_only=True),
+    Param("latency_compensation", True, "predict the ball state over the measured delay", read_only=True),
+    Param("actuation_delay_s", 0.03, "command -> plate tilt delay added to the measured age", "s", 0.0, 0.5,
+          read_only=True),
+    Param("max_prediction_s", 0.3, "never extrapolate the state further than this", "s", 0.0, 1.0,
+          read_only=True),
+    Param("min_markers", 3, "markers needed in a frame to act", "", 0, 4, read_only=True),
+    Param("stale_after_s", 0.25, "a ball state older than this is stale", "s", 0.01, 5.0, read_only=True),
+    Param("grace_s", 0.3, "hold the last tilt this long after a loss before returning home", "s", 0.0, 10.0,
+          read_only=True),
+    Param("home_tolerance_rad", 0.01, "max joint error to count as at home", "rad", 1e-4, 0.5, read_only=True),
+    Param("home_positions_rad", list(HOME_POSITIONS_RAD), "home joint positions (plate level)", "rad",
+          check=_six, read_only=True),
+    Param("max_joint_step_rad", 0.02, "per-joint change per tick", "rad", 1e-4, 0.5, read_only=True),
+    Param("lowpass_alpha", 1.0, "joint low-pass y += alpha (x - y) per tick (1 = off)", "", 0.01, 1.0,
+          read_only=True),
+    Param("joint_margin_rad", 0.05, "stay this far inside the URDF joint limits", "rad", 0.0, 1.0,
+          read_only=True),
+]
+
+PID_SCHEMA = COMMON_SCHEMA + REFERENCE_SCHEMA + PID_GAINS_SCHEMA
+MPC_NODE_SCHEMA = COMMON_SCHEMA + REFERENCE_SCHEMA + MPC_SCHEMA
+RUNTIME_PARAMETERS = {p.name for p in PID_GAINS_SCHEMA + REFERENCE_SCHEMA}
+
+
+def k_g(values: Mapping[str, Any]) -> float:
+    return values["rolling_factor"] * values["gravity_m_s2"]
+
+
+def pid_gains(values: Mapping[str, Any]) -> PidGains:
+    return PidGains(kp=values["kp"], ki=values["ki"], kd=values["kd"], u_max_rad=values["max_tilt_cmd_rad"],
+                    i_limit_rad=values["i_limit_rad"], deadband_m=values["deadband_m"],
+                    i_zone_m=values["i_zone_m"], antiwindup_time_s=values["antiwindup_time_s"])
+
+
+def pipeline_config(values: Mapping[str, Any], controller: str) -> PipelineConfig:
+    """PipelineConfig from validated parameter values (either schema)."""
+    period = 1.0 / values["control_rate_hz"]
+    mpc = MpcConfig()
+    if controller == "mpc":
+        mpc = MpcConfig(dt_s=period, horizon=values["mpc_horizon"], q_pos=values["mpc_q_pos"],
+                        q_vel=values["mpc_q_vel"], r_u=values["mpc_r_u"], r_du=values["mpc_r_du"],
+                        u_max_rad=values["max_tilt_cmd_rad"], du_max_rad_s=values["max_tilt_rate_rad_s"],
+                        k_g=k_g(values))
+    return PipelineConfig(
+        controller=controller, k_g=k_g(values), control_period_s=period,
+        latency_compensation=values["latency_compensation"], actuation_delay_s=values["actuation_delay_s"],
+        max_prediction_s=values["max_prediction_s"],
+        pid=pid_gains(values) if controller == "pid" else PidGains(),
+        mpc=mpc,
+        safety=SafetyConfig(min_markers=values["min_markers"], stale_after_s=values["stale_after_s"],
+                            grace_s=values["grace_s"], home_tolerance_rad=values["home_tolerance_rad"],
+                            plate_half_side_m=PLATE_SIDE_M / 2.0))
+
+
+def shaper_config(values: Mapping[str, Any]) -> ShaperConfig:
+    return ShaperConfig(max_joint_step_rad=values["max_joint_step_rad"], lowpass_alpha=values["lowpass_alpha"],
+                        max_tilt_rad=values["max_total_tilt_rad"], joint_margin_rad=values["joint_margin_rad"])
+
+
+def reference(values: Mapping[str, Any]) -> Reference:
+    """The reference the parameters describe (ReferenceError names the problem)."""
+    centre = tuple(values["reference_centre_m"])
+    inner = make_reference(values["reference_kind"], values["reference_radius_m"], values["reference_period_s"],
+                           centre, values["reference_csv_path"])
+    delay = values["reference_start_delay_s"]
+    return Delayed(inner, delay, centre) if delay > 0 else inner

@@ -1,0 +1,102 @@
+"""PID and MPC controller nodes over DDS, fed by the test graph: the right commands with the
+right sign; bad ball states (NaN, stale, no markers) hold and then return home, never jump."""
+import math
+
+import numpy as np
+import pytest
+from ball_tracker_msgs.msg import BallState
+from geometry_msgs.msg import PointStamped, Vector3Stamped
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from trajectory_msgs.msg import JointTrajectory
+
+from ball_balance.control.kinematics import Chain, PlateKinematics
+from ball_balance.robot import HOME_POSITIONS_RAD, JOINT_NAMES, robot_description_path
+from harness import ROOT, executable
+
+pytestmark = pytest.mark.integration
+MAX_STEP = 0.02
+
+
+class FakeWorld:
+    """Publishes /joint_states (home) and /ball_state from the graph, every 20 ms."""
+
+    def __init__(self, graph, ball=(("x", 0.05), ("y", -0.03))):
+        self.graph, self.q = graph, np.array(HOME_POSITIONS_RAD)
+        self.ball = dict(vx=0.0, vy=0.0, tracking_valid=True, ball_found=True, markers_found=4, **dict(ball))
+        self.stamp_offset_s = 0.0
+        node = graph.node
+        self.joint_pub = node.create_publisher(JointState, "/joint_states", 10)
+        self.ball_pub = node.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
+        node.create_timer(0.02, self.publish)
+
+    def publish(self):
+        now = self.graph.node.get_clock().now()
+        js = JointState(name=list(JOINT_NAMES), position=[float(v) for v in self.q])
+        js.header.stamp = now.to_msg()
+        self.joint_pub.publish(js)
+        msg = BallState(**self.ball)
+        msg.header.frame_id = "plate_center"
+        stamp_ns = now.nanoseconds - int(self.stamp_offset_s * 1e9)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+        self.ball_pub.publish(msg)
+
+
+def _kinematics():
+    return PlateKinematics(Chain.from_urdf(robot_description_path().read_text(), JOINT_NAMES), HOME_POSITIONS_RAD)
+
+
+def _start(launcher, exe, yaml):
+    return launcher.start([executable(exe), "--ros-args", "--params-file", str(ROOT / "config" / yaml)])
+
+
+def test_pid_tilts_toward_the_ball_with_finite_six_joint_commands(launcher, graph):
+    FakeWorld(graph)
+    _start(launcher, "ball_balance_controller", "pid.yaml")
+    commands = graph.collect(Float64MultiArray, "/forward_position_controller/commands", count=20, timeout=30)
+    assert all(len(c.data) == 6 and all(math.isfinite(v) for v in c.data) for c in commands)
+    (cmd,) = graph.collect(Vector3Stamped, "/plate_cmd", timeout=10, predicate=lambda m: m.vector.x != 0.0)
+    # ball at +x, -y: positive u_x (drives it toward -x), negative u_y
+    assert cmd.vector.x > 0 and cmd.vector.y < 0 and cmd.header.frame_id == "plate_center"
+    later = graph.collect(Float64MultiArray, "/forward_position_controller/commands", count=30, timeout=10)
+    u_x, u_y = _kinematics().tilt_of(np.array(later[-1].data))
+    assert u_x > 0.01 and u_y < -0.005
+    (ref,) = graph.collect(PointStamped, "/ball_reference", timeout=10)
+    assert (ref.point.x, ref.point.y) == (0.0, 0.0)
+
+
+@pytest.mark.parametrize("fault", ["nan", "stale", "no_markers"])
+def test_pid_bad_ball_state_holds_then_returns_home_without_jumps(launcher, graph, fault):
+    world = FakeWorld(graph)
+    process = _start(launcher, "ball_balance_controller", "pid.yaml")
+    graph.collect(Vector3Stamped, "/plate_cmd", timeout=30, predicate=lambda m: m.vector.x > 0.03)
+    engaged = graph.collect(Float64MultiArray, "/forward_position_controller/commands", timeout=5)[0]
+    if fault == "nan":
+        world.ball["x"] = float("nan")
+    elif fault == "stale":
+        world.stamp_offset_s = 2.0
+    else:
+        world.ball["markers_found"] = 0
+    commands = graph.collect(Float64MultiArray, "/forward_position_controller/commands", count=100, timeout=20)
+    q = np.array([engaged.data] + [c.data for c in commands])
+    assert np.all(np.isfinite(q))
+    assert np.max(np.abs(np.diff(q, axis=0))) <= MAX_STEP + 1e-9
+    np.testing.assert_allclose(q[-1], HOME_POSITIONS_RAD, atol=1e-6)
+    graph.spin_until(lambda: "returning" in process.output(), 5, "a log line saying it returns home")
+
+
+def test_mpc_publishes_single_point_trajectories_with_the_right_sign(launcher, graph):
+    FakeWorld(graph, ball=(("x", -0.06), ("y", 0.04)))
+    _start(launcher, "ball_balance_mpc", "mpc.yaml")
+    (cmd,) = graph.collect(Vector3Stamped, "/plate_cmd", timeout=30, predicate=lambda m: m.vector.x != 0.0)
+    assert cmd.vector.x < 0 and cmd.vector.y > 0
+    trajectories = graph.collect(JointTrajectory, "/scaled_joint_trajectory_controller/joint_trajectory",
+                                 count=30, timeout=10)
+    last = trajectories[-1]
+    assert list(last.joint_names) == list(JOINT_NAMES) and len(last.points) == 1
+    point = last.points[0]
+    assert len(point.positions) == 6 and all(math.isfinite(v) for v in point.positions)
+    assert point.time_from_start.nanosec > 0
+    u_x, u_y = _kinematics().tilt_of(np.array(point.positions))
+    assert u_x < -0.01 and u_y > 0.005
