@@ -1,0 +1,140 @@
+"""Parameters of the ball tracker: one schema (defaults, units, bounds), one frozen config.
+
+`TRACKER_SCHEMA` holds the algorithm's parameters, `SOURCE_SCHEMA` where frames come from.
+The node declares both (plus its own topic parameters); tools and tests build a
+`TrackerConfig` from a plain dict with `TrackerConfig.from_values`. Plate and ball
+defaults come from `ball_balance.plate_geometry` (the one source).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping, Optional, Tuple
+
+from ball_balance import plate_geometry as pg
+from controller_manager_py.parameters import Param, validate
+
+
+def _three_ints_0_255(value) -> Optional[str]:
+    if len(value) != 3 or not all(isinstance(v, int) and 0 <= v <= 255 for v in value):
+        return "must be 3 integers in 0..255 (H in 0..179, S, V)"
+    return None
+
+
+def _range_pair(value) -> Optional[str]:
+    if len(value) != 2 or not 0.0 < value[0] < value[1]:
+        return "must be [min, max] with 0 < min < max"
+    return None
+
+
+_IDS = tuple(pg.MARKER_CENTRES_M)
+SOURCE_SCHEMA = (
+    Param("source", "topic", "where frames come from", choices=("topic", "camera", "file")),
+    Param("image_topic", "/camera/image_raw", "sensor_msgs/Image input (source=topic), bgr8 or rgb8"),
+    Param("camera_info_topic", "/camera/camera_info",
+          "sensor_msgs/CameraInfo for intrinsics when no calibration_file ('' = off)"),
+    Param("camera_device", "0", "USB camera: device index ('0') or path ('/dev/video0') (source=camera)"),
+    Param("camera_width", 640, "requested capture width (source=camera)", "px", 16, 8192),
+    Param("camera_height", 480, "requested capture height (source=camera)", "px", 16, 8192),
+    Param("camera_fps", 30.0, "requested capture rate (source=camera)", "Hz", 1.0, 1000.0),
+    Param("video_file", "", "video file to replay (source=file)"),
+    Param("video_loop", False, "restart the video file at its end (source=file)"),
+    Param("video_rate_hz", 0.0, "replay rate (source=file); 0 = the file's own rate", "Hz", 0.0, 1000.0),
+    Param("calibration_file", "", "camera calibration YAML (ROS camera_info format); '' = none"),
+    Param("undistort", "points", "with a calibration: undistort detected points (cheap) or whole images",
+          choices=("points", "image")),
+)
+
+TRACKER_SCHEMA = (
+    # plate and markers (DESIGN.md section 5)
+    Param("plate_side_m", pg.PLATE_SIDE_M, "plate side length", "m", 0.05, 5.0),
+    Param("marker_side_m", pg.MARKER_SIDE_M, "ArUco marker side, black border included", "m", 0.005, 1.0),
+    Param("marker_ids", _IDS, "ArUco DICT_4X4_50 ids on the plate",
+          check=lambda v: None if len(v) >= 1 and all(isinstance(i, int) and 0 <= i < 50 for i in v)
+          else "must be ids in 0..49"),
+    Param("marker_x_m", tuple(pg.MARKER_CENTRES_M[i][0] for i in _IDS), "marker centres x (plate frame)", "m"),
+    Param("marker_y_m", tuple(pg.MARKER_CENTRES_M[i][1] for i in _IDS), "marker centres y (plate frame)", "m"),
+    Param("startup_frames", 10, "frames with all markers visible averaged into the start-up plate pose",
+          "frames", 1, 1000),
+    Param("startup_max_motion_px", 2.0, "start-up averaging restarts if a corner moves more than this",
+          "px", 0.1, 100.0),
+    Param("plate_hold_s", 0.5, "keep the last plate pose this long when no marker is visible", "s", 0.0, 60.0),
+    Param("marker_roi_margin", 1.0, "search window around each predicted marker, in marker sides",
+          "", 0.2, 10.0),
+    Param("full_scan_period", 10, "while a marker is missing, search the whole image every N frames",
+          "frames", 1, 10000),
+    Param("parallax_correction", True,
+          "map the ball centre at its height above the plate (needs intrinsics, or estimates them)"),
+    # ball segmentation
+    Param("hsv_lower", (0, 120, 110), "lower HSV bound of the ball colour (OpenCV H 0..179)",
+          check=_three_ints_0_255),
+    Param("hsv_upper", (25, 255, 255), "upper HSV bound of the ball colour", check=_three_ints_0_255),
+    Param("morph_kernel_px", 3, "morphological opening kernel size (0 = none)", "px", 0, 31),
+    Param("min_circularity", 0.6, "minimum 4*pi*area/perimeter^2 of the ball blob", "", 0.0, 1.0),
+    Param("ball_radius_m", pg.BALL_RADIUS_M, "ball radius", "m", 0.001, 0.5),
+    Param("ball_radius_range_m", (0.012, 0.030), "accepted apparent blob radius [min, max]", "m",
+          check=_range_pair),
+    Param("plate_margin_m", 0.010, "detections farther than this outside the plate are rejected", "m", 0.0, 1.0),
+    # Kalman filter
+    Param("meas_noise_m", 0.0010, "measurement noise (1 sigma) per axis", "m", 1e-6, 1.0),
+    Param("accel_noise_m_s2", 1.0, "white-noise acceleration (1 sigma) of the process model", "m/s^2",
+          1e-4, 1000.0),
+    Param("init_vel_std_m_s", 0.5, "velocity uncertainty (1 sigma) at track start", "m/s", 1e-4, 100.0),
+    Param("gate_sigma", 6.0, "reject detections farther than this Mahalanobis distance", "", 1.0, 1000.0),
+    Param("max_coast_frames", 5, "frames predicted without a detection before the track is reset",
+          "frames", 0, 1000),
+    Param("max_dt_s", 0.5, "a gap between frames longer than this resets the track", "s", 0.001, 60.0),
+    Param("use_plate_cmd", False, "use the commanded tilt on /plate_cmd as known acceleration"),
+    Param("plate_cmd_timeout_s", 0.2, "ignore a commanded tilt older than this", "s", 0.0, 10.0),
+    Param("rolling_factor", pg.ROLLING_FACTOR_SHELL, "x'' = -k g sin(u): 0.6 thin shell, 5/7 solid ball",
+          "", 0.0, 1.0),
+)
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Validated, immutable tracker parameters (see TRACKER_SCHEMA for meanings and units)."""
+
+    plate_side_m: float
+    marker_side_m: float
+    marker_centres_m: Tuple[Tuple[int, float, float], ...]
+    startup_frames: int
+    startup_max_motion_px: float
+    plate_hold_s: float
+    marker_roi_margin: float
+    full_scan_period: int
+    parallax_correction: bool
+    hsv_lower: Tuple[int, int, int]
+    hsv_upper: Tuple[int, int, int]
+    morph_kernel_px: int
+    min_circularity: float
+    ball_radius_m: float
+    ball_radius_range_m: Tuple[float, float]
+    plate_margin_m: float
+    meas_noise_m: float
+    accel_noise_m_s2: float
+    init_vel_std_m_s: float
+    gate_sigma: float
+    max_coast_frames: int
+    max_dt_s: float
+    use_plate_cmd: bool
+    plate_cmd_timeout_s: float
+    rolling_factor: float
+
+    @classmethod
+    def from_values(cls, values: Optional[Mapping[str, Any]] = None) -> TrackerConfig:
+        """Validate `values` (missing ones take the schema default); ParameterError if bad."""
+        v = validate(TRACKER_SCHEMA, values, allow_unknown=True)
+        ids, xs, ys = v["marker_ids"], v["marker_x_m"], v["marker_y_m"]
+        if not len(ids) == len(xs) == len(ys):
+            from controller_manager_py.parameters import ParameterError
+            raise ParameterError("parameters 'marker_ids', 'marker_x_m', 'marker_y_m' must have the same length")
+        fields = {k: v[k] for k in cls.__dataclass_fields__ if k in v}
+        fields["marker_centres_m"] = tuple((int(i), float(x), float(y)) for i, x, y in zip(ids, xs, ys))
+        fields["hsv_lower"] = tuple(int(c) for c in v["hsv_lower"])
+        fields["hsv_upper"] = tuple(int(c) for c in v["hsv_upper"])
+        return cls(**fields)
+
+    @property
+    def geometry(self) -> pg.PlateGeometry:
+        return pg.PlateGeometry(side_m=self.plate_side_m, marker_side_m=self.marker_side_m,
+                                marker_centres_m=self.marker_centres_m)

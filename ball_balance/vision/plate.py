@@ -1,0 +1,241 @@
+"""The plate in the image: ArUco markers -> homography between plate metres and image pixels.
+
+Symbols: H_IP maps plate-frame points (x, y, 1) in metres to image pixels (u, v, 1);
+H_PI = inv(H_IP). Plate frame `plate_center` (DESIGN.md section 5): x right, y up as seen
+by the overhead camera, z along the normal toward the camera.
+
+Life of a `PlateLocator`:
+- start-up: full-image marker search; once all markers are seen for `startup_frames`
+  frames without moving, their averaged corners give the reference fit H_full (locked);
+- locked: markers are searched in small windows around their predicted positions (a
+  full-image search every `full_scan_period` frames while one is missing); >= 3 markers
+  refit H_full; 1 or 2 markers shift H_full by their mean image displacement (so a hand
+  over some corners does not stop tracking; a tilt since the last full fit then costs a
+  few millimetres, see `update`); with none, the last H_IP is
+  kept for `plate_hold_s`, then the plate counts as not visible.
+"""
+from __future__ import annotations
+
+from typing import Dict, List, Optional, Tuple
+
+import cv2
+import numpy as np
+
+from ball_balance.plate_geometry import PlateGeometry
+
+FULL_FIT_MIN_MARKERS = 3   # fewer visible markers: similarity correction of the last full fit
+
+Window = Tuple[int, int, int, int]   # x0, y0, x1, y1 (pixels, end exclusive)
+
+
+class MarkerDetector:
+    """DICT_4X4_50 detection with sub-pixel corners, on the whole image or in windows."""
+
+    def __init__(self):
+        params = cv2.aruco.DetectorParameters()
+        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+        params.cornerRefinementWinSize = 3
+        dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
+        self._detector = cv2.aruco.ArucoDetector(dictionary, params)
+
+    def detect(self, gray: np.ndarray) -> Dict[int, np.ndarray]:
+        """Markers in the whole image: id -> corners (4, 2) float64 pixels, OpenCV order."""
+        corners, ids, _ = self._detector.detectMarkers(gray)
+        found: Dict[int, np.ndarray] = {}
+        if ids is not None:
+            for marker_id, c in zip(ids.ravel(), corners):
+                found.setdefault(int(marker_id), c.reshape(4, 2).astype(np.float64))
+        return found
+
+    def detect_in_windows(self, gray: np.ndarray, windows: Dict[int, Window]) -> Dict[int, np.ndarray]:
+        """Look for each expected marker id only inside its window."""
+        found: Dict[int, np.ndarray] = {}
+        for marker_id, (x0, y0, x1, y1) in windows.items():
+            if x1 - x0 < 8 or y1 - y0 < 8:
+                continue
+            corners = self.detect(gray[y0:y1, x0:x1]).get(marker_id)
+            if corners is not None:
+                found[marker_id] = corners + (x0, y0)
+        return found
+
+
+def apply_homography(H: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Map (n, 2) points through the 3x3 homography H."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    q = p @ H[:, :2].T + H[:, 2]
+    return q[:, :2] / q[:, 2:3]
+
+
+def estimate_focal_px(H_IP: np.ndarray, principal_point: Tuple[float, float]) -> Optional[float]:
+    """Focal length from a plane homography (square pixels, known principal point), or None
+    when the view is too close to fronto-parallel for the plate to reveal it."""
+    T = np.array([[1.0, 0.0, -principal_point[0]], [0.0, 1.0, -principal_point[1]], [0.0, 0.0, 1.0]])
+    h = T @ H_IP
+    h = h / np.linalg.norm(h[:, :2])
+    (a1, a2), (b1, b2), (c1, c2) = h[0, :2], h[1, :2], h[2, :2]
+    # r1 . r2 = 0 and |r1| = |r2| with K = diag(f, f, 1) give two estimates of f^2
+    estimates = []
+    if abs(c1 * c2) > 1e-9:
+        estimates.append(-(a1 * a2 + b1 * b2) / (c1 * c2))
+    if abs(c1 * c1 - c2 * c2) > 1e-9:
+        estimates.append(-(a1 * a1 + b1 * b1 - a2 * a2 - b2 * b2) / (c1 * c1 - c2 * c2))
+    good = [f2 for f2 in estimates if f2 > 0.0]
+    if not good:
+        return None
+    f = float(np.sqrt(np.median(good)))
+    # a nearly fronto-parallel view makes the estimate explode: accept only plausible values
+    return f if 0.2 * np.linalg.norm(principal_point) < f < 20.0 * np.linalg.norm(principal_point) else None
+
+
+def camera_centre_in_plate(H_IP: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Camera centre C_P (3,) in the plate frame from H_IP = K [r1 r2 t] (up to scale)."""
+    M = np.linalg.solve(K, H_IP)
+    scale = 0.5 * (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
+    r1, r2, t = M[:, 0] / scale, M[:, 1] / scale, M[:, 2] / scale
+    if t[2] < 0.0:          # the plate is in front of the camera: t_z > 0
+        r1, r2, t = -r1, -r2, -t
+    R_CP = np.column_stack([r1, r2, np.cross(r1, r2)])
+    U, _, Vt = np.linalg.svd(R_CP)
+    R_CP = U @ Vt
+    # X_C = R_CP X_P + t  =>  camera centre C_P = -R_CP^T t
+    return -R_CP.T @ t
+
+
+class PlateLocator:
+    """Marker search and the plate homography over a stream of frames (see module docstring)."""
+
+    def __init__(self, geometry: PlateGeometry, startup_frames: int = 10, startup_max_motion_px: float = 2.0,
+                 plate_hold_s: float = 0.5, marker_roi_margin: float = 1.0, full_scan_period: int = 10):
+        self.geometry = geometry
+        self.startup_frames = startup_frames
+        self.startup_max_motion_px = startup_max_motion_px
+        self.plate_hold_s = plate_hold_s
+        self.marker_roi_margin = marker_roi_margin
+        self.full_scan_period = full_scan_period
+        self.marker_ids: List[int] = [m for m, _, _ in geometry.marker_centres_m]
+        # marker id -> its corners (4, 2) in plate metres, OpenCV corner order
+        self.marker_corners_P = {m: np.array(geometry.marker_corners_m(m)) for m in self.marker_ids}
+        self.detector = MarkerDetector()
+        self.H_full: Optional[np.ndarray] = None   # reference fit (start-up average or >= 3 markers)
+        self.H_IP: Optional[np.ndarray] = None     # current plate -> image
+        self.H_PI: Optional[np.ndarray] = None     # current image -> plate
+        self.last_seen_s: Optional[float] = None   # stamp of the last frame with a marker
+        self.markers: Dict[int, np.ndarray] = {}   # this frame's markers (image px)
+        self._startup_sum: Optional[np.ndarray] = None
+        self._startup_count = 0
+        self._frames_since_full_scan = 0
+
+    @property
+    def locked(self) -> bool:
+        """The start-up plate pose has been established."""
+        return self.H_full is not None
+
+    def plate_visible(self, stamp_s: float) -> bool:
+        """A plate pose usable at `stamp_s` (markers seen recently enough)."""
+        return self.H_IP is not None and self.last_seen_s is not None and \
+            stamp_s - self.last_seen_s <= self.plate_hold_s
+
+    # -- marker search -----------------------------------------------------------------------
+    def find_markers(self, gray: np.ndarray) -> Dict[int, np.ndarray]:
+        """This frame's known markers: windows around predictions once locked, else full image."""
+        if self.H_IP is None:
+            found = self.detector.detect(gray)
+        else:
+            found = self.detector.detect_in_windows(gray, self._windows(gray.shape))
+            self._frames_since_full_scan += 1
+            if len(found) < len(self.marker_ids) and self._frames_since_full_scan >= self.full_scan_period:
+                self._frames_since_full_scan = 0
+                full = self.detector.detect(gray)
+                if len(full) > len(found):
+                    found = full
+        return {m: c for m, c in found.items() if m in self.marker_corners_P}
+
+    def _windows(self, shape) -> Dict[int, Window]:
+        height, width = shape[:2]
+        windows = {}
+        for m, corners_P in self.marker_corners_P.items():
+            corners_I = apply_homography(self.H_IP, corners_P)
+            side_px = np.max(np.ptp(corners_I, axis=0))
+            pad = side_px * self.marker_roi_margin
+            x0, y0 = np.floor(corners_I.min(axis=0) - pad).astype(int)
+            x1, y1 = np.ceil(corners_I.max(axis=0) + pad).astype(int)
+            windows[m] = (max(x0, 0), max(y0, 0), min(x1, width), min(y1, height))
+        return windows
+
+    # -- homography ------------------------------------------------------------------------
+    def update(self, markers: Dict[int, np.ndarray], stamp_s: float) -> bool:
+        """Fold this frame's markers into the plate pose; True when H_IP changed."""
+        self.markers = markers
+        if not markers:
+            return False
+        self.last_seen_s = stamp_s
+        if not self.locked:
+            self._startup(markers)
+            return self.locked
+        ids = sorted(markers)
+        image_pts = np.concatenate([markers[m] for m in ids])
+        plate_pts = np.concatenate([self.marker_corners_P[m] for m in ids])
+        if len(ids) >= FULL_FIT_MIN_MARKERS:
+            self._set(self.fit(plate_pts, image_pts), full=True)
+        else:
+            # a tilt shows as a perspective change that 1-2 corner markers cannot reveal
+            # (a similarity fitted on them extrapolates worse than none): shift H_full only
+            du, dv = (image_pts - apply_homography(self.H_full, plate_pts)).mean(axis=0)
+            self._set(np.array([[1.0, 0.0, du], [0.0, 1.0, dv], [0.0, 0.0, 1.0]]) @ self.H_full, full=False)
+        return True
+
+    def _startup(self, markers: Dict[int, np.ndarray]) -> None:
+        if len(markers) < len(self.marker_ids):
+            self._startup_sum, self._startup_count = None, 0
+            return
+        corners = np.stack([markers[m] for m in self.marker_ids])
+        if self._startup_count:
+            mean = self._startup_sum / self._startup_count
+            if np.max(np.linalg.norm(corners - mean, axis=-1)) > self.startup_max_motion_px:
+                self._startup_sum, self._startup_count = None, 0     # moved: start again
+        self._startup_sum = corners if self._startup_sum is None else self._startup_sum + corners
+        self._startup_count += 1
+        if self._startup_count >= self.startup_frames:
+            mean = (self._startup_sum / self._startup_count).reshape(-1, 2)
+            plate_pts = np.concatenate([self.marker_corners_P[m] for m in self.marker_ids])
+            self._set(self.fit(plate_pts, mean), full=True)
+
+    @staticmethod
+    def fit(plate_pts: np.ndarray, image_pts: np.ndarray) -> np.ndarray:
+        """Least-squares homography H_IP from plate metres to image pixels."""
+        H, _ = cv2.findHomography(plate_pts.astype(np.float64), image_pts.astype(np.float64), 0)
+        if H is None:
+            raise np.linalg.LinAlgError("degenerate marker corners")
+        return H
+
+    def _set(self, H_IP: np.ndarray, full: bool) -> None:
+        if full:
+            self.H_full = H_IP
+        self.H_IP = H_IP
+        self.H_PI = np.linalg.inv(H_IP)
+
+    def reset(self) -> None:
+        """Forget the plate pose (back to start-up)."""
+        self.H_full = self.H_IP = self.H_PI = self.last_seen_s = None
+        self._startup_sum, self._startup_count = None, 0
+
+    # -- helpers for the ball search -------------------------------------------------------
+    def plate_window(self, shape, margin_m: float) -> Window:
+        """Bounding box in the image of the plate widened by `margin_m`, clipped to the image."""
+        half = self.geometry.side_m / 2.0 + margin_m
+        corners_I = apply_homography(self.H_IP, np.array([[-half, -half], [half, -half], [half, half],
+                                                          [-half, half]]))
+        height, width = shape[:2]
+        x0, y0 = np.floor(corners_I.min(axis=0)).astype(int)
+        x1, y1 = np.ceil(corners_I.max(axis=0)).astype(int) + 1
+        return max(x0, 0), max(y0, 0), min(x1, width), min(y1, height)
+
+    def px_per_m(self, x_m: float = 0.0, y_m: float = 0.0) -> float:
+        """Local image scale of the plate at (x, y): sqrt of the homography's Jacobian."""
+        H = self.H_IP
+        w = H[2, 0] * x_m + H[2, 1] * y_m + H[2, 2]
+        u = (H[0, 0] * x_m + H[0, 1] * y_m + H[0, 2]) / w
+        v = (H[1, 0] * x_m + H[1, 1] * y_m + H[1, 2]) / w
+        J = np.array([[H[0, 0] - u * H[2, 0], H[0, 1] - u * H[2, 1]],
+                      [H[1, 0] - v * H[2, 0], H[1, 1] - v * H[2, 1]]]) / w
+        return float(np.sqrt(abs(np.linalg.det(J))))

@@ -1,0 +1,181 @@
+"""The ball tracker pipeline: one BGR frame + its capture stamp -> the ball's plate-frame state.
+
+Stages (each timed, see `STAGES`): optional undistortion of the image, ArUco marker
+search, plate homography, ball segmentation inside the plate's image region with mapping
+to plate metres, Kalman filter. Pure Python + OpenCV + filterpy, no ROS.
+
+Parallax: the camera sees the ball's centre 20 mm above the plate, so the plate-plane
+homography alone would put it too far from the point under the camera (by r/C_z of the
+distance, several mm at the plate edge). With intrinsics K (calibration file, camera_info,
+or estimated from an oblique view of the plate) the camera centre C_P is recovered from
+the homography and the ray is intersected with the plane z = r instead.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Dict, Optional, Tuple
+
+import cv2
+import numpy as np
+
+from ball_balance.plate_geometry import GRAVITY_M_S2
+from ball_balance.vision.ball_segmentation import BallBlob, BallSegmenter
+from ball_balance.vision.camera import CameraModel, Undistorter
+from ball_balance.vision.config import TrackerConfig
+from ball_balance.vision.kalman import BallKalman
+from ball_balance.vision.plate import PlateLocator, apply_homography, camera_centre_in_plate, estimate_focal_px
+
+STAGES = ("undistort", "markers", "homography", "ball", "filter", "total")
+
+
+@dataclass
+class TrackerResult:
+    """One frame's output; fields map 1:1 onto ball_tracker_msgs/BallState."""
+
+    stamp_s: float
+    x: float = 0.0                    # m, plate frame
+    y: float = 0.0
+    vx: float = 0.0                   # m/s
+    vy: float = 0.0
+    ball_found: bool = False          # fresh detection used this frame
+    tracking_valid: bool = False      # fresh or coasting
+    markers_found: int = 0
+    pixel_u: float = float("nan")     # raw detection (pixels), NaN when none
+    pixel_v: float = float("nan")
+    plate_visible: bool = False
+    blob: Optional[BallBlob] = None
+    measurement_m: Optional[Tuple[float, float]] = None
+    timings_s: Dict[str, float] = field(default_factory=dict)
+
+
+class BallTracker:
+    """Stateful per-camera tracker. `process()` is called once per frame, in stamp order."""
+
+    def __init__(self, config: Optional[TrackerConfig] = None, camera: Optional[CameraModel] = None,
+                 undistort_mode: str = "points"):
+        self.config = config or TrackerConfig.from_values()
+        cfg = self.config
+        self.plate = PlateLocator(cfg.geometry, cfg.startup_frames, cfg.startup_max_motion_px, cfg.plate_hold_s,
+                                  cfg.marker_roi_margin, cfg.full_scan_period)
+        self.segmenter = BallSegmenter(cfg.hsv_lower, cfg.hsv_upper, cfg.morph_kernel_px, cfg.min_circularity)
+        self.kalman = BallKalman(cfg.meas_noise_m, cfg.accel_noise_m_s2, cfg.init_vel_std_m_s, cfg.gate_sigma,
+                                 cfg.max_coast_frames, cfg.max_dt_s)
+        self.undistort_mode = undistort_mode
+        self.camera: Optional[CameraModel] = None
+        self.undistorter: Optional[Undistorter] = None
+        self.set_camera(camera)
+        self.C_P: Optional[np.ndarray] = None           # camera centre, plate frame (for parallax)
+        self._K_estimated: Optional[np.ndarray] = None
+        self._plate_cmd: Optional[Tuple[float, float, float]] = None   # (u_x, u_y, stamp_s)
+        self.frames = 0
+        self.rejected_off_plate = 0
+
+    # -- inputs besides frames --------------------------------------------------------------------
+    def set_camera(self, camera: Optional[CameraModel]) -> None:
+        """Intrinsics/distortion (None: uncalibrated). Resets the camera-centre estimate."""
+        self.camera = camera
+        self.undistorter = Undistorter(camera, self.undistort_mode) if camera is not None else None
+        self.C_P = None
+
+    def set_plate_cmd(self, u_x: float, u_y: float, stamp_s: float) -> None:
+        """Commanded tilts (rad) from /plate_cmd, used as known acceleration when enabled."""
+        self._plate_cmd = (u_x, u_y, stamp_s)
+
+    def known_acceleration(self, stamp_s: float) -> Optional[Tuple[float, float]]:
+        """x'' = -k g sin(u_x), y'' = -k g sin(u_y) from a recent enough command, else None."""
+        if not self.config.use_plate_cmd or self._plate_cmd is None:
+            return None
+        u_x, u_y, t_cmd = self._plate_cmd
+        if abs(stamp_s - t_cmd) > self.config.plate_cmd_timeout_s:
+            return None
+        kg = self.config.rolling_factor * GRAVITY_M_S2
+        return (-kg * np.sin(u_x), -kg * np.sin(u_y))
+
+    # -- the pipeline ----------------------------------------------------------------------------
+    def process(self, image_bgr: np.ndarray, stamp_s: float) -> TrackerResult:
+        """Track the ball in one frame captured at `stamp_s` (seconds, any epoch)."""
+        clock = time.perf_counter
+        t0 = clock()
+        self.frames += 1
+        result = TrackerResult(stamp_s)
+        timings = result.timings_s
+        if self.undistorter is not None and self.undistort_mode == "image":
+            image_bgr = self.undistorter.image(image_bgr)
+        t1 = clock()
+        timings["undistort"] = t1 - t0
+
+        gray = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY)
+        markers = self.plate.find_markers(gray)
+        if self.undistorter is not None and markers:
+            markers = {m: self.undistorter.points(c) for m, c in markers.items()}
+        t2 = clock()
+        timings["markers"] = t2 - t1
+
+        result.markers_found = len(markers)
+        if self.plate.update(markers, stamp_s):
+            self._update_camera_centre(image_bgr.shape)
+        result.plate_visible = self.plate.plate_visible(stamp_s)
+        t3 = clock()
+        timings["homography"] = t3 - t2
+
+        z = None
+        if result.plate_visible:
+            z = self._measure_ball(image_bgr, result)
+        t4 = clock()
+        timings["ball"] = t4 - t3
+
+        estimate = self.kalman.step(stamp_s, z, self.known_acceleration(stamp_s))
+        result.x, result.y, result.vx, result.vy = estimate.x, estimate.y, estimate.vx, estimate.vy
+        result.ball_found, result.tracking_valid = estimate.fresh, estimate.valid
+        t5 = clock()
+        timings["filter"] = t5 - t4
+        timings["total"] = t5 - t0
+        return result
+
+    def _measure_ball(self, image_bgr: np.ndarray, result: TrackerResult) -> Optional[Tuple[float, float]]:
+        cfg, plate = self.config, self.plate
+        px_per_m = plate.px_per_m()
+        r_min, r_max = cfg.ball_radius_range_m
+        window = plate.plate_window(image_bgr.shape, cfg.plate_margin_m)
+        blob = self.segmenter.find(image_bgr, window, (r_min * px_per_m, r_max * px_per_m))
+        if blob is None:
+            return None
+        result.blob = blob
+        result.pixel_u, result.pixel_v = blob.u, blob.v
+        uv = np.array([[blob.u, blob.v]])
+        if self.undistorter is not None:
+            uv = self.undistorter.points(uv)
+        x, y = self.pixel_to_plate(uv[0])
+        if not plate.geometry.on_plate(x, y, cfg.plate_margin_m):
+            self.rejected_off_plate += 1
+            return None
+        result.measurement_m = (x, y)
+        return (x, y)
+
+    def pixel_to_plate(self, uv: np.ndarray) -> Tuple[float, float]:
+        """Undistorted pixel of the ball centre -> plate (x, y) of the ball centre (m)."""
+        p = apply_homography(self.plate.H_PI, uv)[0]       # ray hits the plate plane z = 0 here
+        C = self.C_P
+        if C is None or C[2] <= self.config.ball_radius_m:
+            return float(p[0]), float(p[1])
+        # the ray C -> p crosses z = r at C + (C_z - r) / C_z (p - C)
+        s = (C[2] - self.config.ball_radius_m) / C[2]
+        return float(C[0] + s * (p[0] - C[0])), float(C[1] + s * (p[1] - C[1]))
+
+    def _update_camera_centre(self, shape) -> None:
+        if not self.config.parallax_correction:
+            return
+        K = self.camera.K if self.camera is not None else self._estimate_K(shape)
+        if K is not None:
+            self.C_P = camera_centre_in_plate(self.plate.H_IP, K)
+
+    def _estimate_K(self, shape) -> Optional[np.ndarray]:
+        """Intrinsics guessed from the start-up plate view (principal point at the image centre)."""
+        if self._K_estimated is None and self.plate.H_full is not None:
+            height, width = shape[:2]
+            centre = ((width - 1) / 2.0, (height - 1) / 2.0)
+            f = estimate_focal_px(self.plate.H_full, centre)
+            if f is not None:
+                self._K_estimated = np.array([[f, 0.0, centre[0]], [0.0, f, centre[1]], [0.0, 0.0, 1.0]])
+        return self._K_estimated
