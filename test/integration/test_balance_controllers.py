@@ -24,7 +24,7 @@ class FakeWorld:
 
     def __init__(self, graph, ball=(("x", 0.05), ("y", -0.03))):
         self.graph, self.q = graph, np.array(HOME_POSITIONS_RAD)
-        self.ball = dict(vx=0.0, vy=0.0, tracking_valid=True, ball_found=True, markers_found=4, **dict(ball))
+        self.ball = {**dict(vx=0.0, vy=0.0, tracking_valid=True, ball_found=True, markers_found=4), **dict(ball)}
         self.stamp_offset_s = 0.0
         node = graph.node
         self.joint_pub = node.create_publisher(JointState, "/joint_states", 10)
@@ -100,3 +100,19 @@ def test_mpc_publishes_single_point_trajectories_with_the_right_sign(launcher, g
     assert point.time_from_start.nanosec > 0
     u_x, u_y = _kinematics().tilt_of(np.array(point.positions))
     assert u_x < -0.01 and u_y > 0.005
+
+
+def test_visualizer_draws_plate_ball_velocity_reference_and_trail(launcher, graph):
+    from visualization_msgs.msg import MarkerArray
+
+    FakeWorld(graph, ball=(("x", 0.05), ("y", 0.0), ("vx", 0.1)))
+    _start(launcher, "ball_balance_controller", "pid.yaml")
+    launcher.start([executable("ball_balance_visualizer"), "--ros-args", "-p", "reference_kind:=circle"])
+    needed = {"plate", "ball", "velocity", "reference", "target", "trail"}
+    (msg,) = graph.collect(MarkerArray, "/ball_balance_visualization", timeout=30,
+                           predicate=lambda m: needed <= {k.ns for k in m.markers})
+    assert all(k.header.frame_id == "plate_center" for k in msg.markers)
+    ball = next(k for k in msg.markers if k.ns == "ball")
+    assert ball.pose.position.x == pytest.approx(0.05)
+    reference = next(k for k in msg.markers if k.ns == "reference")
+    assert max(p.x for p in reference.points) == pytest.approx(0.10, abs=1e-3)
