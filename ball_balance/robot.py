@@ -21,6 +21,7 @@ import math
 import os
 import sys
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
@@ -51,6 +52,11 @@ HARDWARE_DEFAULT_PARAMS: Dict[str, Dict[str, str]] = {
     "ur": {"robot_ip": "192.168.56.101", "script_filename": "", "output_recipe_filename": "",
            "input_recipe_filename": ""},
 }
+
+
+def joint_dict(values: Sequence[float]) -> Dict[str, float]:
+    """{joint name: value} for a 6-vector in JOINT_NAMES order."""
+    return dict(zip(JOINT_NAMES, (float(v) for v in values), strict=True))
 
 
 class RobotDescriptionError(ValueError):
@@ -130,6 +136,38 @@ def check_robot_description(urdf_text: str, required_links: Sequence[str] = (BAS
     missing = [name for name in JOINT_NAMES if name not in joints]
     if missing:
         raise RobotDescriptionError(f"robot description lacks joint(s) {missing}")
+
+
+@dataclass(frozen=True)
+class JointLimit:
+    """A URDF <limit>: position range (rad), velocity (rad/s), effort (N m)."""
+
+    lower: float
+    upper: float
+    velocity: float
+    effort: float
+
+
+def joint_limits(urdf_text: str) -> Dict[str, JointLimit]:
+    """JointLimit of each of JOINT_NAMES from the URDF (RobotDescriptionError when one lacks <limit>)."""
+    root = _parse(urdf_text)
+    limits = {}
+    for joint in root.findall("joint"):
+        name = joint.get("name")
+        if name not in JOINT_NAMES:
+            continue
+        limit = joint.find("limit")
+        if limit is None:
+            raise RobotDescriptionError(f"joint '{name}' has no <limit>")
+        try:
+            limits[name] = JointLimit(*(float(limit.get(key, "nan"))
+                                        for key in ("lower", "upper", "velocity", "effort")))
+        except ValueError:
+            raise RobotDescriptionError(f"joint '{name}' has a malformed <limit>") from None
+    missing = [name for name in JOINT_NAMES if name not in limits]
+    if missing:
+        raise RobotDescriptionError(f"robot description lacks joint(s) {missing}")
+    return limits
 
 
 def _parse(text: str) -> ET.Element:
