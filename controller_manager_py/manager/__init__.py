@@ -1,0 +1,1 @@
+"""Manager room: resource manager, controller manager core, loop, statistics, diagnostics."""

@@ -1,0 +1,97 @@
+"""Run a callable in a worker thread with ros2_control's AsyncFunctionHandler semantics.
+
+`trigger(time, period)` hands the arguments to the worker and returns immediately; when
+the previous call is still running the trigger is skipped (counted in `skipped`) and the
+last result is returned again. In "detached" mode the worker runs on its own at `rate_hz`
+and trigger() only reports the last result. Used for is_async controllers and hardware.
+"""
+from __future__ import annotations
+
+import threading
+import time as _time
+from typing import Callable
+
+from ..hardware_interface.types import return_type
+
+
+class AsyncHandler:
+    def __init__(self, name: str, function: Callable[[float, float], return_type],
+                 detached: bool = False, rate_hz: float = 0.0, clock: Callable[[], float] = _time.monotonic):
+        self.name = name
+        self._function = function
+        self._detached = detached
+        self._period = 1.0 / rate_hz if rate_hz > 0 else 0.0
+        self._clock = clock
+        self._wake = threading.Event()
+        self._stop = False
+        self._busy = False
+        self._args = (0.0, 0.0)
+        self.last_result = return_type.OK
+        self.skipped = 0
+        self.runs = 0
+        self.last_exception: BaseException | None = None
+        self.last_finish = float("nan")  # clock time of the last completed run (data age)
+        self.last_duration = 0.0
+        self._thread = threading.Thread(target=self._run, name=f"async:{name}", daemon=True)
+        self._thread.start()
+
+    def trigger(self, time: float, period: float) -> return_type:
+        if self._detached:
+            return self.last_result
+        if self._busy:
+            self.skipped += 1
+            return self.last_result
+        self._args = (time, period)
+        self._busy = True
+        self._wake.set()
+        return self.last_result
+
+    @property
+    def busy(self) -> bool:
+        return self._busy
+
+    def wait_idle(self, timeout: float = 1.0) -> bool:
+        deadline = _time.monotonic() + timeout
+        while self._busy and _time.monotonic() < deadline:
+            _time.sleep(0.0005)
+        return not self._busy
+
+    def stop(self) -> None:
+        self._stop = True
+        self._wake.set()
+        self._thread.join(timeout=2.0)
+
+    def _call(self, time: float, period: float) -> None:
+        start = _time.monotonic()
+        try:
+            self.last_result = self._function(time, period)
+        except Exception as error:  # noqa: BLE001 - reported to the loop as ERROR
+            self.last_exception = error
+            self.last_result = return_type.ERROR
+        self.runs += 1
+        self.last_finish = self._clock()
+        self.last_duration = _time.monotonic() - start
+
+    def _run(self) -> None:
+        if self._detached:
+            period = self._period or 0.01
+            next_time = _time.monotonic()
+            last = self._clock()
+            while not self._stop:
+                now = self._clock()
+                self._call(now, now - last)
+                last = now
+                next_time += period
+                delay = next_time - _time.monotonic()
+                if delay > 0:
+                    _time.sleep(delay)
+                else:
+                    next_time = _time.monotonic()
+            return
+        while True:
+            self._wake.wait()
+            self._wake.clear()
+            if self._stop:
+                return
+            self._call(*self._args)
+            self._busy = False
