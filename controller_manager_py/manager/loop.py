@@ -1,0 +1,80 @@
+"""The loop thread: read -> update -> write at the manager's rate, overruns counted.
+
+Timing: absolute deadlines (next = previous + period) so sleeping jitter does not
+accumulate. When a cycle ends after the next deadline the missed periods are counted in
+`overruns` / `skipped_periods`, the schedule restarts from now, and one throttled
+warning says how many (ros2_control logs every one). With
+`expect_blocking_read_write` the hardware's blocking read sets the pace: no sleep, only
+`minimum_cycle_time` (s) between cycle starts. The time given to the cycle is the
+manager's clock (`cm.now()`: simulated when a component provides the clock); the period
+is the difference of two such times (the nominal period for the first cycle).
+"""
+from __future__ import annotations
+
+import threading
+import time as _time
+
+from .controller_manager import ControllerManager
+from .throttle import Throttle
+
+
+class ControlLoop:
+    def __init__(self, cm: ControllerManager, expect_blocking_read_write: bool = False,
+                 minimum_cycle_time: float = 0.0):
+        self.cm = cm
+        self.period = 1.0 / cm.update_rate
+        self.blocking = expect_blocking_read_write
+        self.minimum_cycle_time = minimum_cycle_time
+        self.overruns = 0
+        self.skipped_periods = 0
+        self.cycles = 0
+        self.throttle = Throttle(cm.logger, 5.0)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="controller_manager_loop", daemon=True)
+
+    def start(self) -> None:
+        self.cm.loop_running = True
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=5.0)
+        self.cm.loop_running = False
+
+    def _run(self) -> None:
+        cm, period, stop = self.cm, self.period, self._stop
+        monotonic, sleep = _time.monotonic, _time.sleep
+        previous = cm.now() - period
+        next_deadline = monotonic()
+        try:
+            while not stop.is_set():
+                now = cm.now()
+                cm.cycle(now, now - previous if now > previous else period)
+                previous = now
+                self.cycles += 1
+                if self.blocking:
+                    if self.minimum_cycle_time > 0.0:
+                        next_deadline += self.minimum_cycle_time
+                        delay = next_deadline - monotonic()
+                        if delay > 0:
+                            sleep(delay)
+                        else:
+                            next_deadline = monotonic()
+                    continue
+                next_deadline += period
+                delay = next_deadline - monotonic()
+                if delay > 0.0:
+                    sleep(delay)
+                elif -delay >= period:
+                    missed = int(-delay / period)
+                    self.overruns += 1
+                    self.skipped_periods += missed
+                    cm.skipped_updates = self.skipped_periods
+                    self.throttle.warn("overrun", f"overrun: the cycle took too long, {missed} period(s) of "
+                                       f"{period * 1e3:.1f} ms skipped (total {self.skipped_periods})")
+                    next_deadline = monotonic()
+        except Exception as error:  # noqa: BLE001 - report, then let the node shut down cleanly
+            cm.logger.error(f"control loop stopped: {error!r}")
+        finally:
+            cm.loop_running = False
