@@ -20,6 +20,7 @@ EXECUTABLES = {
 # controller_manager_py plugins (hardware components and controllers), by plugin string.
 CMPY_HARDWARE = {
     "mock_components/GenericSystem": "controller_manager_py.hardware_interface.mock_components:GenericSystem",
+    "ball_balance/MujocoSystem": "ball_balance.hardware.mujoco_system:MujocoSystem",
 }
 CMPY_CONTROLLERS = {
     "joint_state_broadcaster/JointStateBroadcaster":

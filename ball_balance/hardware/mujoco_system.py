@@ -1,0 +1,322 @@
+"""`ball_balance/MujocoSystem`: the simulated UR arm as a controller_manager_py system component.
+
+A thin adapter around ball_balance.sim.SimWorld (the physics) and CameraThread (the camera):
+
+- interfaces (from the robot description): per joint a `position` command and
+  `position`/`velocity`/`effort` states; `speed_scaling/speed_scaling_factor` (1.0) for the
+  scaled trajectory controller; extra states `ball/x`, `ball/y`, `ball/vx`, `ball/vy`
+  (plate frame, truth) and `ball/dropped` (1.0 once the ball fell off).
+- time: `read()` advances physics, in lock-step by the cycle period (pacing=lockstep; the
+  manager's wall-clock loop then paces it) or to follow the wall clock (pacing=realtime);
+  with sim_time=true the component owns the manager's clock (`now()`) and publishes /clock.
+  `write()` hands the position commands to the servos (non-finite or out-of-limit commands
+  are refused, counted and logged throttled; the last good target is kept).
+- topics (when the manager has a node): /camera/image_raw (bgr8) and /camera/camera_info
+  (sensor data QoS, stamp = capture time, rendered in the camera thread), /sim/ball_truth
+  (BallState, plate frame), /sim/ball_dropped (Bool, transient local), /clock; with
+  truth_fed=true also /ball_state from the truth plus detection noise (no tracker needed).
+  Service /sim/reset_ball (std_srvs/Trigger): ball back to rest at the plate centre.
+
+Hardware parameters (`<hardware><param name=...>` in the URDF; see SCHEMA), optionally from
+a YAML file given as `sim_config` (URDF params win).
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+from typing import Dict, Mapping, Optional
+
+import numpy as np
+
+from ball_balance import robot
+from ball_balance.sim.config import CameraConfig, DomainKnobs, SimConfig, SimConfigError
+from ball_balance.sim.world import CommandError, SimWorld
+from controller_manager_py.hardware_interface import CallbackReturn, HardwareInfo, State, SystemInterface, return_type
+from controller_manager_py.parameters import Param, ParameterError, validate
+
+_KNOB = "domain knob; empty = the domain's value"
+SCHEMA = (
+    Param("physics_dt", 0.001, "MuJoCo timestep", "s", 1e-4, 0.005),
+    Param("servo_lag", 0.005, "joint servo time constant", "s", 5e-4, 0.1),
+    Param("pacing", "lockstep", "lockstep: advance one cycle period per cycle; realtime: follow the wall clock",
+          choices=("lockstep", "realtime")),
+    Param("cycle_period", 0.002, "sim time per cycle when the manager gives no usable period", "s", 1e-4, 0.1),
+    Param("sim_time", True, "own the manager's clock and publish /clock"),
+    Param("clock_rate_hz", 500.0, "/clock publishing rate (sim time)", "Hz", 1.0, 10000.0),
+    Param("camera_enabled", True, "render and publish the overhead camera"),
+    Param("camera_rate_hz", 30.0, "camera frame rate (sim time)", "Hz", 0.1, 1000.0),
+    Param("camera_width", 640, "image width", "px", 1, 4096),
+    Param("camera_height", 480, "image height", "px", 1, 4096),
+    Param("camera_fovy_deg", 45.0, "vertical field of view", "deg", 5.0, 150.0),
+    Param("camera_height_m", 0.65, "camera height above the plate at home", "m", 0.1, 5.0),
+    Param("camera_frame_id", "camera_optical_frame", "frame_id of the image messages"),
+    Param("truth_rate_hz", 100.0, "/sim/ball_truth rate (sim time)", "Hz", 0.1, 1000.0),
+    Param("truth_fed", False, "also publish /ball_state from the truth plus detection noise"),
+    Param("domain", "standard", "evaluation domain (DESIGN.md section 7)"),
+    Param("seed", 0, "seed of the domain's random knobs and of the detection noise", min=0),
+    Param("ball_mass_kg", "", _KNOB), Param("ball_friction", "", _KNOB), Param("gravity_scale", "", _KNOB),
+    Param("detection_noise_m", "", _KNOB), Param("latency_s", "", _KNOB), Param("light_scale", "", _KNOB),
+    Param("exposure", "", _KNOB),
+    Param("ball_x", 0.0, "initial ball position, plate frame", "m", -0.2, 0.2),
+    Param("ball_y", 0.0, "initial ball position, plate frame", "m", -0.2, 0.2),
+    Param("sim_config", "", "YAML file with any of these parameters (URDF params win)"),
+    Param("robot_description_file", "", "URDF the world is built from; empty = config/ur5e_ball_balance.urdf"),
+)
+_KNOB_NAMES = ("ball_mass_kg", "ball_friction", "gravity_scale", "detection_noise_m", "latency_s",
+               "light_scale", "exposure")
+
+
+def parse_hardware_params(raw: Mapping[str, str]) -> Mapping[str, object]:
+    """URDF `<param>` strings (+ the optional sim_config YAML) -> validated values (ParameterError)."""
+    values: Dict[str, object] = {}
+    path = raw.get("sim_config", "")
+    if path:
+        import yaml
+
+        try:
+            with open(path) as handle:
+                loaded = yaml.safe_load(handle) or {}
+        except (OSError, yaml.YAMLError) as error:
+            raise ParameterError(f"parameter 'sim_config': cannot read {path}: {error}") from None
+        if not isinstance(loaded, dict):
+            raise ParameterError(f"parameter 'sim_config': {path} must hold a mapping")
+        values.update(loaded)
+    defaults = {p.name: p.default for p in SCHEMA}
+    for name, text in raw.items():
+        if name in defaults:
+            values[name] = _from_text(defaults[name], text)
+        else:
+            values[name] = text  # validate() names it as unknown
+    for name in _KNOB_NAMES:  # knobs are numbers when given, "" when not
+        if name in values and not isinstance(values[name], str):
+            values[name] = str(values[name])
+    return validate(SCHEMA, values)
+
+
+def _from_text(default, text):
+    if not isinstance(text, str):
+        return text
+    text = text.strip()
+    try:
+        if isinstance(default, bool):
+            return {"true": True, "false": False, "1": True, "0": False}.get(text.lower(), text)
+        if isinstance(default, int):
+            return int(text)
+        if isinstance(default, float):
+            return float(text)
+    except ValueError:
+        return text
+    return text
+
+
+def build_sim(params: Mapping[str, object]):
+    """(SimConfig, DomainKnobs) from validated parameters (SimConfigError names a bad value)."""
+    camera = CameraConfig(width_px=params["camera_width"], height_px=params["camera_height"],
+                          fovy_deg=params["camera_fovy_deg"], height_above_plate_m=params["camera_height_m"],
+                          rate_hz=params["camera_rate_hz"])
+    config = SimConfig(physics_dt_s=params["physics_dt"], servo_lag_s=params["servo_lag"], camera=camera)
+    knobs = DomainKnobs.sample(params["domain"], params["seed"]).as_dict()
+    for name in _KNOB_NAMES:
+        text = params[name]
+        if text != "":
+            try:
+                knobs[name] = float(text)
+            except ValueError:
+                raise SimConfigError(f"{name} = {text!r} must be a number") from None
+    return config, DomainKnobs(**knobs)
+
+
+def _full_description(info: HardwareInfo, path: str) -> str:
+    """The whole URDF (the manager hands components only their <ros2_control> block)."""
+    text = getattr(info, "robot_description", "") or ""
+    if text:
+        return text
+    try:
+        return open(path).read() if path else robot.robot_description_path().read_text()
+    except OSError as error:
+        raise robot.RobotDescriptionError(f"robot_description_file: cannot read {path}: {error}") from None
+
+
+class MujocoSystem(SystemInterface):
+    provides_clock = True
+
+    def __init__(self):
+        super().__init__()
+        self.world: Optional[SimWorld] = None
+        self.camera = None
+        self.ros = None
+        self.commands_refused = 0
+        self.overruns = 0
+        self._last_warn = -math.inf
+
+    # ---- lifecycle (executor thread) -----------------------------------------------------
+    def on_init(self, info: HardwareInfo) -> CallbackReturn:
+        result = super().on_init(info)
+        if result != CallbackReturn.SUCCESS:
+            return result
+        try:
+            self.params = parse_hardware_params(info.hardware_parameters)
+            config, knobs = build_sim(self.params)
+            urdf = _full_description(info, self.params["robot_description_file"])
+            joints = [j.name for j in info.joints]
+            if sorted(joints) != sorted(robot.JOINT_NAMES):
+                raise SimConfigError(f"<ros2_control> must list the joints {list(robot.JOINT_NAMES)}, got {joints}")
+            self.world = SimWorld(config, knobs, urdf_text=urdf, seed=self.params["seed"])
+        except (ParameterError, SimConfigError, robot.RobotDescriptionError) as error:
+            self.get_logger().error(f"{info.name} (ball_balance/MujocoSystem): {error}")
+            return CallbackReturn.ERROR
+        self.provides_clock = bool(self.params["sim_time"])
+        self.world.place_ball(self.params["ball_x"], self.params["ball_y"])
+        self._pos_cmd = [self.command_handles[f"{n}/position"] for n in robot.JOINT_NAMES]
+        self._pos = [self.state_handles[f"{n}/position"] for n in robot.JOINT_NAMES]
+        self._vel = [self.state_handles.get(f"{n}/velocity") for n in robot.JOINT_NAMES]
+        self._eff = [self.state_handles.get(f"{n}/effort") for n in robot.JOINT_NAMES]
+        self._ball = [self.state_handles[f"ball/{k}"] for k in ("x", "y", "vx", "vy", "dropped")]
+        self._speed_scaling = self.state_handles.get("speed_scaling/speed_scaling_factor")
+        self._target = np.array(robot.HOME_POSITIONS_RAD)
+        self._reset_requested = False
+        self._copy_states()
+        return CallbackReturn.SUCCESS
+
+    def export_unlisted_state_interfaces(self):
+        return [("ball", k) for k in ("x", "y", "vx", "vy", "dropped")]
+
+    def on_configure(self, previous_state: State) -> CallbackReturn:
+        node = self.get_node()
+        if node is not None:
+            from ball_balance.hardware.sim_ros import SimRosIo
+
+            self.ros = SimRosIo(node, self.world, self.params, self._request_reset)
+        if self.params["camera_enabled"]:
+            from ball_balance.sim.camera import CameraThread
+
+            self.camera = CameraThread(self.world.model, self.world.config.camera, self.world.knobs.exposure,
+                                       self._on_frame, self._on_camera_error)
+            self.camera.start()
+        self._next_frame_s = self.world.time_s
+        self._next_truth_s = self.world.time_s
+        self._next_clock_s = self.world.time_s
+        self._wall_anchor = None
+        self.register_introspection("ball_x", lambda: self._ball[0].value)
+        self.register_introspection("ball_y", lambda: self._ball[1].value)
+        self.register_introspection("commands_refused", lambda: float(self.commands_refused))
+        self.register_introspection("pacing_overruns", lambda: float(self.overruns))
+        return CallbackReturn.SUCCESS
+
+    def on_activate(self, previous_state: State) -> CallbackReturn:
+        # start from where the arm is: stale commands never apply
+        self._target = self.world.joint_positions()
+        for handle, q in zip(self._pos_cmd, self._target, strict=True):
+            handle.value = q
+        return CallbackReturn.SUCCESS
+
+    def on_cleanup(self, previous_state: State) -> CallbackReturn:
+        self._stop_io()
+        return CallbackReturn.SUCCESS
+
+    def on_shutdown(self, previous_state: State) -> CallbackReturn:
+        self._stop_io()
+        return CallbackReturn.SUCCESS
+
+    def _stop_io(self) -> None:
+        if self.camera is not None:
+            self.camera.stop()
+            self.camera = None
+        if self.ros is not None:
+            self.ros.close()
+            self.ros = None
+
+    # ---- clock ------------------------------------------------------------------------------
+    def now(self) -> float:
+        return self.world.time_s
+
+    # ---- real-time loop ---------------------------------------------------------------------
+    def read(self, time: float, period: float) -> return_type:
+        world = self.world
+        if self._reset_requested:
+            self._reset_requested = False
+            world.place_ball(0.0, 0.0)
+        world.step(self._steps_for(period))
+        self._copy_states()
+        t = world.time_s
+        if self.camera is not None and t >= self._next_frame_s:
+            self._next_frame_s = max(self._next_frame_s + 1.0 / self.params["camera_rate_hz"], t)
+            self.camera.submit(world.snapshot())
+            if self.ros is not None and self.params["truth_fed"]:
+                self.ros.publish_detection(t, *world.detected_ball())
+        if self.ros is not None:
+            if t >= self._next_truth_s:
+                self._next_truth_s = max(self._next_truth_s + 1.0 / self.params["truth_rate_hz"], t)
+                self.ros.publish_truth(world.ball_truth())
+            if self.provides_clock and t >= self._next_clock_s:
+                self._next_clock_s = max(self._next_clock_s + 1.0 / self.params["clock_rate_hz"], t)
+                self.ros.publish_clock(t)
+        return return_type.OK
+
+    def _steps_for(self, period: float) -> int:
+        dt = self.world.physics_dt_s
+        if self.params["pacing"] == "realtime":
+            wall = _time.monotonic()
+            if self._wall_anchor is None:
+                self._wall_anchor = (wall, self.world.time_s)
+            behind = self._wall_anchor[1] + (wall - self._wall_anchor[0]) - self.world.time_s
+            steps = int(behind / dt)
+            if steps > int(0.05 / dt):  # more than 50 ms behind: do not spiral, re-anchor
+                self.overruns += 1
+                steps = int(0.05 / dt)
+                self._wall_anchor = (wall, self.world.time_s + steps * dt)
+            return max(0, steps)
+        if not (0.0 < period < 0.1):
+            period = self.params["cycle_period"]
+        return max(1, int(round(period / dt)))
+
+    def _copy_states(self) -> None:
+        world = self.world
+        q, dq, tau = world.joint_positions(), world.joint_velocities(), world.joint_efforts()
+        for i in range(6):
+            self._pos[i].value = q[i]
+            if self._vel[i] is not None:
+                self._vel[i].value = dq[i]
+            if self._eff[i] is not None:
+                self._eff[i].value = tau[i]
+        truth = world.ball_truth()
+        for handle, value in zip(self._ball, (truth.x, truth.y, truth.vx, truth.vy, float(truth.dropped)),
+                                 strict=True):
+            handle.value = value
+        if self._speed_scaling is not None:
+            self._speed_scaling.value = world.speed_scaling
+        if self.ros is not None:
+            self.ros.update_dropped(truth.dropped, truth)
+
+    def write(self, time: float, period: float) -> return_type:
+        target = self._target.copy()
+        given = False
+        for i, handle in enumerate(self._pos_cmd):
+            value = handle.value
+            if value == value:  # NaN = no command yet: keep this joint's target
+                target[i] = value
+                given = True
+        if not given:
+            return return_type.OK
+        try:
+            self.world.set_joint_targets(target)
+        except CommandError as error:
+            self.commands_refused += 1
+            if time - self._last_warn > 1.0:
+                self._last_warn = time
+                self.get_logger().warning(f"{self.get_name()}: refused joint command ({self.commands_refused} so "
+                                          f"far): {error}")
+            return return_type.OK
+        self._target = target
+        return return_type.OK
+
+    # ---- other threads ----------------------------------------------------------------------
+    def _request_reset(self) -> None:
+        self._reset_requested = True
+
+    def _on_frame(self, image, snapshot) -> None:
+        if self.ros is not None:
+            self.ros.publish_image(image, snapshot.time_s)
+
+    def _on_camera_error(self, error: BaseException) -> None:
+        self.get_logger().error(f"{self.get_name()}: camera stopped: {error}")

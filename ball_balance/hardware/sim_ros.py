@@ -1,0 +1,111 @@
+"""The simulated arm's ROS side: publishers and the reset service on the manager's node.
+
+Used by MujocoSystem (ball_balance/hardware/mujoco_system.py); built once in on_configure.
+Publishing is called from the real-time loop (truth, clock, detections: small messages at
+their own rates) and from the camera thread (images).
+"""
+from __future__ import annotations
+
+from typing import Callable, Mapping
+
+from ball_tracker_msgs.msg import BallState
+from builtin_interfaces.msg import Time
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import Bool
+from std_srvs.srv import Trigger
+
+from ball_balance.plate_geometry import PLATE_FRAME
+from ball_balance.sim.config import camera_intrinsics
+
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def stamp(time_s: float) -> Time:
+    sec = int(time_s // 1)
+    return Time(sec=sec, nanosec=min(999_999_999, int(round((time_s - sec) * 1e9))))
+
+
+class SimRosIo:
+    def __init__(self, node, world, params: Mapping[str, object], on_reset: Callable[[], None]):
+        self.node, self.world, self.params = node, world, params
+        self.logger = node.get_logger()
+        self.image_pub = node.create_publisher(Image, "/camera/image_raw", qos_profile_sensor_data)
+        self.info_pub = node.create_publisher(CameraInfo, "/camera/camera_info", qos_profile_sensor_data)
+        self.truth_pub = node.create_publisher(BallState, "/sim/ball_truth", qos_profile_sensor_data)
+        self.dropped_pub = node.create_publisher(Bool, "/sim/ball_dropped", LATCHED)
+        self.clock_pub = node.create_publisher(Clock, "/clock", QoSProfile(depth=1))
+        self.detection_pub = (node.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
+                              if params["truth_fed"] else None)
+        self._on_reset = on_reset
+        self.reset_srv = node.create_service(Trigger, "/sim/reset_ball", self._handle_reset)
+        self._dropped = None
+        self._camera_info = self._make_camera_info()
+        self._clock = Clock()
+        self.update_dropped(False, None)
+
+    def _make_camera_info(self) -> CameraInfo:
+        camera = self.world.config.camera
+        fx, fy, cx, cy = camera_intrinsics(camera)
+        info = CameraInfo(width=camera.width_px, height=camera.height_px, distortion_model="plumb_bob")
+        info.header.frame_id = self.params["camera_frame_id"]
+        info.d = [0.0] * 5
+        info.k = [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]
+        info.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+        info.p = [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]
+        return info
+
+    # ---- camera thread ------------------------------------------------------------------
+    def publish_image(self, image_bgr, time_s: float) -> None:
+        height, width = image_bgr.shape[:2]
+        msg = Image(height=height, width=width, encoding="bgr8", is_bigendian=0, step=width * 3)
+        msg.header.stamp = stamp(time_s)
+        msg.header.frame_id = self.params["camera_frame_id"]
+        msg.data = image_bgr.tobytes()
+        self._camera_info.header.stamp = msg.header.stamp
+        self.image_pub.publish(msg)
+        self.info_pub.publish(self._camera_info)
+
+    # ---- real-time loop -----------------------------------------------------------------
+    def publish_truth(self, truth) -> None:
+        msg = BallState(x=truth.x, y=truth.y, vx=truth.vx, vy=truth.vy, ball_found=not truth.dropped,
+                        tracking_valid=not truth.dropped, markers_found=4)
+        msg.header.stamp = stamp(truth.time_s)
+        msg.header.frame_id = PLATE_FRAME
+        self.truth_pub.publish(msg)
+
+    def publish_detection(self, time_s: float, x: float, y: float) -> None:
+        """truth_fed mode: a tracker-like BallState from the (noisy) truth; no Kalman velocity."""
+        truth = self.world.ball_truth()
+        msg = BallState(x=x, y=y, vx=truth.vx, vy=truth.vy, ball_found=not truth.dropped,
+                        tracking_valid=not truth.dropped, markers_found=4)
+        msg.header.stamp = stamp(time_s)
+        msg.header.frame_id = PLATE_FRAME
+        self.detection_pub.publish(msg)
+
+    def publish_clock(self, time_s: float) -> None:
+        self._clock.clock = stamp(time_s)
+        self.clock_pub.publish(self._clock)
+
+    def update_dropped(self, dropped: bool, truth) -> None:
+        if dropped == self._dropped:
+            return
+        self._dropped = dropped
+        self.dropped_pub.publish(Bool(data=dropped))
+        if dropped:
+            self.logger.warning(f"ball dropped off the plate at t={truth.time_s:.3f} s "
+                                f"(x={truth.x:+.3f} m, y={truth.y:+.3f} m); call /sim/reset_ball to put it back")
+
+    # ---- executor thread ----------------------------------------------------------------
+    def _handle_reset(self, request, response):
+        self._on_reset()
+        response.success, response.message = True, "ball reset to the plate centre"
+        return response
+
+    def close(self) -> None:
+        for entity in (self.image_pub, self.info_pub, self.truth_pub, self.dropped_pub, self.clock_pub,
+                       self.detection_pub):
+            if entity is not None:
+                self.node.destroy_publisher(entity)
+        self.node.destroy_service(self.reset_srv)

@@ -1,0 +1,117 @@
+"""ball_balance/MujocoSystem driven through its lifecycle without ROS (synthetic manager calls):
+interfaces, lock-step clock, servo following, refused commands, bad parameters."""
+import logging
+import math
+
+import pytest
+
+from ball_balance import robot
+from controller_manager_py.hardware_interface import CallbackReturn, State, parse_control_resources, return_type
+from controller_manager_py.plugins import HARDWARE_GROUP, load_class
+
+PERIOD_S = 0.002
+
+
+def make_system(params=None, caplog=None):
+    (info,) = parse_control_resources(robot.robot_description("mujoco", {"camera_enabled": False, **(params or {})}))
+    system = load_class(HARDWARE_GROUP, "ball_balance/MujocoSystem")()
+    system._attach(None, logging.getLogger("test_mujoco_system"))
+    return system, system.on_init(info)
+
+
+def run_cycles(system, n):
+    for _ in range(n):
+        t = system.now()
+        assert system.read(t, PERIOD_S) == return_type.OK
+        assert system.write(t, PERIOD_S) == return_type.OK
+
+
+@pytest.fixture
+def system():
+    system, result = make_system()
+    assert result == CallbackReturn.SUCCESS
+    assert system.on_configure(State.UNCONFIGURED) == CallbackReturn.SUCCESS
+    assert system.on_activate(State.INACTIVE) == CallbackReturn.SUCCESS
+    yield system
+    system.on_shutdown(State.ACTIVE)
+
+
+def test_exports_joint_ball_and_speed_scaling_interfaces(system):
+    for joint in robot.JOINT_NAMES:
+        assert f"{joint}/position" in system.command_handles
+        for itf in ("position", "velocity", "effort"):
+            assert f"{joint}/{itf}" in system.state_handles
+    assert system.get_state("speed_scaling/speed_scaling_factor") == 1.0
+    assert {f"ball/{k}" for k in ("x", "y", "vx", "vy", "dropped")} <= set(system.state_handles)
+    assert system.provides_clock
+
+
+def test_lockstep_clock_advances_one_period_per_cycle(system):
+    start = system.now()
+    run_cycles(system, 50)
+    assert system.now() - start == pytest.approx(50 * PERIOD_S)
+
+
+def test_activation_holds_the_current_pose_and_commands_move_the_arm(system):
+    assert [system.get_command(f"{j}/position") for j in robot.JOINT_NAMES] == pytest.approx(
+        list(robot.HOME_POSITIONS_RAD))
+    system.set_command("wrist_2_joint/position", robot.HOME_POSITIONS_RAD[4] + 0.05)
+    run_cycles(system, 100)
+    assert system.get_state("wrist_2_joint/position") == pytest.approx(robot.HOME_POSITIONS_RAD[4] + 0.05, abs=1e-3)
+    assert system.get_state("shoulder_pan_joint/position") == pytest.approx(0.0, abs=1e-4)
+
+
+@pytest.mark.parametrize("bad", [math.inf, -math.inf, 7.0])
+def test_non_finite_or_out_of_limit_command_is_refused_and_counted(system, bad):
+    run_cycles(system, 5)
+    system.set_command("wrist_1_joint/position", bad)
+    run_cycles(system, 20)
+    assert system.commands_refused == 20
+    assert system.get_state("wrist_1_joint/position") == pytest.approx(robot.HOME_POSITIONS_RAD[3], abs=1e-4)
+
+
+def test_no_command_yet_keeps_the_target(system):
+    for joint in robot.JOINT_NAMES:
+        system.set_command(f"{joint}/position", math.nan)
+    run_cycles(system, 20)
+    assert system.commands_refused == 0
+    assert system.get_state("elbow_joint/position") == pytest.approx(robot.HOME_POSITIONS_RAD[2], abs=1e-4)
+
+
+def test_ball_states_follow_the_ball(system):
+    system.world.place_ball(0.05, -0.02)
+    run_cycles(system, 1)
+    assert (system.get_state("ball/x"), system.get_state("ball/y")) == pytest.approx((0.05, -0.02), abs=1e-3)
+    assert system.get_state("ball/dropped") == 0.0
+
+
+@pytest.mark.parametrize("params,message", [
+    ({"camera_width": 0}, "camera_width"),
+    ({"camera_height": "0"}, "camera_height"),
+    ({"domain": "moon"}, "unknown domain"),
+    ({"warp_speed": 9}, "unknown parameter"),
+    ({"pacing": "fast"}, "pacing"),
+    ({"gravity_scale": "heavy"}, "gravity_scale"),
+    ({"robot_description_file": "/nonexistent.urdf"}, "cannot read"),
+])
+def test_bad_hardware_parameter_fails_on_init_naming_it(params, message, caplog):
+    with caplog.at_level(logging.ERROR):
+        _, result = make_system(params)
+    assert result == CallbackReturn.ERROR
+    assert message in caplog.text
+
+
+def test_description_without_plate_link_fails_on_init(tmp_path, caplog):
+    text = robot.robot_description().replace('"plate_center"', '"tray"')
+    path = tmp_path / "no_plate.urdf"
+    path.write_text(text)
+    with caplog.at_level(logging.ERROR):
+        _, result = make_system({"robot_description_file": str(path)})
+    assert result == CallbackReturn.ERROR
+    assert "plate_center" in caplog.text
+
+
+def test_domain_and_knob_overrides_reach_the_world():
+    system, result = make_system({"domain": "high_gravity", "ball_mass_kg": "0.004", "seed": 3})
+    assert result == CallbackReturn.SUCCESS
+    assert system.world.knobs.gravity_scale == 1.5 and system.world.knobs.ball_mass_kg == 0.004
