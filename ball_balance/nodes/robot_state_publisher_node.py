@@ -1,6 +1,96 @@
-"""`robot_state_publisher` node (issue #4)."""
-from ball_balance.nodes.pending import exit_not_implemented
+"""`robot_state_publisher`: URDF + /joint_states -> /tf, /tf_static, /robot_description.
+
+Our substitute for ros/robot_state_publisher (yourdfpy parses the URDF; the joint
+transforms are ball_balance.robot.UrdfKinematics):
+- /robot_description (std_msgs/String, reliable, transient local): the URDF text, from the
+  `robot_description` parameter, else the file `robot_description_file`, else
+  config/ur5e_ball_balance.urdf (MuJoCo hardware selected);
+- /tf_static: every fixed joint once (transient local, as tf2's static broadcaster);
+- /tf: every moving joint named in a /joint_states message, stamped with that message's
+  stamp (reliable, depth 100). Non-finite positions are skipped and counted (throttled log).
+`frame_prefix` is prepended to every frame id, as upstream.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from ball_balance import robot
+from ball_balance.ros.node_main import StartupError, main_for
+from ball_balance.tf.ros import StaticTransformBroadcaster, TransformBroadcaster, transform_to_msg
+from ball_balance.tf.transform import Transform
+from controller_manager_py.parameters import Param, declare_parameters
+
+SCHEMA = [
+    Param("robot_description", "", "URDF text (empty: read robot_description_file)", read_only=True),
+    Param("robot_description_file", "", "URDF file (empty: config/ur5e_ball_balance.urdf)", read_only=True),
+    Param("frame_prefix", "", "prefix for every published frame id", read_only=True),
+]
+DESCRIPTION_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-def main(args=None):
-    exit_not_implemented("robot_state_publisher", 4)
+def matrix_to_transform(T: np.ndarray) -> Transform:
+    """4x4 homogeneous matrix -> Transform (translation, quaternion x y z w)."""
+    return Transform.from_values(tuple(T[:3, 3]), tuple(Rotation.from_matrix(T[:3, :3]).as_quat()))
+
+
+class RobotStatePublisherNode(Node):
+    def __init__(self):
+        super().__init__("robot_state_publisher")
+        self.params = declare_parameters(self, SCHEMA)
+        text = self._load_description()
+        try:
+            self.kinematics = robot.UrdfKinematics(text)
+        except robot.RobotDescriptionError as error:
+            raise StartupError(f"robot_description: {error}") from None
+        self.prefix = self.params["frame_prefix"]
+        self.moving = set(self.kinematics.moving_joints)
+        self.rejected = 0
+        self.description_pub = self.create_publisher(String, "/robot_description", DESCRIPTION_QOS)
+        self.description_pub.publish(String(data=text))
+        self.static_broadcaster = StaticTransformBroadcaster(self)
+        now = self.get_clock().now().to_msg()
+        static = [transform_to_msg(matrix_to_transform(T), self.prefix + parent, self.prefix + child, now)
+                  for parent, child, T in self.kinematics.fixed_transforms()]
+        if static:
+            self.static_broadcaster.send_transform(static)
+        self.broadcaster = TransformBroadcaster(self)
+        self.create_subscription(JointState, "/joint_states", self.on_joint_states, 10)
+        self.get_logger().info(f"robot '{self.kinematics.robot_name}': {len(static)} fixed, "
+                               f"{len(self.moving)} moving joints")
+
+    def _load_description(self) -> str:
+        text = self.params["robot_description"]
+        if text:
+            return text
+        path = self.params["robot_description_file"]
+        try:
+            return open(path).read() if path else robot.robot_description_path().read_text()
+        except (OSError, robot.RobotDescriptionError) as error:
+            raise StartupError(f"robot_description_file: {error}") from None
+
+    def on_joint_states(self, msg: JointState) -> None:
+        transforms = []
+        for name, position in zip(msg.name, msg.position, strict=False):
+            if name not in self.moving:
+                continue
+            if not math.isfinite(position):
+                self.rejected += 1
+                self.get_logger().warn(f"non-finite position for '{name}' skipped ({self.rejected} so far)",
+                                       throttle_duration_sec=5.0)
+                continue
+            parent, child, T = self.kinematics.joint_transform(name, position)
+            transforms.append(transform_to_msg(matrix_to_transform(T), self.prefix + parent,
+                                               self.prefix + child, msg.header.stamp))
+        if transforms:
+            self.broadcaster.send_transform(transforms)
+
+
+main = main_for(RobotStatePublisherNode)
