@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
-from ball_balance.control.kinematics import ShaperConfig
+from ball_balance.control.kinematics import Chain, PlateKinematics, ShaperConfig
 from ball_balance.control.mpc import MpcConfig
 from ball_balance.control.pid import PidGains
 from ball_balance.control.pipeline import PipelineConfig
@@ -81,6 +81,8 @@ COMMON_SCHEMA = [
     Param("home_tolerance_rad", 0.01, "max joint error to count as at home", "rad", 1e-4, 0.5, read_only=True),
     Param("home_positions_rad", list(HOME_POSITIONS_RAD), "home joint positions (plate level)", "rad",
           check=_six, read_only=True),
+    Param("ik_mode", "pivot", "'wrist': wrist joints only (plate pivots 0.11 m below its centre); "
+          "'pivot': all joints, plate tilts about its own centre", choices=("wrist", "pivot"), read_only=True),
     Param("max_joint_step_rad", 0.02, "per-joint change per tick", "rad", 1e-4, 0.5, read_only=True),
     Param("lowpass_alpha", 1.0, "joint low-pass y += alpha (x - y) per tick (1 = off)", "", 0.01, 1.0,
           read_only=True),
@@ -135,3 +137,7 @@ def reference(values: Mapping[str, Any]) -> Reference:
                            centre, values["reference_csv_path"])
     delay = values["reference_start_delay_s"]
     return Delayed(inner, delay, centre) if delay > 0 else inner
+
+
+def plate_kinematics(chain: Chain, values: Mapping[str, Any]) -> PlateKinematics:
+    return PlateKinematics(chain, values["home_positions_rad"], shaper=shaper_config(values), mode=values["ik_mode"])

@@ -23,6 +23,7 @@ falls back to the clipped, shifted previous plan and is counted.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -88,6 +89,7 @@ class PlateMpc:
                            max_iter=cfg.max_iter, check_termination=5)
         self._plan = np.zeros(2 * n)
         self.failures = 0          # solves that were not "solved" (fallback used)
+        self.last_solve_s = 0.0    # wall time of the last solve() (vector updates + OSQP)
         self.last_status = ""
 
     def reset(self) -> None:
@@ -102,6 +104,7 @@ class PlateMpc:
         ref_p, ref_v, ref_a: (N, 2) previewed reference at steps 1..N.
         u_prev: (2,) previous command [rad]. Returns (u_x, u_y) [rad].
         """
+        t_start = time.perf_counter()
         cfg, n = self.cfg, self.n
         du = cfg.du_max_rad_s * cfg.dt_s
         for axis in range(2):
@@ -135,6 +138,7 @@ class PlateMpc:
         # the first move must respect both limits whatever the solver returned
         u = np.clip(u, u_prev - du, u_prev + du)
         u = np.clip(u, -cfg.u_max_rad, cfg.u_max_rad)
+        self.last_solve_s = time.perf_counter() - t_start
         return float(u[0]), float(u[1])
 
     def plan(self) -> np.ndarray:

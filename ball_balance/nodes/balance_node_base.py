@@ -35,7 +35,7 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 
 from ball_balance.control import config as control_config
-from ball_balance.control.kinematics import Chain, KinematicsError, PlateKinematics
+from ball_balance.control.kinematics import Chain, KinematicsError
 from ball_balance.control.pipeline import ControlPipeline
 from ball_balance.control.references import ReferenceError
 from ball_balance.control.safety import BallObservation, Mode
@@ -56,8 +56,7 @@ class BalanceControllerNode(Node):
         try:
             urdf = robot_description_path().read_text()
             chain = Chain.from_urdf(urdf, JOINT_NAMES)
-            kin = PlateKinematics(chain, self.params["home_positions_rad"],
-                                  shaper=control_config.shaper_config(self.params))
+            kin = control_config.plate_kinematics(chain, self.params)
             reference = control_config.reference(self.params)
         except (RobotDescriptionError, KinematicsError, ReferenceError, OSError) as error:
             raise StartupError(str(error)) from None
