@@ -15,6 +15,7 @@ EXECUTABLES = {
     "ros2_control_node": "controller_manager_py.ros2_control_node:main",
     "spawner": "controller_manager_py.spawner:main",
     "ros2py": "ball_balance.cli.main:main",
+    "camera_snapshot": "ball_balance.nodes.camera_snapshot_node:main",
 }
 
 # controller_manager_py plugins (hardware components and controllers), by plugin string.
