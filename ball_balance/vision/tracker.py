@@ -41,8 +41,8 @@ class TrackerResult:
     ball_found: bool = False          # fresh detection used this frame
     tracking_valid: bool = False      # fresh or coasting
     markers_found: int = 0
-    pixel_u: float = float("nan")     # raw detection (pixels), NaN when none
-    pixel_v: float = float("nan")
+    pixel_u: float = -1.0             # raw detection (pixels), -1 when none
+    pixel_v: float = -1.0
     plate_visible: bool = False
     blob: Optional[BallBlob] = None
     measurement_m: Optional[Tuple[float, float]] = None

@@ -1,0 +1,161 @@
+"""ball_tracker as a real process: synthetic frames in over DDS, /ball_state out."""
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from ball_tracker_msgs.msg import BallState
+from pal_statistics_msgs.msg import StatisticsNames, StatisticsValues
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, Image
+
+from ball_balance.vision.synthetic import SyntheticScene
+from harness import ROOT, executable
+
+pytestmark = pytest.mark.integration
+CONFIG = str(ROOT / "config" / "ball_tracker.yaml")
+BALL_XY = (0.1, -0.05)
+
+
+def tracker_cmd(*params):
+    cmd = [executable("ball_tracker"), "--ros-args", "--params-file", CONFIG, "-p", "startup_frames:=3"]
+    for p in params:
+        cmd += ["-p", p]
+    return cmd
+
+
+def image_msg(image, stamp_ns, encoding="bgr8"):
+    if encoding == "rgb8":
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    msg = Image(height=image.shape[0], width=image.shape[1], encoding=encoding, step=3 * image.shape[1])
+    msg.data = image.tobytes()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 10**9)
+    return msg
+
+
+class FrameFeeder:
+    """Publishes frames (and camera_info) from the test's graph node at 30 Hz (reliable QoS
+    unless told otherwise)."""
+
+    def __init__(self, graph, frames, qos=10):
+        self.frames, self.sent, self.stamps = frames, 0, []
+        self.pub = graph.node.create_publisher(Image, "/camera/image_raw", qos)
+        self.info_pub = graph.node.create_publisher(CameraInfo, "/camera/camera_info", qos_profile_sensor_data)
+        self.timer = graph.node.create_timer(1 / 30, self.tick)
+
+    def tick(self):
+        msg = self.frames[self.sent % len(self.frames)]
+        if isinstance(msg, Image):
+            stamp_ns = 1_700_000_000 * 10**9 + self.sent * 33_333_333
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 10**9)
+            self.stamps.append((msg.header.stamp.sec, msg.header.stamp.nanosec))
+        self.pub.publish(msg)
+        self.info_pub.publish(self.info)
+        self.sent += 1
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return SyntheticScene()
+
+
+def camera_info(scene):
+    cam = scene.camera
+    info = CameraInfo(width=cam.width, height=cam.height, distortion_model="plumb_bob")
+    info.k = [float(v) for v in cam.K.ravel()]
+    info.d = [0.0] * 5
+    return info
+
+
+def test_frames_over_dds_give_ball_state_with_truth_flags_and_stamps(launcher, graph, scene):
+    tracker = launcher.start(tracker_cmd(), name="ball_tracker")
+    image, _ = scene.render(BALL_XY, noise_std=2.0)
+    feeder = FrameFeeder(graph, [image_msg(image, 0, "rgb8")])
+    feeder.info = camera_info(scene)
+    (msg,) = graph.collect(BallState, "/ball_state", qos=qos_profile_sensor_data, timeout=30,
+                           predicate=lambda m: m.ball_found)
+    assert tracker.running
+    assert msg.header.frame_id == "plate_center"
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) in feeder.stamps
+    assert msg.tracking_valid and msg.markers_found == 4
+    assert math.hypot(msg.x - BALL_XY[0], msg.y - BALL_XY[1]) < 0.002
+    assert abs(msg.vx) < 0.05 and abs(msg.vy) < 0.05
+    assert 0 < msg.pixel_u < 640 and 0 < msg.pixel_v < 480
+
+
+def test_best_effort_image_publisher_is_matched_too(launcher, graph, scene):
+    tracker = launcher.start(tracker_cmd(), name="ball_tracker")
+    image, _ = scene.render(BALL_XY)
+    feeder = FrameFeeder(graph, [image_msg(image, 0)], qos=qos_profile_sensor_data)
+    feeder.info = camera_info(scene)
+    (msg,) = graph.collect(BallState, "/ball_state", qos=qos_profile_sensor_data, timeout=40,
+                           predicate=lambda m: m.ball_found)
+    assert math.hypot(msg.x - BALL_XY[0], msg.y - BALL_XY[1]) < 0.002
+    assert "(best_effort)" in tracker.output()
+
+
+def test_ball_missing_published_every_frame_with_flags(launcher, graph, scene):
+    launcher.start(tracker_cmd("max_coast_frames:=2"), name="ball_tracker")
+    with_ball, _ = scene.render(BALL_XY)
+    without, _ = scene.render(None)
+    frames = [image_msg(with_ball, 0)] * 6 + [image_msg(without, 0)] * 6
+    feeder = FrameFeeder(graph, frames)
+    feeder.info = camera_info(scene)
+    msgs = graph.collect(BallState, "/ball_state", count=30, qos=qos_profile_sensor_data, timeout=30)
+    assert all(m.markers_found == 4 for m in msgs)             # one message per frame, ball or not
+    flags = [(m.ball_found, m.tracking_valid) for m in msgs]
+    lost = next(i for i in range(1, len(flags)) if flags[i - 1] == (True, True) and not flags[i][0])
+    # coasting for max_coast_frames = 2 frames, then invalid until the ball is back
+    assert flags[lost:lost + 4] == [(False, True), (False, True), (False, False), (False, False)]
+
+
+def test_bad_frames_are_dropped_counted_and_the_node_keeps_running(launcher, graph, scene):
+    tracker = launcher.start(tracker_cmd(), name="ball_tracker")
+    good, _ = scene.render(BALL_XY)
+    mono = Image(height=4, width=4, encoding="mono8", step=4, data=bytes(16))
+    empty = Image(height=0, width=0, encoding="bgr8", step=0)
+    truncated = image_msg(good, 0)
+    truncated.data = bytes(truncated.data)[:1000]
+    feeder = FrameFeeder(graph, [mono, empty, truncated] + [image_msg(good, 0)] * 5)
+    feeder.info = camera_info(scene)
+    graph.collect(BallState, "/ball_state", qos=qos_profile_sensor_data, timeout=30, predicate=lambda m: m.ball_found)
+    names = graph.collect(StatisticsNames, "/ball_tracker/statistics/names", timeout=10,
+                          qos=QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                         durability=DurabilityPolicy.TRANSIENT_LOCAL))[0]
+    values = graph.collect(StatisticsValues, "/ball_tracker/statistics/values", timeout=10,
+                           predicate=lambda m: m.names_version == names.names_version)[0]
+    stats = dict(zip(names.names, values.values))
+    assert stats["bad_frames"] >= 3 and stats["total_ms"] > 0 and stats["markers_ms"] > 0
+    assert tracker.running
+    log = tracker.output()
+    assert "encoding 'mono8'" in log and "size 0x0" in log
+
+
+@pytest.mark.parametrize("params, needle", [
+    (["calibration_file:=/nonexistent/cam.yaml"], "calibration_file"),
+    (["source:=camera", "camera_device:=/dev/video_missing"], "camera_device"),
+    (["source:=file", "video_file:=/nonexistent.avi"], "video_file"),
+    (["hsv_lower:=[0, 300, 0]"], "hsv_lower"),
+], ids=["missing_calibration", "camera_cannot_open", "missing_video", "bad_hsv"])
+def test_bad_configuration_exits_non_zero_with_one_line(launcher, params, needle):
+    result = launcher.run(tracker_cmd(*params), timeout=60)
+    assert result.returncode != 0
+    lines = [line for line in (result.stdout + result.stderr).splitlines() if line.strip()]
+    assert lines and needle in lines[-1] and "Traceback" not in result.stderr
+
+
+def test_video_file_source(launcher, graph, scene, tmp_path: Path):
+    path = str(tmp_path / "frames.avi")
+    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (640, 480))
+    image, _ = scene.render(BALL_XY)
+    for _ in range(20):
+        writer.write(image)
+    writer.release()
+    launcher.start(tracker_cmd("source:=file", f"video_file:={path}", "video_loop:=true"), name="ball_tracker")
+    (msg,) = graph.collect(BallState, "/ball_state", qos=qos_profile_sensor_data, timeout=30,
+                           predicate=lambda m: m.ball_found)
+    assert msg.markers_found == 4
+    # no intrinsics here (fronto-parallel view): only the parallax error of the plate-plane fit
+    assert math.hypot(msg.x - BALL_XY[0], msg.y - BALL_XY[1]) < 0.006
+    assert np.isfinite(msg.vx)
