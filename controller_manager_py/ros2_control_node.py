@@ -1,7 +1,13 @@
-"""`ros2_control_node` (issue #3)."""
-import sys
+"""`ros2_control_node`: the controller manager node (controller_manager_py.ros.node).
 
+    ros2_control_node --ros-args --params-file config/ur_controllers.yaml \
+        -p robot_description_file:=config/mock_ur.urdf
+"""
+from ball_balance.ros.node_main import main_for
 
-def main(args=None):
-    print("ros2_control_node: not implemented yet (tracked in issue #3).", file=sys.stderr)
-    sys.exit(2)
+from .ros.node import ControllerManagerNode
+
+main = main_for(ControllerManagerNode)
+
+if __name__ == "__main__":
+    main()

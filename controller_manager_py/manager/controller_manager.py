@@ -40,6 +40,7 @@ class ControllerManager:
         self.logger = logger or logging.getLogger("controller_manager")
         self.throttle = Throttle(self.logger)
         self.node_factory = node_factory
+        self.release_node: Callable[[object], None] = lambda node: node.destroy_node()
         self.controller_config: Dict[str, Mapping] = dict(controller_config or {})
         self.rm = ResourceManager([], self.logger)
         self.controllers: Dict[str, ControllerSpec] = {}
@@ -57,6 +58,7 @@ class ControllerManager:
         self.loop_stats = PeriodicityStats()
         self.read_time, self.update_time, self.write_time = Stats(), Stats(), Stats()
         self.skipped_updates = 0
+        self._reset_stats = False
 
     # ---- time ---------------------------------------------------------------------------
     def now(self) -> float:
@@ -200,8 +202,8 @@ class ControllerManager:
     def _destroy_node(self, node) -> None:
         if node is not None:
             try:
-                node.destroy_node()
-            except Exception:  # noqa: BLE001
+                self.release_node(node)
+            except Exception:  # noqa: BLE001 - best effort
                 pass
 
     def _changed(self) -> None:
@@ -266,9 +268,31 @@ class ControllerManager:
         self._changed()
 
     # ---- the cycle (loop thread) ------------------------------------------------------------
+    def request_stats_reset(self) -> None:
+        """Have the loop restart the statistics windows at its next cycle (thread-safe)."""
+        self._reset_stats = True
+
+    def all_stats(self):
+        """Every statistics window the loop updates (the manager's, controllers', hardware's)."""
+        yield self.loop_stats.execution_time
+        yield self.loop_stats.periodicity
+        yield from (self.read_time, self.update_time, self.write_time)
+        for spec in list(self.controllers.values()):
+            if spec.async_handler is None:  # an async worker updates its own: left alone
+                yield spec.stats.execution_time
+                yield spec.stats.periodicity
+        for comp in list(self.rm.components.values()):
+            if comp.async_handler is None:
+                yield from (comp.read_stats.execution_time, comp.read_stats.periodicity,
+                            comp.write_stats.execution_time, comp.write_stats.periodicity)
+
     def cycle(self, time: float, period: float) -> None:
         """One read -> update -> write at `time` (s); `period` (s) since the previous cycle."""
         start = _time.monotonic()
+        if self._reset_stats:
+            self._reset_stats = False
+            for stats in self.all_stats():
+                stats.reset()
         plan = self._pending
         if plan is not None:
             self._pending = None

@@ -39,6 +39,10 @@ class JointLimiter:
             if vel is not None and lim.has_velocity_limits:
                 self._velocities.append((vel, lim.max_velocity))
 
+    def limited_names(self) -> List[str]:
+        """The command interfaces this limiter may change."""
+        return [p.command.name for p in self._positions] + [h.name for h, _ in self._velocities]
+
     def reset(self) -> None:
         """Forget the previous commands (on activation: start from the measured state)."""
         for p in self._positions:

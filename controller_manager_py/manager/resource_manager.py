@@ -58,6 +58,11 @@ class Component:
         self.write_stats.add(start, _time.monotonic())
         return result
 
+    def data_age(self, now: float) -> float:
+        """Seconds since the async worker last finished a read/write (NaN when not async)."""
+        handler = self.async_handler
+        return now - handler.last_finish if handler is not None else float("nan")
+
     def cycle_async(self, time: float, period: float) -> return_type:
         """Async worker body: read, then write when active."""
         result = self.read_once(time, period)

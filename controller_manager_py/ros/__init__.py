@@ -1,0 +1,1 @@
+"""ROS room: the controller manager's node, services, statistics/introspection publishers."""

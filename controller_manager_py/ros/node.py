@@ -1,0 +1,233 @@
+"""The `controller_manager` node: hardware from the robot description, the loop thread,
+ros2_control's services, ~/activity, statistics, introspection and /diagnostics.
+
+Threads: the read-update-write loop runs in its own thread (manager/loop.py); services,
+subscriptions, statistics and diagnostics timers run in the executor, so a slow service
+never delays a cycle (the GIL switch interval is lowered so the loop gets the interpreter
+back quickly after its sleep).
+
+Robot description, first found: parameter `robot_description` (URDF text), parameter
+`robot_description_file` (a path), else the `robot_description_topic` topic (default
+/robot_description, transient local) — the hardware is loaded from the first message.
+Controllers: every `<name>.type` in the manager's parameters (ros2_control YAML layout)
+is loadable by name; those in `activate_controllers` are loaded, configured and activated
+at start, those in `inactive_controllers` loaded and configured. Per-controller
+parameters come from the same --params-file (the `<name>:` section) or from a file in
+`<name>.params_file`. `<name>.fallback_controllers` lists fallbacks.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from std_msgs.msg import String
+
+from ..hardware_interface.types import State
+from ..manager.controller_manager import ControllerError, ControllerManager
+from ..manager.diagnostics import THRESHOLD_PARAMS, roll_up
+from ..manager.introspection import introspection_entries, statistics_entries
+from ..manager.loop import ControlLoop
+from ..manager.resource_manager import ResourceError
+from ..manager.switching import STRICT, SwitchError
+from ..parameters import Param, ParameterError, declare_parameters
+from .services import ControllerManagerServices
+from .statistics_publisher import StatisticsRegistry
+
+_NONE = [""]  # an empty string array parameter (rclpy cannot type an empty list)
+
+SCHEMA = (
+    Param("update_rate", 100, "rate of the read-update-write loop", unit="Hz", min=1, max=10000, read_only=True),
+    Param("robot_description", "", "URDF text with <ros2_control> tags (empty: file or topic)"),
+    Param("robot_description_file", "", "path of a URDF file (used when robot_description is empty)"),
+    Param("robot_description_topic", "/robot_description", "topic (transient local) when no parameter is set"),
+    Param("hardware_components_initial_state.unconfigured", _NONE, "components only loaded at start"),
+    Param("hardware_components_initial_state.inactive", _NONE, "components configured but not activated"),
+    Param("hardware_synchronization.expect_blocking_read_write", False,
+          "hardware read() blocks and sets the pace: the loop does not sleep"),
+    Param("hardware_synchronization.minimum_cycle_time", 0.0, "with blocking read/write: least time per cycle",
+          unit="s", min=0.0),
+    Param("activate_controllers", _NONE, "controllers loaded, configured and activated at start (in order)"),
+    Param("inactive_controllers", _NONE, "controllers loaded and configured at start"),
+    Param("statistics.publish_rate", 20.0, "rate of ~/statistics and ~/introspection_data", unit="Hz",
+          min=0.1, max=1000.0),
+    Param("diagnostics.period", 1.0, "period of /diagnostics (statistics windows restart after each)", unit="s",
+          min=0.05),
+    Param("gil_switch_interval", 0.0005, "Python's thread switch interval (lower: less loop jitter)", unit="s",
+          min=1e-5, max=0.01),
+    *THRESHOLD_PARAMS,
+)
+CONTROLLER_KEYS = ("type", "fallback_controllers", "params_file")
+
+
+class ControllerManagerNode(Node):
+    def __init__(self, node_name: str = "controller_manager"):
+        super().__init__(node_name, allow_undeclared_parameters=True)
+        self.params = declare_parameters(self, SCHEMA)
+        sys.setswitchinterval(self.params["gil_switch_interval"])
+        config = self._controller_config()
+        self.cm = ControllerManager(self.params["update_rate"], self.get_logger(), self._make_controller_node, config)
+        self.cm.release_node = self._release_controller_node
+        self.loop = None
+        self._unattached = []
+        self.cm_services = ControllerManagerServices(self, self.cm, lambda name: None)
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        from controller_manager_msgs.msg import ControllerManagerActivity
+        self.activity_pub = self.create_publisher(ControllerManagerActivity, "~/activity", latched)
+        self.statistics = StatisticsRegistry(self, "~/statistics")
+        self.introspection = StatisticsRegistry(self, "~/introspection_data")
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._published_version = -1
+        self.create_timer(1.0 / self.params["statistics.publish_rate"], self.on_publish_timer)
+        self.create_timer(self.params["diagnostics.period"], self.on_diagnostics_timer)
+        self._description_sub = None
+        urdf = self._description_from_parameters()
+        if urdf:
+            self._load_hardware(urdf, at_startup=True)
+        else:
+            topic = self.params["robot_description_topic"]
+            self.get_logger().info(f"waiting for the robot description on {topic}")
+            self._description_sub = self.create_subscription(String, topic, self.on_robot_description, latched)
+        self._start_timer = self.create_timer(0.01, self.on_start)
+
+    # ---- configuration -------------------------------------------------------------------
+    def _controller_config(self):
+        overrides = getattr(self, "_parameter_overrides", {})
+        config = {}
+        for key, param in overrides.items():
+            name, _, leaf = key.rpartition(".")
+            if leaf in CONTROLLER_KEYS and name and not name.startswith(("diagnostics", "hardware_")):
+                config.setdefault(name, {})[leaf] = param.value
+                if not self.has_parameter(key):
+                    self.declare_parameter(key, param.value)
+        return config
+
+    def _description_from_parameters(self) -> str:
+        urdf, path = self.params["robot_description"], self.params["robot_description_file"]
+        if urdf:
+            return urdf
+        if path:
+            try:
+                return Path(path).read_text()
+            except OSError as error:
+                raise ParameterError(f"parameter 'robot_description_file': cannot read {path}: "
+                                     f"{error.strerror}") from None
+        return ""
+
+    def _initial_states(self):
+        states = {}
+        for label, state in (("unconfigured", State.UNCONFIGURED), ("inactive", State.INACTIVE)):
+            for name in self.params[f"hardware_components_initial_state.{label}"]:
+                if name:
+                    states[name] = state
+        return states
+
+    def _load_hardware(self, urdf: str, at_startup: bool) -> bool:
+        try:
+            self.cm.load_robot_description(urdf, node=self, initial_states=self._initial_states())
+        except (ResourceError, ControllerError) as error:
+            if at_startup:  # run_node prints it as one line and exits non-zero
+                raise ParameterError(f"robot description: {error}") from None
+            self.get_logger().error(f"robot description: {error}; waiting for another one")
+            return False
+        names = ", ".join(f"{c.name} ({c.info.plugin})" for c in self.cm.rm.components.values())
+        self.get_logger().info(f"hardware loaded: {names}")
+        return True
+
+    def on_robot_description(self, msg: String) -> None:
+        if self.cm.rm.components:
+            return
+        if self._load_hardware(msg.data, at_startup=False):
+            self.destroy_subscription(self._description_sub)
+            self._description_sub = None
+            self.on_start()
+
+    # ---- controller nodes ------------------------------------------------------------------
+    def _make_controller_node(self, name: str):
+        cli_args = None
+        params_file = self.cm.controller_config.get(name, {}).get("params_file")
+        if self.has_parameter(f"{name}.params_file"):
+            params_file = self.get_parameter(f"{name}.params_file").value
+        if params_file:
+            cli_args = ["--ros-args", "--params-file", str(params_file)]
+        node = rclpy.create_node(name, namespace=self.get_namespace(), context=self.context, cli_args=cli_args)
+        if self.executor is not None:
+            self.executor.add_node(node)
+        else:
+            self._unattached.append(node)
+        return node
+
+    def _release_controller_node(self, node) -> None:
+        if self.executor is not None:
+            self.executor.remove_node(node)
+        node.destroy_node()
+
+    def controller_type_from_parameters(self, name: str) -> str:
+        key = f"{name}.type"
+        return self.get_parameter(key).value if self.has_parameter(key) else ""
+
+    # ---- start-up: spawn listed controllers, start the loop ---------------------------------
+    def on_start(self) -> None:
+        if self._start_timer is not None:
+            self._start_timer.cancel()
+        for node in self._unattached:
+            self.executor.add_node(node)
+        self._unattached = []
+        if not self.cm.rm.components or self.loop is not None:
+            return
+        activate = [n for n in self.params["activate_controllers"] if n]
+        inactive = [n for n in self.params["inactive_controllers"] if n]
+        for name in [*activate, *inactive]:
+            try:
+                self.spawn(name)
+            except (ControllerError, SwitchError) as error:
+                self.get_logger().error(f"cannot spawn '{name}': {error}")
+        try:
+            started = [n for n in activate if n in self.cm.controllers]
+            self.cm.switch_controller(started, [], STRICT)
+        except SwitchError as error:
+            self.get_logger().error(f"cannot activate {activate}: {error}")
+        blocking = self.params["hardware_synchronization.expect_blocking_read_write"]
+        self.loop = ControlLoop(self.cm, blocking, self.params["hardware_synchronization.minimum_cycle_time"])
+        self.loop.start()
+        self.get_logger().info(f"update loop running at {self.cm.update_rate} Hz; active controllers: "
+                               f"{[s.name for s in self.cm.ordered]}")
+
+    def spawn(self, name: str) -> None:
+        self.cm.load_controller(name, self.controller_type_from_parameters(name))
+        self.cm.configure_controller(name)
+
+    # ---- publishers -------------------------------------------------------------------------
+    def on_publish_timer(self) -> None:
+        version = self.cm.version
+        if version != self._published_version:
+            self._published_version = version
+            self.statistics.set_entries(statistics_entries(self.cm))
+            self.introspection.set_entries(introspection_entries(self.cm))
+            self.activity_pub.publish(self.cm_services.activity())
+        self.statistics.publish()
+        self.introspection.publish()
+
+    def on_diagnostics_timer(self) -> None:
+        thresholds = {p.name: self.params[p.name] for p in THRESHOLD_PARAMS}
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        for status in roll_up(self.cm, thresholds):
+            msg.status.append(DiagnosticStatus(
+                level=bytes([status.level]), name=f"{self.get_name()}: {status.name}", message=status.message,
+                hardware_id=self.get_fully_qualified_name(),
+                values=[KeyValue(key=k, value=v) for k, v in status.values]))
+        self.diagnostics_pub.publish(msg)
+        self.cm.request_stats_reset()
+
+    def destroy_node(self):
+        if self.loop is not None:
+            self.loop.stop()
+        try:
+            self.cm.shutdown()
+        except Exception as error:  # noqa: BLE001 - best effort at exit
+            self.get_logger().error(f"shutdown: {error!r}")
+        return super().destroy_node()
