@@ -239,9 +239,10 @@ class MujocoSystem(SystemInterface):
         world.step(self._steps_for(period))
         self._copy_states()
         t = world.time_s
-        if self.camera is not None and t >= self._next_frame_s:
+        if t >= self._next_frame_s:  # a camera frame (rendered, and/or a truth-fed detection)
             self._next_frame_s = max(self._next_frame_s + 1.0 / self.params["camera_rate_hz"], t)
-            self.camera.submit(world.snapshot())
+            if self.camera is not None:
+                self.camera.submit(world.snapshot())
             if self.ros is not None and self.params["truth_fed"]:
                 self.ros.publish_detection(t, *world.detected_ball())
         if self.ros is not None:

@@ -1,0 +1,79 @@
+#!/usr/bin/env bash
+# The simulated UR arm: ros2_control_node hosting ball_balance/MujocoSystem (MuJoCo arm +
+# plate + ball + overhead camera) with config/ur_controllers.yaml, plus robot_state_publisher.
+# joint_state_broadcaster and forward_position_controller come up active (with
+# --trajectory: scaled_joint_trajectory_controller instead). Ctrl-C stops everything.
+#
+#   scripts/sim_arm.sh                              # standard domain, camera 30 Hz 640x480
+#   scripts/sim_arm.sh --domain slippery --seed 3   # an evaluation domain (DESIGN.md section 7)
+#   scripts/sim_arm.sh --sim-config config/sim_truth_fed.yaml   # no camera, /ball_state from truth
+#   scripts/sim_arm.sh --param camera_rate_hz=60 --param camera_width=320 --param camera_height=240
+#   scripts/sim_arm.sh --trajectory                 # MPC-style: the trajectory controller active
+#
+# Topics: /joint_states, /tf, /tf_static, /robot_description, /camera/image_raw,
+# /camera/camera_info, /sim/ball_truth, /sim/ball_dropped, /clock; service /sim/reset_ball.
+# See the camera without a display:
+#   camera_snapshot --ros-args -p png:=/tmp/camera.png -p mp4:=/tmp/camera.mp4 -p duration_s:=5.0
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+if [[ -z "${BALL_BALANCE_ROOT:-}" ]]; then
+  # shellcheck disable=SC1091
+  source "$ROOT/env.sh"
+fi
+
+SIM_CONFIG="$ROOT/config/sim.yaml"
+CONTROLLERS="$ROOT/config/ur_controllers.yaml"
+PARAMS=()
+TRAJECTORY=0
+usage() { sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; }
+while (($#)); do
+  case "$1" in
+    --sim-config) SIM_CONFIG="$(realpath "$2")"; shift 2 ;;
+    --controllers) CONTROLLERS="$(realpath "$2")"; shift 2 ;;
+    --domain) PARAMS+=(--param "domain=$2"); shift 2 ;;
+    --seed) PARAMS+=(--param "seed=$2"); shift 2 ;;
+    --param) PARAMS+=(--param "$2"); shift 2 ;;
+    --trajectory) TRAJECTORY=1; shift ;;
+    -h|--help) usage; exit 0 ;;
+    *) echo "sim_arm.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+  esac
+done
+[[ -f "$SIM_CONFIG" ]] || { echo "sim_arm.sh: no such sim config: $SIM_CONFIG" >&2; exit 2; }
+
+WORK="$(mktemp -d /tmp/ball_balance_sim.XXXXXX)"
+URDF="$WORK/ur5e_ball_balance_sim.urdf"
+# the description with the MuJoCo hardware selected and its parameters (the world is built
+# from this same file: robot_description_file points at it)
+python -m ball_balance.robot --hardware mujoco --param "sim_config=$SIM_CONFIG" \
+  --param "robot_description_file=$URDF" ${PARAMS[@]+"${PARAMS[@]}"} >"$URDF"
+
+if ((TRAJECTORY)); then
+  ACTIVE="[joint_state_broadcaster, scaled_joint_trajectory_controller]"
+  INACTIVE="[forward_position_controller]"
+else
+  ACTIVE="[joint_state_broadcaster, forward_position_controller]"
+  INACTIVE="[scaled_joint_trajectory_controller]"
+fi
+
+PIDS=()
+stop_all() {
+  trap - INT TERM EXIT
+  for pid in "${PIDS[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
+  for pid in "${PIDS[@]}"; do
+    for _ in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
+    kill -KILL "$pid" 2>/dev/null || true
+  done
+  rm -rf "$WORK"
+}
+trap stop_all INT TERM EXIT
+
+robot_state_publisher --ros-args -p "robot_description_file:=$URDF" &
+PIDS+=($!)
+ros2_control_node --ros-args --params-file "$CONTROLLERS" \
+  -p "robot_description_file:=$URDF" \
+  -p "activate_controllers:=$ACTIVE" -p "inactive_controllers:=$INACTIVE" &
+PIDS+=($!)
+echo "sim_arm.sh: running (robot_state_publisher ${PIDS[0]}, ros2_control_node ${PIDS[1]}); Ctrl-C stops" >&2
+# exit when either process ends (then stop the other)
+wait -n "${PIDS[@]}"
