@@ -65,7 +65,7 @@ TRACKER_SCHEMA = (
     Param("parallax_correction", True,
           "map the ball centre at its height above the plate (needs intrinsics, or estimates them)"),
     # ball segmentation
-    Param("hsv_lower", (0, 120, 110), "lower HSV bound of the ball colour (OpenCV H 0..179)",
+    Param("hsv_lower", (0, 100, 60), "lower HSV bound of the ball colour (OpenCV H 0..179)",
           check=_three_ints_0_255),
     Param("hsv_upper", (25, 255, 255), "upper HSV bound of the ball colour", check=_three_ints_0_255),
     Param("morph_kernel_px", 3, "morphological opening kernel size (0 = none)", "px", 0, 31),
