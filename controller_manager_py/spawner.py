@@ -1,7 +1,134 @@
-"""`spawner` (issue #3)."""
+"""`spawner`: load, configure and activate controllers of a running controller manager.
+
+Same command line as ros2_control's spawner (the common options):
+    spawner joint_state_broadcaster forward_position_controller [-c /controller_manager]
+            [--inactive | --activate] [--load-only] [-t TYPE] [-p PARAM_FILE]
+            [--activate-as-group] [--controller-manager-timeout S] [--switch-timeout S]
+Exits 0 when every controller reached the requested state, 1 otherwise (one line why).
+"""
+from __future__ import annotations
+
+import argparse
 import sys
+
+import rclpy
+from controller_manager_msgs.srv import ConfigureController, ListControllers, LoadController, SwitchController
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+
+
+class SpawnError(RuntimeError):
+    pass
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(prog="spawner", description=__doc__.splitlines()[0])
+    parser.add_argument("controller_names", nargs="+")
+    parser.add_argument("-c", "--controller-manager", default="/controller_manager")
+    parser.add_argument("-p", "--param-file", help="controller parameters file (sets <name>.params_file)")
+    parser.add_argument("-t", "--controller-type", help="controller type (sets <name>.type)")
+    parser.add_argument("--load-only", action="store_true", help="only load the controllers")
+    state = parser.add_mutually_exclusive_group()
+    state.add_argument("--inactive", action="store_true", help="configure but leave inactive")
+    state.add_argument("--activate", action="store_true", help="configure and activate (the default)")
+    parser.add_argument("--activate-as-group", action="store_true", help="activate all in one switch")
+    parser.add_argument("--controller-manager-timeout", type=float, default=10.0)
+    parser.add_argument("--switch-timeout", type=float, default=5.0)
+    parser.add_argument("--service-call-timeout", type=float, default=10.0)
+    return parser.parse_args(argv)
+
+
+class Spawner:
+    def __init__(self, node, args):
+        self.node, self.args = node, args
+        self.cm = args.controller_manager.rstrip("/") or "/controller_manager"
+
+    def call(self, srv_type, name: str, request, timeout: float):
+        client = self.node.create_client(srv_type, f"{self.cm}/{name}")
+        try:
+            if not client.wait_for_service(timeout_sec=timeout):
+                raise SpawnError(f"controller manager {self.cm} not available ({self.cm}/{name} missing "
+                                 f"after {timeout:g} s)")
+            future = client.call_async(request)
+            rclpy.spin_until_future_complete(self.node, future, timeout_sec=self.args.service_call_timeout)
+            if not future.done():
+                raise SpawnError(f"{self.cm}/{name} did not answer within {self.args.service_call_timeout:g} s")
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    def set_param(self, name: str, value: str) -> None:
+        request = SetParameters.Request(parameters=[Parameter(
+            name=name, value=ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value))])
+        result = self.call(SetParameters, "set_parameters", request, self.args.controller_manager_timeout)
+        if not result.results or not result.results[0].successful:
+            raise SpawnError(f"cannot set {self.cm} parameter '{name}'")
+
+    def loaded(self):
+        response = self.call(ListControllers, "list_controllers", ListControllers.Request(),
+                             self.args.controller_manager_timeout)
+        return {c.name: c.state for c in response.controller}
+
+    def switch(self, names):
+        request = SwitchController.Request(activate_controllers=list(names), strictness=SwitchController.Request.STRICT,
+                                           activate_asap=True)
+        request.timeout.sec = int(self.args.switch_timeout)
+        request.timeout.nanosec = int((self.args.switch_timeout % 1) * 1e9)
+        if not self.call(SwitchController, "switch_controller", request, self.args.switch_timeout).ok:
+            raise SpawnError(f"failed to activate {', '.join(names)} (see the controller manager's log)")
+
+    def run(self) -> None:
+        a = self.args
+        to_activate = []
+        for name in a.controller_names:
+            if a.controller_type:
+                self.set_param(f"{name}.type", a.controller_type)
+            if a.param_file:
+                self.set_param(f"{name}.params_file", a.param_file)
+            state = self.loaded().get(name)
+            if state is not None:
+                print(f"[spawner] controller '{name}' already loaded ({state})", file=sys.stderr)
+            elif not self.call(LoadController, "load_controller", LoadController.Request(name=name),
+                               a.controller_manager_timeout).ok:
+                raise SpawnError(f"failed loading controller '{name}' (unknown type or bad parameters: see the "
+                                 "controller manager's log)")
+            if a.load_only:
+                print(f"[spawner] loaded {name}")
+                continue
+            if self.loaded().get(name) == "unconfigured" and not self.call(
+                    ConfigureController, "configure_controller", ConfigureController.Request(name=name),
+                    a.controller_manager_timeout).ok:
+                raise SpawnError(f"failed to configure controller '{name}' (see the controller manager's log)")
+            if a.inactive:
+                print(f"[spawner] configured {name} (inactive)")
+            elif a.activate_as_group:
+                to_activate.append(name)
+            elif self.loaded().get(name) != "active":
+                self.switch([name])
+                print(f"[spawner] configured and activated {name}")
+        if to_activate:
+            self.switch(to_activate)
+            print(f"[spawner] configured and activated {', '.join(to_activate)}")
 
 
 def main(args=None):
-    print("spawner: not implemented yet (tracked in issue #3).", file=sys.stderr)
-    sys.exit(2)
+    argv = rclpy.utilities.remove_ros_args(args if args is not None else sys.argv)[1:]
+    options = parse_args(argv)
+    rclpy.init(args=args)
+    node = rclpy.create_node("spawner_" + options.controller_names[0].replace("/", "_"))
+    code = 0
+    try:
+        Spawner(node, options).run()
+    except SpawnError as error:
+        print(f"spawner: {error}", file=sys.stderr)
+        code = 1
+    except KeyboardInterrupt:
+        code = 130
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    sys.exit(code)
+
+
+if __name__ == "__main__":
+    main()

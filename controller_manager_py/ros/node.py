@@ -73,7 +73,7 @@ class ControllerManagerNode(Node):
         self.cm.release_node = self._release_controller_node
         self.loop = None
         self._unattached = []
-        self.cm_services = ControllerManagerServices(self, self.cm, lambda name: None)
+        self.cm_services = ControllerManagerServices(self, self.cm, self.controller_type)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         from controller_manager_msgs.msg import ControllerManagerActivity
         self.activity_pub = self.create_publisher(ControllerManagerActivity, "~/activity", latched)
@@ -165,9 +165,13 @@ class ControllerManagerNode(Node):
             self.executor.remove_node(node)
         node.destroy_node()
 
-    def controller_type_from_parameters(self, name: str) -> str:
-        key = f"{name}.type"
-        return self.get_parameter(key).value if self.has_parameter(key) else ""
+    def controller_type(self, name: str) -> str:
+        """`<name>.type` (and `<name>.fallback_controllers`) as currently set, e.g. by a spawner."""
+        config = self.cm.controller_config.setdefault(name, {})
+        for leaf in ("type", "fallback_controllers"):
+            if self.has_parameter(f"{name}.{leaf}"):
+                config[leaf] = self.get_parameter(f"{name}.{leaf}").value
+        return config.get("type", "")
 
     # ---- start-up: spawn listed controllers, start the loop ---------------------------------
     def on_start(self) -> None:
@@ -197,7 +201,7 @@ class ControllerManagerNode(Node):
                                f"{[s.name for s in self.cm.ordered]}")
 
     def spawn(self, name: str) -> None:
-        self.cm.load_controller(name, self.controller_type_from_parameters(name))
+        self.cm.load_controller(name, self.controller_type(name))
         self.cm.configure_controller(name)
 
     # ---- publishers -------------------------------------------------------------------------

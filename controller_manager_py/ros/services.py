@@ -45,9 +45,9 @@ def state_msg(state: State) -> StateMsg:
 
 
 class ControllerManagerServices:
-    def __init__(self, node, cm: ControllerManager, load_hook):
-        """load_hook(name) -> dict | None: the controller's parameters (None: its node's)."""
-        self.node, self.cm, self.load_hook = node, cm, load_hook
+    def __init__(self, node, cm: ControllerManager, type_of):
+        """type_of(name) -> the controller's type from the manager's parameters ('' if unset)."""
+        self.node, self.cm, self.type_of = node, cm, type_of
         self.logger = node.get_logger()
         self._cache = {}
         self.services = [node.create_service(t, f"~/{name}", getattr(self, f"on_{name}"))
@@ -105,7 +105,7 @@ class ControllerManagerServices:
 
     def on_load_controller(self, request, response):
         return self._do("load_controller", lambda: self.cm.load_controller(
-            request.name, params=self.load_hook(request.name)), response)
+            request.name, self.type_of(request.name)), response)
 
     def on_configure_controller(self, request, response):
         return self._do("configure_controller", lambda: self.cm.configure_controller(request.name), response)

@@ -1,0 +1,146 @@
+"""ros2_control_node as a real process over DDS: services, topics, switching, spawner."""
+import math
+from pathlib import Path
+
+import pytest
+from controller_manager_msgs.msg import ControllerManagerActivity
+from controller_manager_msgs.srv import (
+    ListControllers,
+    ListControllerTypes,
+    ListHardwareComponents,
+    ListHardwareInterfaces,
+    SwitchController,
+)
+from diagnostic_msgs.msg import DiagnosticArray
+from pal_statistics_msgs.msg import StatisticsNames, StatisticsValues
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, String
+
+from harness import ROOT, executable
+
+pytestmark = pytest.mark.integration
+URDF = ROOT / "config" / "mock_ur.urdf"
+CONTROLLERS = ROOT / "config" / "ur_controllers.yaml"
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+TARGET = [0.1, -1.4, 1.4, -1.5, 1.5, 0.2]
+
+
+def start_manager(launcher, *params: str, urdf: Path = URDF):
+    args = [executable("ros2_control_node"), "--ros-args", "--params-file", str(CONTROLLERS)]
+    if urdf is not None:
+        args += ["-p", f"robot_description_file:={urdf}"]
+    for p in params:
+        args += ["-p", p]
+    return launcher.start(args, name="ros2_control_node")
+
+
+def controllers(graph):
+    response = graph.call(ListControllers, "/controller_manager/list_controllers", ListControllers.Request())
+    return {c.name: c for c in response.controller}
+
+
+def switch(graph, activate=(), deactivate=(), strictness=SwitchController.Request.STRICT):
+    request = SwitchController.Request(activate_controllers=list(activate), deactivate_controllers=list(deactivate),
+                                       strictness=strictness)
+    request.timeout.sec = 2
+    return graph.call(SwitchController, "/controller_manager/switch_controller", request).ok
+
+
+def test_services_commands_switching_and_numbers_over_dds(launcher, graph):
+    node = start_manager(launcher)
+    graph.wait_for_service("/controller_manager/list_controllers", timeout=30)
+    listed = controllers(graph)
+    assert listed["joint_state_broadcaster"].state == "active"
+    assert listed["forward_position_controller"].state == "active"
+    assert listed["forward_position_controller"].update_rate == 500
+    assert sorted(listed["forward_position_controller"].claimed_interfaces) == sorted(
+        f"{j}/position" for j in ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
+                                  "wrist_2_joint", "wrist_3_joint"))
+    assert listed["scaled_joint_trajectory_controller"].state == "inactive", node.output()
+
+    # commands on /forward_position_controller/commands show up on /joint_states (mock mirrors them)
+    publisher = graph.node.create_publisher(Float64MultiArray, "/forward_position_controller/commands", 10)
+    graph.wait_for_topic("/joint_states")
+
+    def arrived(msg):
+        publisher.publish(Float64MultiArray(data=TARGET))
+        return all(math.isclose(a, b, abs_tol=1e-9) for a, b in zip(msg.position, TARGET))
+    graph.collect(JointState, "/joint_states", predicate=arrived, timeout=10)
+    publisher.publish(Float64MultiArray(data=[1.0, 2.0]))  # wrong length: refused, nothing moves
+    (msg,) = graph.collect(JointState, "/joint_states", count=1)
+    assert list(msg.position) == pytest.approx(TARGET)
+
+    # claiming conflict (STRICT) changes nothing; a swap in one switch works
+    assert not switch(graph, activate=["scaled_joint_trajectory_controller"])
+    assert controllers(graph)["forward_position_controller"].state == "active"
+    assert switch(graph, activate=["scaled_joint_trajectory_controller"], deactivate=["forward_position_controller"])
+    listed = controllers(graph)
+    assert listed["scaled_joint_trajectory_controller"].state == "active"
+    assert listed["forward_position_controller"].state == "inactive"
+    assert switch(graph, activate=["ghost", "forward_position_controller"],
+                  deactivate=["scaled_joint_trajectory_controller"], strictness=SwitchController.Request.BEST_EFFORT)
+
+    # hardware listings
+    hw = graph.call(ListHardwareComponents, "/controller_manager/list_hardware_components",
+                    ListHardwareComponents.Request()).component
+    assert [(c.name, c.plugin_name, c.state.label) for c in hw] == [("mock_ur", "mock_components/GenericSystem",
+                                                                     "active")]
+    interfaces = graph.call(ListHardwareInterfaces, "/controller_manager/list_hardware_interfaces",
+                            ListHardwareInterfaces.Request())
+    claimed = {i.name for i in interfaces.command_interfaces if i.is_claimed}
+    assert "elbow_joint/position" in claimed
+    assert "speed_scaling/speed_scaling_factor" in {i.name for i in interfaces.state_interfaces}
+    types = graph.call(ListControllerTypes, "/controller_manager/list_controller_types",
+                       ListControllerTypes.Request()).types
+    assert "joint_trajectory_controller/JointTrajectoryController" in types
+
+    # statistics: names (latched) then values with the same names_version
+    (names,) = graph.collect(StatisticsNames, "/controller_manager/statistics/names", qos=LATCHED)
+    assert "joint_state_broadcaster.stats/execution_time/average" in names.names
+    assert "mock_ur.stats/read_cycle/periodicity/average" in names.names
+    (values,) = graph.collect(StatisticsValues, "/controller_manager/statistics/values")
+    assert values.names_version == names.names_version and len(values.values) == len(names.names)
+    rate = values.values[names.names.index("controller_manager.stats/periodicity/average")]
+    assert 300 < rate < 700  # 500 Hz loop on a busy 2-core machine
+    (intro,) = graph.collect(StatisticsNames, "/controller_manager/introspection_data/names", qos=LATCHED)
+    assert "state_interface.elbow_joint/position" in intro.names
+    assert "command_interface.elbow_joint/position.is_limited" in intro.names
+
+    (diag,) = graph.collect(DiagnosticArray, "/diagnostics", timeout=10)
+    assert [s.name for s in diag.status] == ["controller_manager: Controllers Activity",
+                                             "controller_manager: Hardware Components Activity",
+                                             "controller_manager: Controller Manager Activity"]
+    (activity,) = graph.collect(ControllerManagerActivity, "/controller_manager/activity", qos=LATCHED)
+    assert {c.name: c.state.label for c in activity.controllers}["forward_position_controller"] == "active"
+
+
+def test_description_from_topic_and_the_spawner(launcher, graph):
+    launcher_env_params = ["activate_controllers:=[joint_state_broadcaster]"]
+    start_manager(launcher, *launcher_env_params, urdf=None)
+    publisher = graph.node.create_publisher(String, "/robot_description", LATCHED)
+    publisher.publish(String(data=URDF.read_text()))
+    graph.wait_for_service("/controller_manager/list_controllers", timeout=30)
+    graph.spin_until(lambda: "joint_state_broadcaster" in controllers(graph), 15, "controllers spawned")
+    env_run = launcher.run([executable("spawner"), "scaled_joint_trajectory_controller", "--inactive"], timeout=30)
+    assert env_run.returncode == 0, env_run.stderr
+    run = launcher.run([executable("spawner"), "forward_position_controller"], timeout=30)
+    assert run.returncode == 0, run.stderr
+    listed = controllers(graph)
+    assert listed["forward_position_controller"].state == "active"
+    assert listed["scaled_joint_trajectory_controller"].state == "inactive"
+    run = launcher.run([executable("spawner"), "extra_jsb", "-t", "joint_state_broadcaster/JointStateBroadcaster",
+                        "--inactive"], timeout=30)
+    assert run.returncode == 0, run.stderr
+    assert controllers(graph)["extra_jsb"].state == "inactive"
+    run = launcher.run([executable("spawner"), "nonexistent_controller"], timeout=30)
+    assert run.returncode == 1 and "failed loading controller 'nonexistent_controller'" in run.stderr
+
+
+def test_malformed_description_stops_with_one_clear_line(launcher, tmp_path):
+    broken = tmp_path / "broken.urdf"
+    broken.write_text(URDF.read_text().replace("mock_components/GenericSystem", "acme/Robot"))
+    process = start_manager(launcher, urdf=broken)
+    assert process.wait(timeout=30) == 2
+    lines = [line for line in process.output().splitlines() if line.strip()]
+    assert any("unknown hardware plugin 'acme/Robot'" in line for line in lines), lines
