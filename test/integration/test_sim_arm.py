@@ -1,0 +1,120 @@
+"""The simulated arm over DDS: ros2_control_node hosting ball_balance/MujocoSystem with the
+UR controller configuration. Commands move the arm, the camera publishes frames where all
+four markers are detectable, the ball truth and drop report work, bad hardware params stop
+the node with a clear line."""
+import cv2
+import numpy as np
+import pytest
+from ball_tracker_msgs.msg import BallState
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import Bool, Float64MultiArray
+from std_srvs.srv import Trigger
+
+from ball_balance import robot
+from ball_balance.sim.config import CameraConfig, camera_intrinsics
+from harness import ROOT, executable
+
+pytestmark = pytest.mark.integration
+CONTROLLERS = str(ROOT / "config" / "ur_controllers.yaml")
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def start_sim(launcher, tmp_path, trajectory=False, **params):
+    urdf = tmp_path / "sim.urdf"
+    params.setdefault("robot_description_file", str(urdf))
+    urdf.write_text(robot.robot_description("mujoco", params))
+    active = "scaled_joint_trajectory_controller" if trajectory else "forward_position_controller"
+    inactive = "forward_position_controller" if trajectory else "scaled_joint_trajectory_controller"
+    return launcher.start([executable("ros2_control_node"), "--ros-args", "--params-file", CONTROLLERS,
+                           "-p", f"robot_description_file:={urdf}",
+                           "-p", f"activate_controllers:=[joint_state_broadcaster, {active}]",
+                           "-p", f"inactive_controllers:=[{inactive}]"])
+
+
+def joint_positions(msg: JointState) -> np.ndarray:
+    index = {name: i for i, name in enumerate(msg.name)}
+    return np.array([msg.position[index[name]] for name in robot.JOINT_NAMES])
+
+
+def test_forward_position_commands_move_the_arm_and_the_camera_sees_the_plate(launcher, graph, tmp_path):
+    start_sim(launcher, tmp_path)
+    (state,) = graph.collect(JointState, "/joint_states", timeout=60)
+    assert np.allclose(joint_positions(state), robot.HOME_POSITIONS_RAD, atol=1e-3)
+
+    image, = graph.collect(Image, "/camera/image_raw", qos=qos_profile_sensor_data, timeout=30)
+    info, = graph.collect(CameraInfo, "/camera/camera_info", qos=qos_profile_sensor_data, timeout=30)
+    assert (image.encoding, image.width, image.height, image.step) == ("bgr8", 640, 480, 640 * 3)
+    fx, fy, cx, cy = camera_intrinsics(CameraConfig())
+    assert list(info.k) == pytest.approx([fx, 0, cx, 0, fy, cy, 0, 0, 1])
+    pixels = np.frombuffer(bytes(image.data), dtype=np.uint8).reshape(480, 640, 3)
+    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50),
+                                       cv2.aruco.DetectorParameters())
+    _, ids, _ = detector.detectMarkers(pixels)
+    assert ids is not None and sorted(ids.ravel().tolist()) == [0, 1, 2, 3]
+
+    truth, = graph.collect(BallState, "/sim/ball_truth", qos=qos_profile_sensor_data, timeout=30)
+    assert truth.header.frame_id == "plate_center" and abs(truth.x) < 0.01 and abs(truth.y) < 0.01
+    graph.collect(Clock, "/clock", qos=QoSProfile(depth=1), timeout=30)
+
+    target = np.array(robot.HOME_POSITIONS_RAD) + np.array([0.05, 0.0, 0.0, 0.02, -0.02, 0.1])
+    pub = graph.node.create_publisher(Float64MultiArray, "/forward_position_controller/commands", 10)
+    pub.publish(Float64MultiArray(data=target.tolist()))
+
+    def reached(msg):
+        pub.publish(Float64MultiArray(data=target.tolist()))
+        return np.allclose(joint_positions(msg), target, atol=1e-3)
+
+    graph.collect(JointState, "/joint_states", predicate=reached, timeout=30)
+
+
+def test_dropped_ball_is_reported_and_reset(launcher, graph, tmp_path):
+    start_sim(launcher, tmp_path, camera_enabled=False, ball_x=0.15)
+    reports = []
+    graph.node.create_subscription(Bool, "/sim/ball_dropped", lambda m: reports.append(m.data), LATCHED)
+    graph.spin_until(lambda: reports == [False], 60, "the first /sim/ball_dropped report")
+    tilted = np.array(robot.HOME_POSITIONS_RAD) + np.array([0.0, 0.0, 0.0, 0.0, 0.2, 0.0])
+    pub = graph.node.create_publisher(Float64MultiArray, "/forward_position_controller/commands", 10)
+
+    def dropped():
+        pub.publish(Float64MultiArray(data=tilted.tolist()))
+        return reports[-1]
+
+    graph.spin_until(dropped, 30, "the ball to drop off the tilted plate")
+    pub.publish(Float64MultiArray(data=list(robot.HOME_POSITIONS_RAD)))
+    response = graph.call(Trigger, "/sim/reset_ball", Trigger.Request())
+    assert response.success
+    graph.spin_until(lambda: reports[-1] is False, 30, "the drop report to clear after the reset")
+
+
+def test_trajectory_moves_the_arm(launcher, graph, tmp_path):
+    pytest.importorskip("controller_manager_py.controllers.joint_trajectory")
+    from builtin_interfaces.msg import Duration
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+    start_sim(launcher, tmp_path, trajectory=True, camera_enabled=False)
+    graph.collect(JointState, "/joint_states", timeout=60)
+    target = np.array(robot.HOME_POSITIONS_RAD) + np.array([0.0, 0.0, 0.0, -0.05, 0.05, 0.0])
+    traj = JointTrajectory(joint_names=list(robot.JOINT_NAMES),
+                           points=[JointTrajectoryPoint(positions=target.tolist(),
+                                                        time_from_start=Duration(sec=0, nanosec=200_000_000))])
+    pub = graph.node.create_publisher(JointTrajectory, "/scaled_joint_trajectory_controller/joint_trajectory", 10)
+    graph.wait_for_topic("/scaled_joint_trajectory_controller/joint_trajectory")
+
+    def reached(msg):
+        if not reached.sent:
+            pub.publish(traj)
+            reached.sent = True
+        return np.allclose(joint_positions(msg), target, atol=2e-3)
+
+    reached.sent = False
+    graph.collect(JointState, "/joint_states", predicate=reached, timeout=30)
+
+
+@pytest.mark.parametrize("params,message", [({"camera_width": 0}, "camera_width"),
+                                            ({"domain": "moon"}, "unknown domain")])
+def test_bad_hardware_parameter_stops_the_node_with_a_clear_error(launcher, tmp_path, params, message):
+    process = start_sim(launcher, tmp_path, **params)
+    assert process.wait(60) != 0
+    assert message in process.output()
