@@ -23,6 +23,25 @@ class CaptureSource:
     def __init__(self, kind: str, location: str, width: int = 640, height: int = 480, fps: float = 30.0,
                  rate_hz: float = 0.0, loop: bool = False, clock=time.time):
         self.kind, self.location, self.loop, self.clock = kind, location, loop, clock
+        # OpenCV's own backend warnings would bury our one-line error: quiet while opening
+        previous = cv2.utils.logging.getLogLevel()
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+        try:
+            self._open(kind, location)
+        finally:
+            cv2.utils.logging.setLogLevel(previous)
+        if kind == "camera":
+            self.capture.set(cv2.CAP_PROP_FRAME_WIDTH, width)
+            self.capture.set(cv2.CAP_PROP_FRAME_HEIGHT, height)
+            self.capture.set(cv2.CAP_PROP_FPS, fps)
+            self.period_s = 0.0                      # the camera paces itself
+        else:
+            file_fps = self.capture.get(cv2.CAP_PROP_FPS) or 30.0
+            self.period_s = 1.0 / (rate_hz or file_fps)
+        self._next_s: Optional[float] = None
+        self.ended = False
+
+    def _open(self, kind: str, location: str) -> None:
         if kind == "camera":
             target = int(location) if location.strip().isdigit() else location
             self.capture = cv2.VideoCapture(target)
@@ -34,16 +53,6 @@ class CaptureSource:
             raise SourceError(f"unknown source kind '{kind}'")
         if not self.capture.isOpened():
             raise SourceError(f"{what} cannot be opened")
-        if kind == "camera":
-            self.capture.set(cv2.CAP_PROP_FRAME_WIDTH, width)
-            self.capture.set(cv2.CAP_PROP_FRAME_HEIGHT, height)
-            self.capture.set(cv2.CAP_PROP_FPS, fps)
-            self.period_s = 0.0                      # the camera paces itself
-        else:
-            file_fps = self.capture.get(cv2.CAP_PROP_FPS) or 30.0
-            self.period_s = 1.0 / (rate_hz or file_fps)
-        self._next_s: Optional[float] = None
-        self.ended = False
 
     def read(self) -> Tuple[Optional[np.ndarray], float]:
         """The next frame (BGR) and its stamp (s), or (None, stamp) on a failed read / end."""

@@ -1,0 +1,1 @@
+"""Command-line helpers for the tracker: camera calibration, HSV band tuning (headless)."""
