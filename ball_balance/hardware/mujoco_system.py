@@ -8,7 +8,10 @@ A thin adapter around ball_balance.sim.SimWorld (the physics) and CameraThread (
   (plate frame, truth) and `ball/dropped` (1.0 once the ball fell off).
 - time: `read()` advances physics, in lock-step by the cycle period (pacing=lockstep; the
   manager's wall-clock loop then paces it) or to follow the wall clock (pacing=realtime);
-  with sim_time=true the component owns the manager's clock (`now()`) and publishes /clock.
+  with sim_time=true the component owns the manager's clock (`now()`) and publishes /clock
+  (starting at 0: run the other nodes with use_sim_time:=true); with sim_time=false the
+  manager keeps the wall clock and message stamps are wall-clock times (pair it with
+  pacing=realtime so simulated time keeps up with them).
   `write()` hands the position commands to the servos (non-finite or out-of-limit commands
   are refused, counted and logged throttled; the last good target is kept).
 - topics (when the manager has a node): /camera/image_raw (bgr8) and /camera/camera_info
@@ -187,6 +190,8 @@ class MujocoSystem(SystemInterface):
             from ball_balance.hardware.sim_ros import SimRosIo
 
             self.ros = SimRosIo(node, self.world, self.params, self._request_reset)
+            if not self.provides_clock:
+                self.ros.stamp_offset_s = _time.time() - self.world.time_s
         if self.params["camera_enabled"]:
             from ball_balance.sim.camera import CameraThread
 

@@ -39,6 +39,9 @@ class SimRosIo:
         self.detection_pub = (node.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
                               if params["truth_fed"] else None)
         self._on_reset = on_reset
+        # stamps = sim time + this offset: 0 with sim_time (the component owns /clock), else
+        # the wall-clock time at start, so stamps compare with wall-clock nodes
+        self.stamp_offset_s = 0.0
         self.reset_srv = node.create_service(Trigger, "/sim/reset_ball", self._handle_reset)
         self._dropped = None
         self._camera_info = self._make_camera_info()
@@ -60,7 +63,7 @@ class SimRosIo:
     def publish_image(self, image_bgr, time_s: float) -> None:
         height, width = image_bgr.shape[:2]
         msg = Image(height=height, width=width, encoding="bgr8", is_bigendian=0, step=width * 3)
-        msg.header.stamp = stamp(time_s)
+        msg.header.stamp = stamp(time_s + self.stamp_offset_s)
         msg.header.frame_id = self.params["camera_frame_id"]
         msg.data = image_bgr.tobytes()
         self._camera_info.header.stamp = msg.header.stamp
@@ -71,7 +74,7 @@ class SimRosIo:
     def publish_truth(self, truth) -> None:
         msg = BallState(x=truth.x, y=truth.y, vx=truth.vx, vy=truth.vy, ball_found=not truth.dropped,
                         tracking_valid=not truth.dropped, markers_found=4)
-        msg.header.stamp = stamp(truth.time_s)
+        msg.header.stamp = stamp(truth.time_s + self.stamp_offset_s)
         msg.header.frame_id = PLATE_FRAME
         self.truth_pub.publish(msg)
 
@@ -80,7 +83,7 @@ class SimRosIo:
         truth = self.world.ball_truth()
         msg = BallState(x=x, y=y, vx=truth.vx, vy=truth.vy, ball_found=not truth.dropped,
                         tracking_valid=not truth.dropped, markers_found=4)
-        msg.header.stamp = stamp(time_s)
+        msg.header.stamp = stamp(time_s + self.stamp_offset_s)
         msg.header.frame_id = PLATE_FRAME
         self.detection_pub.publish(msg)
 

@@ -82,3 +82,9 @@ def test_camera_thread_renders_snapshots_off_the_calling_thread(world):
         camera.stop()
     assert frames == [((480, 640, 3), pytest.approx(0.1))]
     assert threads == ["sim_camera"]
+
+
+def test_light_knob_changes_the_lighting():
+    dim, _ = SimWorld(knobs=DomainKnobs(light_scale=0.5)).render()
+    bright, _ = SimWorld(knobs=DomainKnobs(light_scale=1.4)).render()
+    assert bright.mean() > dim.mean() + 10

@@ -115,3 +115,23 @@ def test_domain_and_knob_overrides_reach_the_world():
     system, result = make_system({"domain": "high_gravity", "ball_mass_kg": "0.004", "seed": 3})
     assert result == CallbackReturn.SUCCESS
     assert system.world.knobs.gravity_scale == 1.5 and system.world.knobs.ball_mass_kg == 0.004
+
+
+def test_realtime_pacing_follows_the_wall_clock():
+    import time
+
+    system, result = make_system({"pacing": "realtime"})
+    assert result == CallbackReturn.SUCCESS
+    system.on_configure(State.UNCONFIGURED)
+    system.on_activate(State.INACTIVE)
+    system.read(system.now(), PERIOD_S)
+    sim_start, wall_start = system.now(), time.monotonic()
+    while time.monotonic() - wall_start < 0.3:
+        system.read(system.now(), PERIOD_S)
+        time.sleep(0.004)
+    assert system.now() - sim_start == pytest.approx(time.monotonic() - wall_start, abs=0.02)
+
+
+def test_without_sim_time_the_manager_keeps_its_clock():
+    system, result = make_system({"sim_time": False})
+    assert result == CallbackReturn.SUCCESS and not system.provides_clock
