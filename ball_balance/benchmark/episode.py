@@ -189,6 +189,7 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
     if qp_times:
         metrics["qp_p50_us"] = float(np.percentile(qp_times, 50) * 1e6)
         metrics["qp_p99_us"] = float(np.percentile(qp_times, 99) * 1e6)
+    metrics["delay_estimate_s"] = pipeline.actuation_delay_s
     metrics["qp_fallbacks"] = float(pipeline.mpc.failures if pipeline.mpc is not None else 0)
     world.close()
     return EpisodeResult(spec, metrics, series if spec.record else None, frames)

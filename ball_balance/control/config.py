@@ -70,8 +70,10 @@ COMMON_SCHEMA = [
     Param("max_total_tilt_rad", 0.20, "limit on the plate's total tilt from home", "rad", 0.0, 0.5,
           read_only=True),
     Param("latency_compensation", True, "predict the ball state over the measured delay", read_only=True),
-    Param("actuation_delay_s", 0.03, "command -> plate tilt delay added to the measured age", "s", 0.0, 0.5,
-          read_only=True),
+    Param("actuation_delay_s", 0.03, "command -> plate tilt delay added to the measured age (initial value "
+          "when estimate_actuation_delay)", "s", 0.0, 0.5, read_only=True),
+    Param("estimate_actuation_delay", True, "refine actuation_delay_s online: commanded vs measured tilt "
+          "(FK of /joint_states)", read_only=True),
     Param("max_prediction_s", 0.3, "never extrapolate the state further than this", "s", 0.0, 1.0,
           read_only=True),
     Param("min_markers", 3, "markers needed in a frame to act", "", 0, 4, read_only=True),
@@ -117,6 +119,7 @@ def pipeline_config(values: Mapping[str, Any], controller: str) -> PipelineConfi
     return PipelineConfig(
         controller=controller, k_g=k_g(values), control_period_s=period,
         latency_compensation=values["latency_compensation"], actuation_delay_s=values["actuation_delay_s"],
+        estimate_delay=values["estimate_actuation_delay"],
         max_prediction_s=values["max_prediction_s"],
         pid=pid_gains(values) if controller == "pid" else PidGains(),
         mpc=mpc,

@@ -36,14 +36,14 @@ import scipy.sparse as sp
 class MpcConfig:
     dt_s: float = 0.02                 # model step = control period
     horizon: int = 25                  # N
-    q_pos: float = 400.0               # weight on position error [1/m^2]
+    q_pos: float = 150.0               # weight on position error [1/m^2]
     q_vel: float = 10.0                # weight on velocity error [1/(m/s)^2]
     r_u: float = 1.0                   # weight on (u - u_ff) [1/rad^2]
-    r_du: float = 50.0                 # weight on (u_k - u_{k-1}) [1/rad^2]
+    r_du: float = 400.0                # weight on (u_k - u_{k-1}) [1/rad^2]
     u_max_rad: float = 0.15            # tilt limit
     du_max_rad_s: float = 1.5          # tilt-rate limit
     k_g: float = 0.6 * 9.81            # rolling factor * gravity [m/s^2 per rad]
-    eps: float = 1e-5                  # OSQP absolute/relative tolerance
+    eps: float = 1e-4                  # OSQP absolute/relative tolerance (1e-4 rad is plenty)
     max_iter: int = 200
 
 

@@ -16,7 +16,7 @@ import numpy as np
 from ball_balance.control.kinematics import PlateKinematics
 from ball_balance.control.mpc import MpcConfig, PlateMpc, preview
 from ball_balance.control.pid import PidGains, PlatePid
-from ball_balance.control.prediction import TiltHistory, predict
+from ball_balance.control.prediction import DelayEstimator, TiltHistory, predict
 from ball_balance.control.references import Reference, RefSample
 from ball_balance.control.safety import BallObservation, Mode, SafetyConfig, SafetySupervisor
 
@@ -27,7 +27,8 @@ class PipelineConfig:
     k_g: float = 0.6 * 9.81                 # rolling factor * g [m/s^2 per rad]
     control_period_s: float = 0.02
     latency_compensation: bool = True
-    actuation_delay_s: float = 0.03         # command -> plate tilt (arm + controller)
+    actuation_delay_s: float = 0.03         # command -> plate tilt (arm + controller); initial value
+    estimate_delay: bool = True             # refine actuation_delay_s online from the measured joints
     max_prediction_s: float = 0.3           # never extrapolate further than this
     pid: PidGains = field(default_factory=PidGains)
     mpc: MpcConfig = field(default_factory=MpcConfig)
@@ -51,6 +52,7 @@ class ControlPipeline:
         self.pid = PlatePid(cfg.pid, cfg.k_g)
         self.mpc = PlateMpc(cfg.mpc) if cfg.controller == "mpc" else None
         self.history = TiltHistory()
+        self.delay = DelayEstimator(cfg.actuation_delay_s, cfg.control_period_s)
         self.q_cmd: Optional[np.ndarray] = None
         self.u = np.zeros(2)
         self.t_engaged = 0.0
@@ -67,6 +69,11 @@ class ControlPipeline:
         if self.mpc is not None:
             self.mpc.reset()
         self.history.clear()
+
+    @property
+    def actuation_delay_s(self) -> float:
+        """Command -> plate delay in use: the online estimate, or the configured value."""
+        return self.delay.estimate_s if self.cfg.estimate_delay else self.cfg.actuation_delay_s
 
     def at_home(self) -> bool:
         tol = self.cfg.safety.home_tolerance_rad
@@ -88,7 +95,6 @@ class ControlPipeline:
             ref, predicted = self._control(now_s, obs)
         elif mode != Mode.HOLDING:
             self.u = np.zeros(2)
-        self.history.record(now_s, float(self.u[0]), float(self.u[1]))
         if mode in (Mode.ENGAGED, Mode.HOLDING):
             q_target = self.kin.ik(self.q_cmd, self.kin.desired_rotation(*self.u))
         else:
@@ -100,17 +106,23 @@ class ControlPipeline:
             self.refused_count += 1
             q_new = self.q_cmd.copy()
         self.q_cmd = q_new
+        # What the plate was told, after shaping (step limit, tilt limit): the prediction's input
+        tilt_cmd = self.kin.tilt_of(q_new) if mode != Mode.HOMING else (0.0, 0.0)
+        self.history.record(now_s, *tilt_cmd)
+        if self.cfg.estimate_delay and q_measured is not None and np.all(np.isfinite(q_measured)):
+            self.delay.add(tilt_cmd, self.kin.tilt_of(q_measured))
         return TickResult(q_new.copy(), (float(self.u[0]), float(self.u[1])), mode, ref, predicted, refused)
 
     def _control(self, now_s: float, obs: BallObservation):
         cfg = self.cfg
         pos = np.array([obs.x, obs.y])
         vel = np.array([obs.vx, obs.vy])
+        delay = self.actuation_delay_s
         if cfg.latency_compensation:
             stamp = now_s - obs.age_s
-            horizon = min(now_s + cfg.actuation_delay_s, stamp + cfg.max_prediction_s)
-            pos, vel = predict(pos, vel, stamp, horizon, self.history, cfg.k_g, cfg.actuation_delay_s)
-        t_ref = now_s - self.t_engaged + (cfg.actuation_delay_s if cfg.latency_compensation else 0.0)
+            horizon = min(now_s + delay, stamp + cfg.max_prediction_s)
+            pos, vel = predict(pos, vel, stamp, horizon, self.history, cfg.k_g, delay)
+        t_ref = now_s - self.t_engaged + (delay if cfg.latency_compensation else 0.0)
         ref = self.reference.sample(t_ref)
         if self.mpc is not None:
             p, v, a = preview(self.reference, t_ref, cfg.mpc.dt_s, cfg.mpc.horizon)

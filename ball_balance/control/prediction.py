@@ -61,3 +61,56 @@ def predict(pos_m: np.ndarray, vel_m_s: np.ndarray, t_from_s: float, t_to_s: flo
         p += v * h + 0.5 * a * h * h
         v += a * h
     return p, v
+
+
+class DelayEstimator:
+    """Online estimate of the command -> plate delay from the commanded tilts and the tilts
+    measured from /joint_states (FK), by least-squares alignment over a sliding window.
+
+    Every `update_every` samples, for each candidate delay d on a grid (0..max_delay_s),
+    cost(d) = mean |tilt_measured(t) - u_cmd(t - d)|^2 over the last `window_s`; the argmin
+    is blended into the estimate (`blend`). Nothing changes while the commands barely move
+    (std below `min_excitation_rad`): a still plate says nothing about delay.
+    """
+
+    def __init__(self, initial_s: float, period_s: float, max_delay_s: float = 0.3, window_s: float = 3.0,
+                 update_every: int = 25, blend: float = 0.5, min_excitation_rad: float = 0.003):
+        self.estimate_s = initial_s
+        self.period_s = period_s
+        self.max_lag = int(round(max_delay_s / period_s))
+        n = int(round(window_s / period_s)) + self.max_lag + 1
+        self._cmd: Deque[np.ndarray] = deque(maxlen=n)
+        self._meas: Deque[np.ndarray] = deque(maxlen=n)
+        self.update_every, self.blend, self.min_excitation = update_every, blend, min_excitation_rad
+        self._count = 0
+
+    def reset(self) -> None:
+        self._cmd.clear()
+        self._meas.clear()
+
+    def add(self, u_cmd, tilt_measured) -> float:
+        """One control tick's commanded and measured tilt pairs [rad]; returns the estimate [s]."""
+        self._cmd.append(np.asarray(u_cmd, dtype=float))
+        self._meas.append(np.asarray(tilt_measured, dtype=float))
+        self._count += 1
+        if self._count % self.update_every == 0 and len(self._cmd) == self._cmd.maxlen:
+            self._update()
+        return self.estimate_s
+
+    def _update(self) -> None:
+        cmd, meas = np.array(self._cmd), np.array(self._meas)
+        window = len(cmd) - self.max_lag
+        if np.std(cmd[-window:]) < self.min_excitation:
+            return
+        target = meas[-window:]
+        costs = [np.mean((target - cmd[len(cmd) - window - lag:len(cmd) - lag]) ** 2)
+                 for lag in range(self.max_lag + 1)]
+        best = int(np.argmin(costs))
+        # sub-sample refinement: parabola through the neighbours
+        frac = 0.0
+        if 0 < best < self.max_lag:
+            c0, c1, c2 = costs[best - 1], costs[best], costs[best + 1]
+            denom = c0 - 2 * c1 + c2
+            frac = 0.5 * (c0 - c2) / denom if denom > 0 else 0.0
+        measured = (best + frac) * self.period_s
+        self.estimate_s += self.blend * (measured - self.estimate_s)

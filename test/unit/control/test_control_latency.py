@@ -60,3 +60,26 @@ def test_latency_compensation_improves_a_delayed_plant(controller):
         results[compensate] = _tracking_rmse(controller, compensate)
     assert results[True] < 0.5 * results[False], results
     assert results[True] < 0.005, results
+
+
+def test_delay_estimator_finds_the_command_to_plate_delay():
+    from ball_balance.control.prediction import DelayEstimator
+
+    period = 0.02
+    est = DelayEstimator(initial_s=0.03, period_s=period)
+    rng = np.random.default_rng(0)
+    commands = np.cumsum(rng.normal(0, 0.01, (600, 2)), axis=0)
+    lag = 6  # 0.12 s
+    for i in range(len(commands)):
+        measured = commands[i - lag] if i >= lag else np.zeros(2)
+        est.add(commands[i], measured)
+    assert est.estimate_s == pytest.approx(0.12, abs=0.01)
+
+
+def test_delay_estimator_keeps_its_value_without_excitation():
+    from ball_balance.control.prediction import DelayEstimator
+
+    est = DelayEstimator(initial_s=0.05, period_s=0.02)
+    for _ in range(500):
+        est.add((0.0, 0.0), (0.0, 0.0))
+    assert est.estimate_s == 0.05
