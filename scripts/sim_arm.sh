@@ -59,7 +59,8 @@ fi
 PIDS=()
 stop_all() {
   trap - INT TERM EXIT
-  for pid in "${PIDS[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
+  # background jobs of a script ignore SIGINT; rclpy shuts down cleanly on SIGTERM
+  for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
   for pid in "${PIDS[@]}"; do
     for _ in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
     kill -KILL "$pid" 2>/dev/null || true

@@ -118,3 +118,25 @@ def test_bad_hardware_parameter_stops_the_node_with_a_clear_error(launcher, tmp_
     process = start_sim(launcher, tmp_path, **params)
     assert process.wait(60) != 0
     assert message in process.output()
+
+
+def test_sim_arm_script_runs_the_graph_and_ctrl_c_stops_everything(launcher, graph, tmp_path):
+    import os
+    import signal
+
+    script = launcher.start(["bash", str(ROOT / "scripts" / "sim_arm.sh"), "--param", "camera_enabled=false"])
+    graph.collect(JointState, "/joint_states", timeout=60)
+    graph.wait_for_topic("/tf_static")
+    graph.wait_for_topic("/forward_position_controller/commands")
+    os.kill(script.popen.pid, signal.SIGINT)  # the script only: its trap must stop the rest
+    assert script.wait(30) is not None
+    graph.spin_until(lambda: graph.node.count_publishers("/joint_states") == 0
+                     and graph.node.count_publishers("/tf_static") == 0, 30, "the nodes to exit")
+
+
+def test_camera_snapshot_writes_a_png_of_the_running_camera(launcher, graph, tmp_path):
+    start_sim(launcher, tmp_path, camera_width=320, camera_height=240)
+    png = tmp_path / "camera.png"
+    snapshot = launcher.start([executable("camera_snapshot"), "--ros-args", "-p", f"png:={png}"])
+    assert snapshot.wait(60) == 0
+    assert cv2.imread(str(png)).shape == (240, 320, 3)
