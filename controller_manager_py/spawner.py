@@ -74,8 +74,10 @@ class Spawner:
                                            activate_asap=True)
         request.timeout.sec = int(self.args.switch_timeout)
         request.timeout.nanosec = int((self.args.switch_timeout % 1) * 1e9)
-        if not self.call(SwitchController, "switch_controller", request, self.args.switch_timeout).ok:
-            raise SpawnError(f"failed to activate {', '.join(names)} (see the controller manager's log)")
+        response = self.call(SwitchController, "switch_controller", request, self.args.switch_timeout + 5.0)
+        if not response.ok:
+            why = getattr(response, "message", "") or "see the controller manager's log"
+            raise SpawnError(f"failed to activate {', '.join(names)}: {why}")
 
     def run(self) -> None:
         a = self.args

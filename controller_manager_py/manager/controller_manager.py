@@ -214,8 +214,9 @@ class ControllerManager:
                           activate_asap: bool = True, timeout: float = 0.0) -> switching.SwitchPlan:
         """Plan, then have the loop apply it between cycles. Raises SwitchError.
 
-        strictness: 1 BEST_EFFORT, 2 STRICT (0 -> BEST_EFFORT, as ros2_control). timeout in
-        seconds for the loop to apply it (0: wait as long as the loop runs).
+        strictness: 1 BEST_EFFORT, 2 STRICT, 3 AUTO (adds the chained controllers needed),
+        4 FORCE_AUTO (also deactivates whoever holds the interfaces); 0 -> BEST_EFFORT, as
+        ros2_control. timeout: seconds for the loop to apply it (0: as long as the loop runs).
         """
         with self.lock:
             plan = switching.plan_switch(self, list(activate), list(deactivate),

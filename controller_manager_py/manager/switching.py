@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from .controller_manager import ControllerManager
     from .controller_spec import ControllerSpec
 
-BEST_EFFORT, STRICT = 1, 2
+BEST_EFFORT, STRICT, AUTO, FORCE_AUTO = 1, 2, 3, 4
 
 
 class SwitchError(RuntimeError):
@@ -41,7 +41,9 @@ class SwitchPlan:
 
 def plan_switch(cm: ControllerManager, activate: List[str], deactivate: List[str], strictness: int,
                 activate_asap: bool = True) -> SwitchPlan:
-    strict = strictness == STRICT
+    if strictness in (AUTO, FORCE_AUTO):
+        activate, deactivate = _resolve(cm, list(activate), list(deactivate), strictness == FORCE_AUTO)
+    strict = strictness != BEST_EFFORT
     plan = SwitchPlan(activate_asap=activate_asap)
 
     def problem(message: str) -> None:
@@ -98,6 +100,35 @@ def plan_switch(cm: ControllerManager, activate: List[str], deactivate: List[str
             if (start or stop) and comp.plugin.prepare_command_mode_switch(start, stop) != return_type.OK:
                 raise SwitchError(f"hardware '{comp.name}' refused the command mode switch")
     return plan
+
+
+def _resolve(cm: ControllerManager, activate: List[str], deactivate: List[str], force: bool):
+    """AUTO: add the chained controllers an activation needs and the ones a deactivation
+    strands; FORCE_AUTO also deactivates the holders of interfaces an activation claims."""
+    owner = cm.rm.interface_owner
+    pending = list(activate)
+    while pending:
+        spec = cm.controllers.get(pending.pop())
+        for itf in spec.command_names if spec is not None else ():
+            target = owner.get(itf)
+            if target in cm.controllers and target not in activate and cm.controllers[target].state != State.ACTIVE:
+                activate.append(target)
+                pending.append(target)
+    pending = list(deactivate)
+    while pending:
+        name = pending.pop()
+        for itf, holder in list(cm.rm.claimed.items()):
+            if owner.get(itf) == name and holder not in deactivate:
+                deactivate.append(holder)
+                pending.append(holder)
+    if force:
+        for name in activate:
+            spec = cm.controllers.get(name)
+            for itf in spec.command_names if spec is not None else ():
+                holder = cm.rm.claimed.get(itf)
+                if holder is not None and holder != name and holder not in deactivate:
+                    deactivate.append(holder)
+    return activate, deactivate
 
 
 def _interface_problem(cm, spec, claimed_after: Dict[str, str], leaving, activating: List[str]) -> str:

@@ -50,8 +50,19 @@ class ControllerManagerServices:
         self.node, self.cm, self.type_of = node, cm, type_of
         self.logger = node.get_logger()
         self._cache = {}
-        self.services = [node.create_service(t, f"~/{name}", getattr(self, f"on_{name}"))
+        self.services = [node.create_service(t, f"~/{name}", self._guarded(name, getattr(self, f"on_{name}")))
                          for name, t in SERVICES.items()]
+
+    def _guarded(self, name, callback):
+        def call(request, response):
+            try:
+                return callback(request, response)
+            except Exception as error:  # noqa: BLE001 - a bug must not take the manager down
+                self.logger.error(f"{name}: unexpected {error!r}")
+                if hasattr(response, "ok"):
+                    response.ok = False
+                return response
+        return call
 
     def _cached(self, key, build):
         version = self.cm.version
@@ -95,12 +106,19 @@ class ControllerManagerServices:
         return response
 
     def _do(self, what: str, action, response):
+        """Run `action`; ok/message from its outcome. Never lets an exception kill the node."""
         try:
-            action()
+            result = action()
             response.ok = True
+            message = "; ".join(getattr(result, "messages", []) or [])
         except (ControllerError, SwitchError, ResourceError) as error:
             self.logger.error(f"{what}: {error}")
-            response.ok = False
+            response.ok, message = False, str(error)
+        except Exception as error:  # noqa: BLE001 - a bug must not take the manager down
+            self.logger.error(f"{what}: unexpected {error!r}")
+            response.ok, message = False, f"internal error: {error!r}"
+        if hasattr(response, "message"):
+            response.message = message or ("Switch successful" if what == "switch_controller" else "")
         return response
 
     def on_load_controller(self, request, response):
@@ -117,19 +135,17 @@ class ControllerManagerServices:
         return self._do("unload_controller", lambda: self.cm.unload_controller(request.name), response)
 
     def on_switch_controller(self, request, response):
-        activate = [*request.activate_controllers, *getattr(request, "start_controllers", [])]
-        deactivate = [*request.deactivate_controllers, *getattr(request, "stop_controllers", [])]
         timeout = request.timeout.sec + request.timeout.nanosec * 1e-9
         return self._do("switch_controller", lambda: self.cm.switch_controller(
-            activate, deactivate, request.strictness, request.activate_asap or request.start_asap,
-            timeout), response)
+            list(request.activate_controllers), list(request.deactivate_controllers), request.strictness,
+            request.activate_asap, timeout), response)
 
     # ---- hardware ----------------------------------------------------------------------------
     def _interfaces(self, names, commands: bool):
         rm = self.cm.rm
         available_fn = rm.command_available if commands else rm.state_available
-        return [cm_msg.HardwareInterface(name=n, is_available=available_fn(n), is_claimed=n in rm.claimed)
-                for n in names]
+        return [cm_msg.HardwareInterface(name=n, data_type="double", is_available=available_fn(n),
+                                         is_claimed=n in rm.claimed) for n in names]
 
     def on_list_hardware_components(self, request, response):
         def build():
@@ -137,7 +153,8 @@ class ControllerManagerServices:
             for comp in list(self.cm.rm.components.values()):
                 commands, states = self.cm.rm.interfaces_of(comp.name)
                 out.append(cm_msg.HardwareComponentState(
-                    name=comp.name, type=comp.kind, class_type=comp.info.plugin, plugin_name=comp.info.plugin,
+                    name=comp.name, type=comp.kind, is_async=comp.info.is_async, rw_rate=comp.rw_rate,
+                    class_type=comp.info.plugin, plugin_name=comp.info.plugin,
                     state=state_msg(comp.state), command_interfaces=self._interfaces(commands, True),
                     state_interfaces=self._interfaces(states, False)))
             return out
