@@ -28,6 +28,7 @@ from ball_balance.sim.config import DomainKnobs, SimConfig
 BALL_BODY = "ball"
 CAMERA_NAME = "overhead_camera"
 PLATE_TOP_GEOM = "plate_top"
+COLLISION_GROUP = 3  # not drawn by mujoco.Renderer's default scene options
 ARMATURE_KG_M2 = (0.2, 0.2, 0.1, 0.02, 0.02, 0.02)  # reflected rotor inertia per joint
 TEXTURE_PX_PER_M = 2400.0  # marker side = 96 px = 6 ArUco cells of 16 px
 
@@ -103,9 +104,16 @@ def _home_plate_pose(urdf_text: str) -> np.ndarray:
 
 
 def _add_arm_dynamics(spec: mujoco.MjSpec, urdf_text: str) -> None:
-    """Arm geoms do not collide (only plate, ball, floor do); gravity compensated; servos."""
+    """URDF visuals are drawn (group 1); its collision shapes are hidden (group 3) and do not
+    collide, except the plate's box (the ball's contact surface). Gravity compensated; servos."""
     for geom in spec.geoms:
-        geom.contype, geom.conaffinity = 0, 0
+        if geom.contype == 0 and geom.conaffinity == 0:
+            continue  # a URDF <visual>
+        geom.group = COLLISION_GROUP
+        if geom.parent.name == PLATE_FRAME and geom.type == mujoco.mjtGeom.mjGEOM_BOX:
+            geom.name, geom.contype, geom.conaffinity = "plate", 1, 1
+        else:
+            geom.contype, geom.conaffinity = 0, 0
     for body in spec.bodies:
         if body.name not in ("world", BALL_BODY):
             body.gravcomp = 1.0
@@ -147,14 +155,9 @@ def _add_plate_texture(spec: mujoco.MjSpec) -> None:
     mesh.usertexcoord = [0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0]  # texture row 0 at +y
     mesh.userface = [0, 1, 2, 0, 2, 3]
     mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL
-    plate = spec.body(PLATE_FRAME)
-    plate.add_geom(name=PLATE_TOP_GEOM, type=mujoco.mjtGeom.mjGEOM_MESH, meshname="plate_top",
-                   material="plate_markers", contype=0, conaffinity=0, mass=0.0, density=0.0)
-    for geom in plate.geoms:  # the URDF's plate box: the contact surface for the ball
-        if geom.type == mujoco.mjtGeom.mjGEOM_BOX:
-            geom.name = "plate"
-            geom.contype, geom.conaffinity = 1, 1
-            geom.rgba = [0.92, 0.92, 0.90, 1.0]
+    spec.body(PLATE_FRAME).add_geom(name=PLATE_TOP_GEOM, type=mujoco.mjtGeom.mjGEOM_MESH, meshname="plate_top",
+                                    material="plate_markers", contype=0, conaffinity=0, group=1,
+                                    mass=0.0, density=0.0)
 
 
 def _add_ball(spec: mujoco.MjSpec, config: SimConfig, knobs: DomainKnobs, home: np.ndarray) -> None:
