@@ -1,0 +1,215 @@
+"""`ros2py`: the ros2 command-line verbs we need, for machines without ROS 2's `ros2`.
+
+    ros2py topic list|echo|hz|info|pub     ros2py node list     ros2py service list
+    ros2py param get|set|dump|list|load    ros2py bag record    ros2py run PKG EXE
+    ros2py control list_controllers|list_hardware_components|list_hardware_interfaces|
+                   switch_controllers|load_controller|set_controller_state|unload_controller
+
+Only argparse is imported up front; each verb imports rclpy and its modules when it runs,
+so `ros2py topic echo` starts quickly. Failures print one line and exit 1 (Ctrl-C exits 0).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+from typing import List, Optional
+
+PROG = "ros2py"
+QOS_RELIABILITY = ["reliable", "best_effort", "system_default"]
+QOS_DURABILITY = ["volatile", "transient_local", "system_default"]
+
+
+def _verb(subparsers, name: str, target: str, help: str):
+    """A sub-command whose handler is `module:function` in ball_balance.cli (imported lazily)."""
+    parser = subparsers.add_parser(name, help=help, description=help)
+    parser.set_defaults(_target=target)
+    return parser
+
+
+def _spin_time(parser) -> None:
+    parser.add_argument("--spin-time", type=float, default=2.0,
+                        help="seconds to wait for discovery (default: %(default)s)")
+
+
+def _qos(parser, depth_default: int = 10) -> None:
+    parser.add_argument("--qos-reliability", choices=QOS_RELIABILITY, help="override the QoS reliability")
+    parser.add_argument("--qos-durability", choices=QOS_DURABILITY, help="override the QoS durability")
+    parser.add_argument("--qos-depth", type=int, default=depth_default, help="queue depth (default: %(default)s)")
+
+
+def _topic_parsers(sub) -> None:
+    topic = sub.add_parser("topic", help="inspect and publish topics").add_subparsers(dest="verb", required=True)
+    p = _verb(topic, "list", "topic:cmd_list", "output a list of available topics")
+    p.add_argument("-t", "--show-types", action="store_true", help="additionally show the topic type")
+    p.add_argument("-c", "--count-topics", action="store_true", help="only show the number of topics")
+    p.add_argument("--include-hidden-topics", action="store_true", help="consider hidden topics as well")
+    _spin_time(p)
+
+    p = _verb(topic, "echo", "topic:cmd_echo", "output messages from a topic")
+    p.add_argument("topic_name", help="name of the topic, e.g. /ball_state")
+    p.add_argument("message_type", nargs="?", help="type of the message (default: from the graph)")
+    p.add_argument("--once", action="store_true", help="print the first message received and exit")
+    p.add_argument("--field", help="echo only this field, e.g. header.stamp")
+    p.add_argument("--truncate-length", type=int, default=128, help="truncate arrays/strings (default: 128)")
+    p.add_argument("--full-length", "-f", action="store_true", help="do not truncate arrays or strings")
+    p.add_argument("--no-arr", action="store_true", help="do not print array fields")
+    p.add_argument("--no-str", action="store_true", help="do not print string fields")
+    p.add_argument("--timeout", type=float, default=None,
+                   help="ros2py extension: give up after this many seconds without a message")
+    _qos(p)
+    _spin_time(p)
+
+    p = _verb(topic, "hz", "topic:cmd_hz", "print the average receiving rate of a topic")
+    p.add_argument("topic_name")
+    p.add_argument("--window", "-w", type=int, default=10000, help="window size in messages (default: 10000)")
+    p.add_argument("--duration", type=float, default=None, help="ros2py extension: stop after this many seconds")
+    _qos(p)
+    _spin_time(p)
+
+    p = _verb(topic, "info", "topic:cmd_info", "print information about a topic")
+    p.add_argument("topic_name")
+    p.add_argument("--verbose", "-v", action="store_true", help="print node, QoS and GID of each endpoint")
+    _spin_time(p)
+
+    p = _verb(topic, "pub", "topic:cmd_pub", "publish a message to a topic")
+    p.add_argument("topic_name")
+    p.add_argument("message_type", help="e.g. std_msgs/msg/String")
+    p.add_argument("values", nargs="?", default="{}", help="message values in YAML, e.g. \"{data: hi}\"")
+    p.add_argument("-r", "--rate", type=float, default=1.0, help="publishing rate in Hz (default: 1)")
+    p.add_argument("-1", "--once", action="store_true", help="publish one message and exit")
+    p.add_argument("-t", "--times", type=int, default=0, help="publish this many messages and exit")
+    p.add_argument("-w", "--wait-matching-subscriptions", type=int, default=None,
+                   help="wait for this many matching subscriptions first (default: 1 with --once/--times)")
+    p.add_argument("--max-wait-time-secs", type=float, default=None, help="give up waiting after this long")
+    p.add_argument("--keep-alive", type=float, default=0.1, help="seconds to stay alive after the last message")
+    p.add_argument("-p", "--print", type=int, default=1, dest="print_nth", help="print every N-th message (0: never)")
+    _qos(p, depth_default=1)
+
+
+def _simple_parsers(sub) -> None:
+    node = sub.add_parser("node", help="list nodes").add_subparsers(dest="verb", required=True)
+    p = _verb(node, "list", "graph:cmd_node_list", "output a list of available nodes")
+    p.add_argument("-a", "--all", action="store_true", help="also show hidden nodes")
+    p.add_argument("-c", "--count-nodes", action="store_true", help="only show the number of nodes")
+    _spin_time(p)
+
+    service = sub.add_parser("service", help="list services").add_subparsers(dest="verb", required=True)
+    p = _verb(service, "list", "graph:cmd_service_list", "output a list of available services")
+    p.add_argument("-t", "--show-types", action="store_true", help="additionally show the service type")
+    p.add_argument("-c", "--count-services", action="store_true", help="only show the number of services")
+    p.add_argument("--include-hidden-services", action="store_true", help="consider hidden services as well")
+    _spin_time(p)
+
+    param = sub.add_parser("param", help="node parameters").add_subparsers(dest="verb", required=True)
+    p = _verb(param, "get", "param:cmd_get", "get a parameter")
+    p.add_argument("node_name")
+    p.add_argument("parameter_name")
+    p.add_argument("--hide-type", action="store_true", help="print only the value")
+    _spin_time(p)
+    p = _verb(param, "set", "param:cmd_set", "set a parameter")
+    p.add_argument("node_name")
+    p.add_argument("parameter_name")
+    p.add_argument("value", help="value in YAML, e.g. 0.5, true, [1, 2]")
+    _spin_time(p)
+    p = _verb(param, "dump", "param:cmd_dump", "print all parameters of a node as a parameter file")
+    p.add_argument("node_name")
+    _spin_time(p)
+    p = _verb(param, "list", "param:cmd_list", "list the parameter names of a node")
+    p.add_argument("node_name")
+    _spin_time(p)
+    p = _verb(param, "load", "param:cmd_load", "set parameters of a node from a parameter file")
+    p.add_argument("node_name")
+    p.add_argument("parameter_file")
+    _spin_time(p)
+
+    bag = sub.add_parser("bag", help="record topics to MCAP").add_subparsers(dest="verb", required=True)
+    p = _verb(bag, "record", "bag:cmd_record", "record topics into an MCAP bag (rosbag2 layout)")
+    p.add_argument("topics", nargs="*", help="topics to record")
+    p.add_argument("-o", "--output", help="output bag folder (default: rosbag2_<date>)")
+    p.add_argument("-a", "--all", action="store_true", help="record every topic")
+    p.add_argument("--duration", type=float, default=None, help="ros2py extension: stop after this many seconds")
+    _spin_time(p)
+
+    p = sub.add_parser("run", help="run an executable of a package", description="run an executable of a package")
+    p.set_defaults(_target="run:cmd_run")
+    p.add_argument("package_name")
+    p.add_argument("executable_name")
+    p.add_argument("argv", nargs=argparse.REMAINDER, help="arguments for the executable")
+
+
+def _control_parsers(sub) -> None:
+    control = sub.add_parser("control", help="talk to a controller manager").add_subparsers(dest="verb", required=True)
+
+    def verb(name, target, help):
+        p = _verb(control, name, f"control:{target}", help)
+        p.add_argument("-c", "--controller-manager", default="/controller_manager",
+                       help="name of the controller manager node (default: %(default)s)")
+        _spin_time(p)
+        return p
+
+    p = verb("list_controllers", "cmd_list_controllers", "output the loaded controllers, their type and state")
+    p.add_argument("--verbose", "-v", action="store_true", help="also list interfaces of each controller")
+    for flag in ("--claimed-interfaces", "--required-state-interfaces", "--required-command-interfaces",
+                 "--chained-interfaces", "--reference-interfaces"):
+        p.add_argument(flag, action="store_true")
+    p = verb("list_hardware_components", "cmd_list_hardware_components", "output the hardware components")
+    p.add_argument("--verbose", "-v", action="store_true", help="also list state interfaces")
+    verb("list_hardware_interfaces", "cmd_list_hardware_interfaces", "output the command and state interfaces")
+    p = verb("switch_controllers", "cmd_switch_controllers", "activate and deactivate controllers at once")
+    p.add_argument("--activate", nargs="*", default=[], help="controllers to activate")
+    p.add_argument("--deactivate", nargs="*", default=[], help="controllers to deactivate")
+    strict = p.add_mutually_exclusive_group()
+    strict.add_argument("--strict", action="store_true", help="fail the whole switch if one part fails")
+    strict.add_argument("--best-effort", action="store_true", help="switch what can be switched")
+    p.add_argument("--activate-asap", action="store_true", help="activate as soon as interfaces are ready")
+    p.add_argument("--switch-timeout", type=float, default=5.0, help="timeout in seconds (default: 5)")
+    p = verb("load_controller", "cmd_load_controller", "load a controller")
+    p.add_argument("controller_name")
+    p.add_argument("--set-state", choices=["inactive", "active"], help="then configure (and activate) it")
+    p = verb("set_controller_state", "cmd_set_controller_state", "configure, activate or deactivate a controller")
+    p.add_argument("controller_name")
+    p.add_argument("state", choices=["inactive", "active"])
+    p = verb("unload_controller", "cmd_unload_controller", "unload a controller")
+    p.add_argument("controller_name")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    _topic_parsers(sub)
+    _simple_parsers(sub)
+    _control_parsers(sub)
+    return parser
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    args = build_parser().parse_args(argv)
+    module_name, function_name = args._target.split(":")
+    try:
+        from ball_balance.cli.errors import CliError
+
+        handler = getattr(importlib.import_module(f"ball_balance.cli.{module_name}"), function_name)
+        code = handler(args)
+    except KeyboardInterrupt:
+        code = 0
+    except CliError as error:
+        print(f"{PROG}: {error}", file=sys.stderr)
+        code = 1
+    except BrokenPipeError:  # `ros2py topic echo ... | head`
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        code = 0
+    except Exception as error:  # noqa: BLE001 - one line, never a traceback wall
+        if os.environ.get("ROS2PY_DEBUG"):
+            raise
+        text = str(error).strip().splitlines()
+        print(f"{PROG}: {type(error).__name__}: {text[0] if text else ''} (ROS2PY_DEBUG=1 shows the traceback)",
+              file=sys.stderr)
+        code = 1
+    sys.stdout.flush()
+    return code or 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

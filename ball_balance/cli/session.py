@@ -1,0 +1,170 @@
+"""The CLI's own short-lived rclpy node: graph discovery, waiting, service calls, QoS.
+
+ros2cli without its daemon creates a hidden node per command and lets discovery run for a
+moment; so do we. The node is hidden (`_ros2py_<pid>`), serves no parameters and has no
+/rosout publisher, so it does not show up in what it lists.
+"""
+from __future__ import annotations
+
+import os
+import time
+from typing import Callable, Dict, List, Optional, Tuple
+
+from ball_balance.cli.errors import CliError
+
+DEFAULT_SPIN_TIME_S = 2.0  # upper bound on discovery waits when the graph is not yet complete
+
+
+class Session:
+    """`with Session() as s:` gives s.node, spun by s.spin_until(...)."""
+
+    def __init__(self, name: str = "ros2py"):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        self._rclpy = rclpy
+        self.context = rclpy.Context()
+        rclpy.init(args=[], context=self.context)
+        self.node = rclpy.create_node(f"_{name}_{os.getpid()}", context=self.context,
+                                      start_parameter_services=False, enable_rosout=False)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def __enter__(self) -> Session:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        try:
+            self.executor.shutdown(timeout_sec=0.5)
+            self.node.destroy_node()
+        finally:
+            self.context.try_shutdown()
+
+    # --- waiting -----------------------------------------------------------------------
+    def spin_until(self, condition: Callable[[], bool], timeout_s: Optional[float],
+                   step_s: float = 0.05) -> bool:
+        """Spin until condition() is true (True) or timeout_s passes (False; None: forever)."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while not condition():
+            step = step_s
+            if deadline is not None:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return False
+                step = min(step_s, remaining)
+            self.executor.spin_once(timeout_sec=step)
+        return True
+
+    def spin_for(self, duration_s: float) -> None:
+        self.spin_until(lambda: False, duration_s)
+
+    def discover(self, spin_time_s: float = DEFAULT_SPIN_TIME_S, settle_s: float = 0.4,
+                 alone_s: float = 1.0) -> None:
+        """Let discovery run until the graph stops changing for settle_s (at most spin_time_s).
+
+        While only our own node is visible, keep waiting for alone_s: other participants
+        usually answer within a few hundred milliseconds.
+        """
+        start = time.monotonic()
+        state = {"seen": None, "since": start}
+
+        def settled() -> bool:
+            now = time.monotonic()
+            snapshot = (tuple(sorted(self.node.get_node_names_and_namespaces())),
+                        tuple((n, tuple(t)) for n, t in self.node.get_topic_names_and_types()),
+                        tuple((n, tuple(t)) for n, t in self.node.get_service_names_and_types()))
+            if snapshot != state["seen"]:
+                state["seen"], state["since"] = snapshot, now
+            others = len(snapshot[0]) > 1
+            return now - state["since"] >= settle_s and (others or now - start >= alone_s)
+
+        self.spin_until(settled, spin_time_s, step_s=0.1)
+
+    # --- graph -------------------------------------------------------------------------
+    def topic_types(self) -> Dict[str, List[str]]:
+        return dict(self.node.get_topic_names_and_types())
+
+    def wait_for_topic_type(self, topic: str, timeout_s: float) -> Optional[str]:
+        """The type of `topic` once the graph shows it (None after timeout_s)."""
+        found: List[str] = []
+
+        def appeared() -> bool:
+            types = self.topic_types().get(topic)
+            if types:
+                found.append(types[0])
+            return bool(found)
+
+        self.spin_until(appeared, timeout_s)
+        return found[0] if found else None
+
+    def node_exists(self, full_name: str) -> bool:
+        return any(_join(ns, name) == full_name for name, ns in self.node.get_node_names_and_namespaces())
+
+    def wait_for_node(self, full_name: str, timeout_s: float) -> None:
+        if not self.spin_until(lambda: self.node_exists(full_name), timeout_s):
+            raise CliError(f"node '{full_name}' not found (waited {timeout_s:.1f} s); see `ros2py node list`")
+
+    def call(self, srv_type, service: str, request, timeout_s: float = 10.0):
+        """Call a service and return the response, or raise a CliError naming the service."""
+        client = self.node.create_client(srv_type, service)
+        try:
+            if not self.spin_until(client.service_is_ready, timeout_s):
+                raise CliError(f"service '{service}' is not available (waited {timeout_s:.1f} s)")
+            future = client.call_async(request)
+            if not self.spin_until(future.done, timeout_s):
+                raise CliError(f"no response from service '{service}' within {timeout_s:.1f} s")
+            if future.exception() is not None:
+                raise CliError(f"service '{service}' failed: {future.exception()}")
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    def adapted_qos(self, topic: str, reliability: Optional[str] = None, durability: Optional[str] = None,
+                    depth: int = 10):
+        """A subscription QoS that matches every publisher on `topic` (as ros2 topic echo does).
+
+        Best effort if any publisher is best effort, transient local only if all are;
+        explicit `reliability`/`durability` ('reliable', 'best_effort', 'volatile',
+        'transient_local') win.
+        """
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        publishers = self.node.get_publishers_info_by_topic(topic)
+        rel = ReliabilityPolicy.RELIABLE
+        dur = DurabilityPolicy.VOLATILE
+        if publishers:
+            if any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for p in publishers):
+                rel = ReliabilityPolicy.BEST_EFFORT
+            if all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers):
+                dur = DurabilityPolicy.TRANSIENT_LOCAL
+        if reliability:
+            rel = ReliabilityPolicy[reliability.upper()]
+        if durability:
+            dur = DurabilityPolicy[durability.upper()]
+        return QoSProfile(depth=depth, reliability=rel, durability=dur)
+
+
+def _join(namespace: str, name: str) -> str:
+    return f"{namespace.rstrip('/')}/{name}"
+
+
+def full_node_name(name: str) -> str:
+    """'talker' -> '/talker'; '/ns/talker' stays."""
+    return name if name.startswith("/") else f"/{name}"
+
+
+def is_hidden(name: str) -> bool:
+    """ROS hides names with a token starting with '_' (our own node among them)."""
+    return any(part.startswith("_") for part in name.split("/"))
+
+
+def node_names(session: Session, include_hidden: bool = False) -> List[str]:
+    names = {_join(ns, name) for name, ns in session.node.get_node_names_and_namespaces()}
+    return sorted(n for n in names if include_hidden or not is_hidden(n))
+
+
+def name_type_pairs(pairs: List[Tuple[str, List[str]]], include_hidden: bool = False):
+    return sorted((name, types) for name, types in pairs if include_hidden or not is_hidden(name))

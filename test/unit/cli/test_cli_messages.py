@@ -1,0 +1,81 @@
+"""ros2py's message helpers: YAML like ros2 topic echo, YAML to message with clear errors."""
+import pytest
+
+from ball_balance.cli.errors import CliError
+from ball_balance.cli.messages import (
+    get_field,
+    get_interface,
+    message_to_yaml,
+    parse_yaml_values,
+    set_message_fields,
+    type_name_of,
+)
+from ball_balance.cli.topic import hz_statistics
+
+
+def test_ball_state_prints_as_ros2_topic_echo_does():
+    cls = get_interface("ball_tracker_msgs/msg/BallState")
+    msg = cls(x=0.125, ball_found=True, markers_found=3)
+    msg.header.frame_id = "plate_center"
+    assert message_to_yaml(msg) == (
+        "header:\n  stamp:\n    sec: 0\n    nanosec: 0\n  frame_id: plate_center\n"
+        "x: 0.125\ny: 0.0\nvx: 0.0\nvy: 0.0\nball_found: true\ntracking_valid: false\n"
+        "markers_found: 3\npixel_u: 0.0\npixel_v: 0.0\n")
+
+
+def test_arrays_are_block_lists_and_truncated():
+    msg = get_interface("sensor_msgs/JointState")(name=["a", "b"], position=[1.0, 2.5])
+    text = message_to_yaml(msg)
+    assert "name:\n- a\n- b\nposition:\n- 1.0\n- 2.5\nvelocity: []\n" in text
+    long = get_interface("std_msgs/msg/Float64MultiArray")(data=[float(i) for i in range(5)])
+    assert message_to_yaml(long, truncate_length=2).endswith("data:\n- 0.0\n- 1.0\n- '...'\n")
+
+
+def test_field_selection_and_scalars():
+    msg = get_interface("geometry_msgs/msg/TransformStamped")()
+    msg.transform.translation.x = 1.5
+    assert message_to_yaml(get_field(msg, "transform.translation.x")) == "1.5\n"
+    with pytest.raises(CliError, match="invalid field 'transform.nope'.*has no field 'nope'"):
+        get_field(msg, "transform.nope")
+
+
+def test_yaml_values_fill_nested_messages_and_sequences():
+    msg = set_message_fields(get_interface("tf2_msgs/msg/TFMessage")(), parse_yaml_values(
+        "{transforms: [{header: {frame_id: world}, child_frame_id: plate, transform: {translation: {x: 1}}}]}"))
+    (t,) = msg.transforms
+    assert (t.header.frame_id, t.child_frame_id, t.transform.translation.x) == ("world", "plate", 1.0)
+    stamped = set_message_fields(get_interface("std_msgs/msg/Header")(), {"stamp": "now"}, now_ns=1_500_000_000)
+    assert (stamped.stamp.sec, stamped.stamp.nanosec) == (1, 500_000_000)
+    assert type_name_of(t) == "geometry_msgs/msg/TransformStamped"
+
+
+@pytest.mark.parametrize("type_name, values, error", [
+    ("std_msgs/msg/String", "{dta: hi}", "has no field 'dta'"),
+    ("std_msgs/msg/Int32", "{data: hello}", r"field 'data' \(int32\): expected an integer"),
+    ("std_msgs/msg/UInt8", "{data: 300}", r"300 is outside \[0, 255\]"),
+    ("std_msgs/msg/Bool", "{data: 1}", "expected true or false"),
+    ("sensor_msgs/msg/JointState", "{position: 3}", "expected a list"),
+    ("std_msgs/msg/String", "[1, 2]", "must be a mapping"),
+])
+def test_wrong_values_name_the_field(type_name, values, error):
+    with pytest.raises(CliError, match=error):
+        set_message_fields(get_interface(type_name)(), parse_yaml_values(values))
+
+
+def test_bad_yaml_and_unknown_types_are_one_line_errors():
+    with pytest.raises(CliError, match=r"not valid YAML: expected .* at line 1, column 14") as bad_yaml:
+        parse_yaml_values("{data: [hello")
+    assert "\n" not in str(bad_yaml.value)
+    with pytest.raises(CliError, match="no interface package 'nopkg'"):
+        get_interface("nopkg/msg/Thing")
+    with pytest.raises(CliError, match="package 'std_msgs' has no msg 'Strin'"):
+        get_interface("std_msgs/msg/Strin")
+    with pytest.raises(CliError, match="not a valid interface type name"):
+        get_interface("String")
+
+
+def test_hz_statistics_match_the_definition():
+    rate, lo, hi, std = hz_statistics([0.1, 0.1, 0.1, 0.1])
+    assert rate == pytest.approx(10.0) and lo == hi == pytest.approx(0.1) and std == pytest.approx(0.0)
+    rate, lo, hi, std = hz_statistics([0.1, 0.3])
+    assert rate == pytest.approx(5.0) and (lo, hi) == (0.1, 0.3) and std == pytest.approx(0.1)
