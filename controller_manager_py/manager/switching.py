@@ -114,13 +114,6 @@ def _resolve(cm: ControllerManager, activate: List[str], deactivate: List[str], 
             if target in cm.controllers and target not in activate and cm.controllers[target].state != State.ACTIVE:
                 activate.append(target)
                 pending.append(target)
-    pending = list(deactivate)
-    while pending:
-        name = pending.pop()
-        for itf, holder in list(cm.rm.claimed.items()):
-            if owner.get(itf) == name and holder not in deactivate:
-                deactivate.append(holder)
-                pending.append(holder)
     if force:
         for name in activate:
             spec = cm.controllers.get(name)
@@ -128,6 +121,13 @@ def _resolve(cm: ControllerManager, activate: List[str], deactivate: List[str], 
                 holder = cm.rm.claimed.get(itf)
                 if holder is not None and holder != name and holder not in deactivate:
                     deactivate.append(holder)
+    pending = list(deactivate)
+    while pending:
+        name = pending.pop()
+        for itf, holder in list(cm.rm.claimed.items()):
+            if owner.get(itf) == name and holder not in deactivate:
+                deactivate.append(holder)
+                pending.append(holder)
     return activate, deactivate
 
 

@@ -68,3 +68,29 @@ class FlakySystem(SystemInterface):
 
     def read(self, time, period):
         return return_type.ERROR if FlakySystem.fail_read else return_type.OK
+
+
+class SimClockSystem(SystemInterface):
+    """A mock that owns the clock: simulated time starts at 1000 s and advances 1 ms per read."""
+
+    provides_clock = True
+
+    def on_init(self, info):
+        self.sim_time = 1000.0
+        return super().on_init(info)
+
+    def now(self):
+        return self.sim_time
+
+    def read(self, time, period):
+        self.sim_time += 0.001
+        return return_type.OK
+
+
+class BlockingSystem(SystemInterface):
+    """read() blocks 10 ms, like hardware whose read sets the pace."""
+
+    def read(self, time, period):
+        import time as _time
+        _time.sleep(0.01)
+        return return_type.OK
