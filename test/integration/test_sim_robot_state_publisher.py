@@ -58,3 +58,26 @@ def test_bad_description_file_stops_with_one_clear_line(launcher, tmp_path):
                            f"robot_description_file:={tmp_path}/missing.urdf"], timeout=60)
     assert result.returncode != 0
     assert "robot_description_file" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_non_finite_joint_position_is_skipped_and_the_rest_published(launcher, graph):
+    from tf2_msgs.msg import TFMessage
+
+    process = launcher.start([executable("robot_state_publisher")])
+    graph.wait_for_topic("/tf")
+    pub = graph.node.create_publisher(JointState, "/joint_states", 10)
+    q = list(robot.HOME_POSITIONS_RAD)
+    q[5] = math.nan
+    msg = JointState(name=list(robot.JOINT_NAMES), position=q)
+
+    def has_arm(tf):
+        pub.publish(msg)
+        return bool(tf.transforms)
+
+    sub_msgs = []
+    graph.node.create_subscription(TFMessage, "/tf", sub_msgs.append, 100)
+    graph.spin_until(lambda: has_arm(TFMessage(transforms=[t for m in sub_msgs for t in m.transforms])), 30,
+                     "/tf from a joint state with one NaN")
+    children = {t.child_frame_id for m in sub_msgs for t in m.transforms}
+    assert "shoulder_link" in children and "wrist_3_link" not in children
+    assert process.running
