@@ -201,7 +201,7 @@ class BallTrackerNode(Node):
     def track(self, image: np.ndarray, stamp_s: float, stamp_msg) -> None:
         with self._lock:
             self._camera_for(image.shape)
-            result = self.tracker.process(image, stamp_s)
+            result = self.tracker.process(image, stamp_s, self.get_clock().now().nanoseconds * 1e-9)
         self.state_pub.publish(ball_state(result, stamp_msg))
         if self.debug_pub is not None and self.debug_pub.get_subscription_count() > 0:
             self.debug_pub.publish(encode_image(draw_overlay(image, self.tracker.plate, result), stamp_msg))

@@ -78,23 +78,25 @@ class BallTracker:
         self.undistorter = Undistorter(camera, self.undistort_mode) if camera is not None else None
         self.C_P = None
 
-    def set_plate_cmd(self, u_x: float, u_y: float, stamp_s: float) -> None:
-        """Commanded tilts (rad) from /plate_cmd, used as known acceleration when enabled."""
-        self._plate_cmd = (u_x, u_y, stamp_s)
+    def set_plate_cmd(self, u_x: float, u_y: float, received_s: float) -> None:
+        """Commanded tilts (rad) from /plate_cmd, used as known acceleration when enabled.
+        `received_s` is on the same clock as `process(..., now_s)` (the node's receipt clock)."""
+        self._plate_cmd = (u_x, u_y, received_s)
 
-    def known_acceleration(self, stamp_s: float) -> Optional[Tuple[float, float]]:
+    def known_acceleration(self, now_s: float) -> Optional[Tuple[float, float]]:
         """x'' = -k g sin(u_x), y'' = -k g sin(u_y) from a recent enough command, else None."""
         if not self.config.use_plate_cmd or self._plate_cmd is None:
             return None
         u_x, u_y, t_cmd = self._plate_cmd
-        if abs(stamp_s - t_cmd) > self.config.plate_cmd_timeout_s:
+        if abs(now_s - t_cmd) > self.config.plate_cmd_timeout_s:
             return None
         kg = self.config.rolling_factor * GRAVITY_M_S2
         return (-kg * np.sin(u_x), -kg * np.sin(u_y))
 
     # -- the pipeline ----------------------------------------------------------------------------
-    def process(self, image_bgr: np.ndarray, stamp_s: float) -> TrackerResult:
-        """Track the ball in one frame captured at `stamp_s` (seconds, any epoch)."""
+    def process(self, image_bgr: np.ndarray, stamp_s: float, now_s: Optional[float] = None) -> TrackerResult:
+        """Track the ball in one frame captured at `stamp_s` (seconds, any epoch). `now_s`:
+        the clock /plate_cmd receipt times are on (default: the frame stamp)."""
         clock = time.perf_counter
         t0 = clock()
         self.frames += 1
@@ -125,7 +127,8 @@ class BallTracker:
         t4 = clock()
         timings["ball"] = t4 - t3
 
-        estimate = self.kalman.step(stamp_s, z, self.known_acceleration(stamp_s))
+        accel = self.known_acceleration(stamp_s if now_s is None else now_s)
+        estimate = self.kalman.step(stamp_s, z, accel)
         result.x, result.y, result.vx, result.vy = estimate.x, estimate.y, estimate.vx, estimate.vy
         result.ball_found, result.tracking_valid = estimate.fresh, estimate.valid
         t5 = clock()

@@ -132,6 +132,28 @@ def test_bad_frames_are_dropped_counted_and_the_node_keeps_running(launcher, gra
     assert "encoding 'mono8'" in log and "size 0x0" in log
 
 
+def test_debug_overlay_and_non_finite_plate_cmd(launcher, graph, scene):
+    from geometry_msgs.msg import Vector3Stamped
+
+    tracker = launcher.start(tracker_cmd("publish_debug_image:=true", "use_plate_cmd:=true"), name="ball_tracker")
+    image, _ = scene.render(BALL_XY)
+    feeder = FrameFeeder(graph, [image_msg(image, 0)])
+    feeder.info = camera_info(scene)
+    cmd_pub = graph.node.create_publisher(Vector3Stamped, "/plate_cmd", 10)
+    bad = Vector3Stamped()
+    bad.vector.x = float("nan")
+    good = Vector3Stamped()
+    good.vector.x, good.vector.y = 0.01, -0.01
+    graph.node.create_timer(0.1, lambda: (cmd_pub.publish(bad), cmd_pub.publish(good)))
+    (overlay,) = graph.collect(Image, "/ball_tracker/debug_image", qos=qos_profile_sensor_data, timeout=30)
+    assert (overlay.encoding, overlay.width, overlay.height) == ("bgr8", 640, 480)
+    (msg,) = graph.collect(BallState, "/ball_state", qos=qos_profile_sensor_data, timeout=30,
+                           predicate=lambda m: m.ball_found)
+    assert math.hypot(msg.x - BALL_XY[0], msg.y - BALL_XY[1]) < 0.003   # a small tilt fed forward
+    graph.spin_until(lambda: "non-finite /plate_cmd" in tracker.output(), 10, "the bad /plate_cmd warning")
+    assert tracker.running
+
+
 @pytest.mark.parametrize("params, needle", [
     (["calibration_file:=/nonexistent/cam.yaml"], "calibration_file"),
     (["source:=camera", "camera_device:=/dev/video_missing"], "camera_device"),

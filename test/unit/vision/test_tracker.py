@@ -1,4 +1,5 @@
 """The whole pipeline on synthetic frames with known truth: position error and flags."""
+import cv2
 import numpy as np
 import pytest
 
@@ -127,3 +128,25 @@ def test_timings_for_every_stage():
     r = run(scene, tracker, [(0.0, 0.0)] * 4)[-1]
     assert set(r.timings_s) == {"undistort", "markers", "homography", "ball", "filter", "total"}
     assert r.timings_s["total"] >= r.timings_s["markers"] > 0.0
+
+
+def distort(image, K, D):
+    """The image a lens with distortion D would give: each output pixel samples the ideal image."""
+    h, w = image.shape[:2]
+    u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    pts = np.stack([u.ravel(), v.ravel()], axis=-1).reshape(-1, 1, 2)
+    ideal = cv2.undistortPoints(pts, K, D, P=K).reshape(h, w, 2)
+    return cv2.remap(image, ideal[..., 0], ideal[..., 1], cv2.INTER_LINEAR)
+
+
+@pytest.mark.parametrize("mode", ["points", "image"])
+def test_lens_distortion_is_removed_with_a_calibration(mode):
+    scene = SyntheticScene()
+    K, D = scene.camera.K, np.array([-0.25, 0.08, 0.0, 0.0, 0.0])   # ~5 mm error if ignored
+    tracker = BallTracker(TrackerConfig.from_values({"startup_frames": 3}), CameraModel(640, 480, K, D), mode)
+    xy = (0.17, -0.12)
+    image = distort(scene.render(xy)[0], K, D)
+    for i in range(4):
+        r = tracker.process(image, i / FPS)
+    assert r.markers_found == 4 and r.ball_found
+    assert error_mm(r, xy) < 2.0
