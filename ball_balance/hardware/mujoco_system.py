@@ -33,7 +33,7 @@ import numpy as np
 
 from ball_balance import robot
 from ball_balance.sim.config import CameraConfig, DomainKnobs, SimConfig, SimConfigError
-from ball_balance.sim.world import CommandError, SimWorld
+from ball_balance.sim.world import CommandError, SimulationError, SimWorld
 from controller_manager_py.hardware_interface import CallbackReturn, HardwareInfo, State, SystemInterface, return_type
 from controller_manager_py.parameters import Param, ParameterError, validate
 
@@ -241,7 +241,12 @@ class MujocoSystem(SystemInterface):
         if self._reset_requested:
             self._reset_requested = False
             world.place_ball(0.0, 0.0)
-        world.step(self._steps_for(period))
+        try:
+            world.step(self._steps_for(period))
+        except SimulationError as error:
+            self.get_logger().error(f"{self.get_name()}: {error}")
+            self._copy_states()
+            return return_type.ERROR
         self._copy_states()
         t = world.time_s
         if t >= self._next_frame_s:  # a camera frame (rendered, and/or a truth-fed detection)

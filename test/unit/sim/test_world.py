@@ -146,3 +146,16 @@ def test_detection_noise_is_seeded():
 def test_bad_settings_are_refused_naming_the_setting(make, message):
     with pytest.raises(SimConfigError, match=message):
         make()
+
+
+def test_diverged_physics_is_reported_and_the_world_reset(world):
+    from ball_balance.sim.world import SimulationError
+
+    world.reset()
+    world.set_joint_targets(tilted_home(4, 0.02))
+    world.advance(0.1)
+    world.data.qvel[world.ids.ball_dof] = 1e20
+    with pytest.raises(SimulationError, match="diverged"):
+        world.step()
+    assert np.allclose(world.joint_positions(), tilted_home(4, 0.02))
+    assert world.time_s == pytest.approx(0.101) and world.ball_truth().on_plate
