@@ -178,6 +178,7 @@ class SimWorld:
         """
         dt = self.physics_dt_s
         diverged_before = self._divergences()
+        last_time_s = self.data.time
         acts = self.ids.actuators
         for _ in range(n):
             while self._pending and self._pending[0][0] <= self.time_s + 1e-12:
@@ -186,9 +187,10 @@ class SimWorld:
             max_step = self.max_velocity_rad_s * (self.speed_scaling * dt)
             setpoint = self.data.ctrl[acts]
             self.data.ctrl[acts] = setpoint + np.clip(self._target - setpoint, -max_step, max_step)
+            last_time_s = self.data.time
             mujoco.mj_step(self.model, self.data)
         if self._divergences() != diverged_before:
-            at = self.time_s
+            at = last_time_s + dt  # MuJoCo's reset zeroed data.time
             self.reset(self._target.copy())
             self.data.time = at  # time never runs backwards (it may be the system's clock)
             raise SimulationError(f"physics diverged at t={at:.3f} s (MuJoCo reset its state); "
