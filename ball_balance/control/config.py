@@ -37,6 +37,8 @@ REFERENCE_SCHEMA = [
     Param("reference_csv_path", "", "CSV path t_s,x_m,y_m (reference_kind=csv)"),
     Param("reference_start_delay_s", 0.0, "hold the centre this long after engaging, then start", "s",
           0.0, 600.0),
+    Param("reference_blend_s", 2.0, "blend from the centre into the path over this long (no jump)", "s",
+          0.0, 60.0),
 ]
 
 PID_GAINS_SCHEMA = [
@@ -138,8 +140,8 @@ def reference(values: Mapping[str, Any]) -> Reference:
     centre = tuple(values["reference_centre_m"])
     inner = make_reference(values["reference_kind"], values["reference_radius_m"], values["reference_period_s"],
                            centre, values["reference_csv_path"])
-    delay = values["reference_start_delay_s"]
-    return Delayed(inner, delay, centre) if delay > 0 else inner
+    delay, blend = values["reference_start_delay_s"], values["reference_blend_s"]
+    return Delayed(inner, delay, centre, blend) if delay > 0 or blend > 0 else inner
 
 
 def plate_kinematics(chain: Chain, values: Mapping[str, Any]) -> PlateKinematics:

@@ -208,17 +208,31 @@ def _positive(**values: float) -> None:
 
 
 class Delayed(Reference):
-    """Hold `hold_point` for `delay_s`, then run `inner` from its start (balance, then track)."""
+    """Hold `hold_point` for `delay_s`, then blend into `inner` (run from its start) over
+    `blend_s` with a smoothstep s(tau) = 3 tau^2 - 2 tau^3, so neither position nor velocity
+    jumps (balance at the centre, then track the path):
 
-    def __init__(self, inner: Reference, delay_s: float, hold_point=(0.0, 0.0)):
-        self.inner, self.delay_s = inner, delay_s
+        p = h + s (q - h),  v = s' (q - h) + s q',  a = s'' (q - h) + 2 s' q' + s q''
+    """
+
+    def __init__(self, inner: Reference, delay_s: float, hold_point=(0.0, 0.0), blend_s: float = 0.0):
+        self.inner, self.delay_s, self.blend_s = inner, delay_s, blend_s
         self.hold = Stationary(hold_point)
         self.period_s = inner.period_s
 
     def sample(self, t_s: float) -> RefSample:
         if t_s < self.delay_s:
             return self.hold.sample(t_s)
-        return self.inner.sample(t_s - self.delay_s)
+        q = self.inner.sample(t_s - self.delay_s)
+        if self.blend_s <= 0 or t_s >= self.delay_s + self.blend_s:
+            return q
+        T = self.blend_s
+        tau = (t_s - self.delay_s) / T
+        s = 3 * tau ** 2 - 2 * tau ** 3
+        ds = (6 * tau - 6 * tau ** 2) / T
+        dds = (6 - 12 * tau) / T ** 2
+        d = q.p - self.hold.centre
+        return RefSample(self.hold.centre + s * d, ds * d + s * q.v, dds * d + 2 * ds * q.v + s * q.a)
 
     def path_points(self, n: int = 100) -> np.ndarray:
         return self.inner.path_points(n)

@@ -89,3 +89,14 @@ def test_delayed_reference_holds_then_starts():
     ref = Delayed(Circle(0.1, 10.0), 3.0, (0.0, 0.0))
     assert tuple(ref.sample(2.9).p) == (0.0, 0.0)
     np.testing.assert_allclose(ref.sample(3.0).p, (0.1, 0.0))
+
+
+def test_blended_start_has_no_jump_and_consistent_derivatives():
+    ref = Delayed(Circle(0.1, 10.0), 3.0, (0.0, 0.0), blend_s=2.0)
+    np.testing.assert_allclose(ref.sample(3.0).p, (0.0, 0.0), atol=1e-12)
+    np.testing.assert_allclose(ref.sample(5.5).p, Circle(0.1, 10.0).sample(2.5).p)
+    h = 1e-5
+    for t in (3.2, 4.0, 4.9):
+        s, s1, s0 = ref.sample(t), ref.sample(t + h), ref.sample(t - h)
+        np.testing.assert_allclose((s1.p - s0.p) / (2 * h), s.v, atol=1e-6)
+        np.testing.assert_allclose((s1.v - s0.v) / (2 * h), s.a, atol=1e-5)

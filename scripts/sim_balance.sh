@@ -1,0 +1,132 @@
+#!/usr/bin/env bash
+# The whole simulated balancing graph: MuJoCo UR arm in ros2_control_node + robot_state_publisher
+# (scripts/sim_arm.sh), ball_tracker on the simulated camera, the balance controller (PID or MPC)
+# and the visualizer, each with its parameter file; a monitor prints progress once a second.
+# Ctrl-C stops every process. Usually started through scripts/sim_pid.sh or scripts/sim_mpc.sh.
+#
+#   scripts/sim_balance.sh --controller pid                    # balance at the centre
+#   scripts/sim_balance.sh --controller mpc --reference circle --radius 0.1 --period 10
+#   scripts/sim_balance.sh --ball 0.08 -0.05 --domain noisy_vision --seed 2
+#   scripts/sim_balance.sh --duration 30 --out artifacts/run    # stop after 30 s, plot + metrics
+#   scripts/sim_balance.sh --duration 30 --out DIR --video-s 10 --debug-image   # + camera.mp4 with overlay
+#   scripts/sim_balance.sh --truth-fed                          # no camera/tracker: /ball_state from truth
+#   scripts/sim_balance.sh --param kp:=2.0                      # any controller parameter
+#
+# Topics: /ball_state, /plate_cmd, /ball_reference, /ball_balance_visualization (RViz, frame
+# plate_center), /forward_position_controller/commands (PID) or
+# /scaled_joint_trajectory_controller/joint_trajectory (MPC), /joint_states, /tf, /sim/ball_truth.
+# Change gains live: ros2 param set /ball_balance_controller kp 2.0 (or ros2py param set ...).
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+if [[ -z "${BALL_BALANCE_ROOT:-}" ]]; then
+  # shellcheck disable=SC1091
+  source "$ROOT/env.sh"
+fi
+
+CONTROLLER=pid
+REFERENCE=""
+RADIUS=""
+PERIOD=""
+START_DELAY=""
+BALL_X=0.08
+BALL_Y=-0.05
+DOMAIN=standard
+SEED=0
+DURATION=0
+OUT=""
+VIDEO_S=0
+TRUTH_FED=0
+DEBUG_IMAGE=false
+CTRL_PARAMS=()
+usage() { sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; }
+while (($#)); do
+  case "$1" in
+    --controller) CONTROLLER="$2"; shift 2 ;;
+    --reference) REFERENCE="$2"; shift 2 ;;
+    --radius) RADIUS="$2"; shift 2 ;;
+    --period) PERIOD="$2"; shift 2 ;;
+    --start-delay) START_DELAY="$2"; shift 2 ;;
+    --ball) BALL_X="$2"; BALL_Y="$3"; shift 3 ;;
+    --domain) DOMAIN="$2"; shift 2 ;;
+    --seed) SEED="$2"; shift 2 ;;
+    --duration) DURATION="$2"; shift 2 ;;
+    --out) OUT="$2"; shift 2 ;;
+    --video-s) VIDEO_S="$2"; shift 2 ;;
+    --truth-fed) TRUTH_FED=1; shift ;;
+    --debug-image) DEBUG_IMAGE=true; shift ;;
+    --param) CTRL_PARAMS+=(-p "$2"); shift 2 ;;
+    -h|--help) usage; exit 0 ;;
+    *) echo "sim_balance.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+  esac
+done
+case "$CONTROLLER" in
+  pid) EXE=ball_balance_controller; YAML="$ROOT/config/pid.yaml"; ARM_FLAGS=() ;;
+  mpc) EXE=ball_balance_mpc; YAML="$ROOT/config/mpc.yaml"; ARM_FLAGS=(--trajectory) ;;
+  *) echo "sim_balance.sh: --controller must be pid or mpc, got '$CONTROLLER'" >&2; exit 2 ;;
+esac
+float() { [[ "$1" == *.* || "$1" == *e* ]] && echo "$1" || echo "$1.0"; }
+[[ -n "$REFERENCE" ]] && CTRL_PARAMS+=(-p "reference_kind:=$REFERENCE")
+[[ -n "$RADIUS" ]] && CTRL_PARAMS+=(-p "reference_radius_m:=$(float "$RADIUS")")
+[[ -n "$PERIOD" ]] && CTRL_PARAMS+=(-p "reference_period_s:=$(float "$PERIOD")")
+[[ -n "$START_DELAY" ]] && CTRL_PARAMS+=(-p "reference_start_delay_s:=$(float "$START_DELAY")")
+VIS_PARAMS=()
+[[ -n "$REFERENCE" ]] && VIS_PARAMS+=(-p "reference_kind:=$REFERENCE")
+[[ -n "$RADIUS" ]] && VIS_PARAMS+=(-p "reference_radius_m:=$(float "$RADIUS")")
+[[ -n "$PERIOD" ]] && VIS_PARAMS+=(-p "reference_period_s:=$(float "$PERIOD")")
+
+SIM_CONFIG="$ROOT/config/sim.yaml"
+((TRUTH_FED)) && SIM_CONFIG="$ROOT/config/sim_truth_fed.yaml"
+LOGS="$(mktemp -d /tmp/ball_balance_graph.XXXXXX)"
+PIDS=()
+NAMES=()
+stop_all() {
+  trap - INT TERM EXIT
+  # background jobs of a script ignore SIGINT; every node shuts down cleanly on SIGTERM
+  for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
+  for pid in "${PIDS[@]}"; do
+    for _ in $(seq 60); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
+    kill -KILL "$pid" 2>/dev/null || true
+  done
+  echo "sim_balance.sh: stopped (logs in $LOGS)" >&2
+}
+trap stop_all INT TERM EXIT
+start() {  # start NAME CMD...: in the background, output to $LOGS/NAME.log
+  local name="$1"; shift
+  "$@" >"$LOGS/$name.log" 2>&1 &
+  PIDS+=($!)
+  NAMES+=("$name")
+  echo "sim_balance.sh: started $name (pid $!)" >&2
+}
+
+echo "sim_balance.sh: $CONTROLLER controller, domain $DOMAIN seed $SEED, ball released at ($BALL_X, $BALL_Y) m; logs in $LOGS" >&2
+start sim "$ROOT/scripts/sim_arm.sh" --sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" \
+  --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y" ${ARM_FLAGS[@]+"${ARM_FLAGS[@]}"}
+if ((! TRUTH_FED)); then
+  start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
+    -p "publish_debug_image:=$DEBUG_IMAGE"
+fi
+start controller "$EXE" --ros-args --params-file "$YAML" -p use_sim_time:=true ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"}
+start visualizer ball_balance_visualizer --ros-args -p use_sim_time:=true ${VIS_PARAMS[@]+"${VIS_PARAMS[@]}"}
+
+MONITOR=(python -m ball_balance.benchmark.live --sim-time --duration "$DURATION" --title "$CONTROLLER, $DOMAIN")
+[[ -n "$OUT" ]] && MONITOR+=(--out "$OUT")
+[[ "$VIDEO_S" != 0 ]] && MONITOR+=(--video-s "$VIDEO_S")
+[[ "$DEBUG_IMAGE" == true ]] && MONITOR+=(--video-topic /ball_tracker/debug_image)
+set +e
+if [[ "$DURATION" != 0 ]]; then
+  "${MONITOR[@]}"
+  CODE=$?
+else
+  "${MONITOR[@]}" &
+  PIDS+=($!)
+  wait -n "${PIDS[@]}"   # until Ctrl-C or a process ends
+  CODE=$?
+fi
+for i in "${!PIDS[@]}"; do
+  if ! kill -0 "${PIDS[$i]}" 2>/dev/null && [[ -n "${NAMES[$i]:-}" ]]; then
+    echo "sim_balance.sh: ${NAMES[$i]} exited; last lines of its log:" >&2
+    tail -n 5 "$LOGS/${NAMES[$i]}.log" >&2
+  fi
+done
+exit "$CODE"
