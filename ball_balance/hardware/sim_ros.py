@@ -72,8 +72,11 @@ class SimRosIo:
 
     # ---- real-time loop -----------------------------------------------------------------
     def publish_truth(self, truth) -> None:
+        """The true ball state; pixel_u/v: the ball centre projected into the camera image."""
+        frame = self.world.frame_truth(truth)
         msg = BallState(x=truth.x, y=truth.y, vx=truth.vx, vy=truth.vy, ball_found=not truth.dropped,
-                        tracking_valid=not truth.dropped, markers_found=4)
+                        tracking_valid=not truth.dropped, markers_found=4,
+                        pixel_u=frame.pixel_u, pixel_v=frame.pixel_v)
         msg.header.stamp = stamp(truth.time_s + self.stamp_offset_s)
         msg.header.frame_id = PLATE_FRAME
         self.truth_pub.publish(msg)

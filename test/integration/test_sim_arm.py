@@ -56,6 +56,7 @@ def test_forward_position_commands_move_the_arm_and_the_camera_sees_the_plate(la
 
     truth, = graph.collect(BallState, "/sim/ball_truth", qos=qos_profile_sensor_data, timeout=30)
     assert truth.header.frame_id == "plate_center" and abs(truth.x) < 0.01 and abs(truth.y) < 0.01
+    assert (truth.pixel_u, truth.pixel_v) == pytest.approx((319.5, 239.5), abs=15)
     graph.collect(Clock, "/clock", qos=QoSProfile(depth=1), timeout=30)
 
     target = np.array(robot.HOME_POSITIONS_RAD) + np.array([0.05, 0.0, 0.0, 0.02, -0.02, 0.1])
