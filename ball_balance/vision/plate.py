@@ -143,7 +143,10 @@ class PlateLocator:
         else:
             found = self.detector.detect_in_windows(gray, self._windows(gray.shape))
             self._frames_since_full_scan += 1
-            if len(found) < len(self.marker_ids) and self._frames_since_full_scan >= self.full_scan_period:
+            # none in their windows (the plate jumped, or all covered): look everywhere now;
+            # some missing (covered by a hand or the ball): look everywhere now and then
+            if not found or (len(found) < len(self.marker_ids)
+                             and self._frames_since_full_scan >= self.full_scan_period):
                 self._frames_since_full_scan = 0
                 full = self.detector.detect(gray)
                 if len(full) > len(found):

@@ -83,3 +83,21 @@ def test_arm_link_covering_a_marker_keeps_tracking(world):
     r = tracker.process(image, 4 / FPS)
     assert r.markers_found == 3 and r.ball_found
     assert 1e3 * np.hypot(r.x - truth.ball.x, r.y - truth.ball.y) < 2.0
+
+
+def test_plate_tilting_under_the_camera_every_frame(world):
+    tracker = locked_tracker(world)
+    world.place_ball(0.08, -0.06)
+    tracker.kalman.reset()
+    errors = []
+    for i in range(30):
+        q = list(robot.HOME_POSITIONS_RAD)
+        q[3] += 0.05 * np.sin(2 * np.pi * i / 30)       # the plate rocks at 1 Hz, +-0.05 rad
+        q[4] += 0.04 * np.cos(2 * np.pi * i / 30)
+        world.set_joint_positions(q)
+        world.step(int(round(1 / FPS / world.physics_dt_s)))
+        image, truth = world.render()
+        r = tracker.process(image, 2.0 + i / FPS)
+        assert r.markers_found == 4 and r.ball_found, i
+        errors.append(np.hypot(r.x - truth.ball.x, r.y - truth.ball.y))
+    assert 1e3 * np.sqrt(np.mean(np.square(errors[5:]))) < 2.0
