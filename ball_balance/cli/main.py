@@ -19,6 +19,7 @@ from typing import List, Optional
 PROG = "ros2py"
 QOS_RELIABILITY = ["reliable", "best_effort", "system_default"]
 QOS_DURABILITY = ["volatile", "transient_local", "system_default"]
+WAIT_FOR_NODE_S = 5.0  # discovering a node or topic can take 2-3 s on a loaded machine
 
 
 def _verb(subparsers, name: str, target: str, help: str):
@@ -28,8 +29,8 @@ def _verb(subparsers, name: str, target: str, help: str):
     return parser
 
 
-def _spin_time(parser) -> None:
-    parser.add_argument("--spin-time", type=float, default=2.0,
+def _spin_time(parser, default: float = 2.5) -> None:
+    parser.add_argument("--spin-time", type=float, default=default,
                         help="seconds to wait for discovery (default: %(default)s)")
 
 
@@ -59,19 +60,19 @@ def _topic_parsers(sub) -> None:
     p.add_argument("--timeout", type=float, default=None,
                    help="ros2py extension: give up after this many seconds without a message")
     _qos(p)
-    _spin_time(p)
+    _spin_time(p, WAIT_FOR_NODE_S)
 
     p = _verb(topic, "hz", "topic:cmd_hz", "print the average receiving rate of a topic")
     p.add_argument("topic_name")
     p.add_argument("--window", "-w", type=int, default=10000, help="window size in messages (default: 10000)")
     p.add_argument("--duration", type=float, default=None, help="ros2py extension: stop after this many seconds")
     _qos(p)
-    _spin_time(p)
+    _spin_time(p, WAIT_FOR_NODE_S)
 
     p = _verb(topic, "info", "topic:cmd_info", "print information about a topic")
     p.add_argument("topic_name")
     p.add_argument("--verbose", "-v", action="store_true", help="print node, QoS and GID of each endpoint")
-    _spin_time(p)
+    _spin_time(p, WAIT_FOR_NODE_S)
 
     p = _verb(topic, "pub", "topic:cmd_pub", "publish a message to a topic")
     p.add_argument("topic_name")
@@ -107,22 +108,22 @@ def _simple_parsers(sub) -> None:
     p.add_argument("node_name")
     p.add_argument("parameter_name")
     p.add_argument("--hide-type", action="store_true", help="print only the value")
-    _spin_time(p)
+    _spin_time(p, WAIT_FOR_NODE_S)
     p = _verb(param, "set", "param:cmd_set", "set a parameter")
     p.add_argument("node_name")
     p.add_argument("parameter_name")
     p.add_argument("value", help="value in YAML, e.g. 0.5, true, [1, 2]")
-    _spin_time(p)
+    _spin_time(p, WAIT_FOR_NODE_S)
     p = _verb(param, "dump", "param:cmd_dump", "print all parameters of a node as a parameter file")
     p.add_argument("node_name")
-    _spin_time(p)
+    _spin_time(p, WAIT_FOR_NODE_S)
     p = _verb(param, "list", "param:cmd_list", "list the parameter names of a node")
     p.add_argument("node_name")
-    _spin_time(p)
+    _spin_time(p, WAIT_FOR_NODE_S)
     p = _verb(param, "load", "param:cmd_load", "set parameters of a node from a parameter file")
     p.add_argument("node_name")
     p.add_argument("parameter_file")
-    _spin_time(p)
+    _spin_time(p, WAIT_FOR_NODE_S)
 
     bag = sub.add_parser("bag", help="record topics to MCAP").add_subparsers(dest="verb", required=True)
     p = _verb(bag, "record", "bag:cmd_record", "record topics into an MCAP bag (rosbag2 layout)")
@@ -146,7 +147,7 @@ def _control_parsers(sub) -> None:
         p = _verb(control, name, f"control:{target}", help)
         p.add_argument("-c", "--controller-manager", default="/controller_manager",
                        help="name of the controller manager node (default: %(default)s)")
-        _spin_time(p)
+        _spin_time(p, WAIT_FOR_NODE_S)
         return p
 
     p = verb("list_controllers", "cmd_list_controllers", "output the loaded controllers, their type and state")

@@ -12,17 +12,18 @@ from typing import Callable, Dict, List, Optional, Tuple
 
 from ball_balance.cli.errors import CliError
 
-DEFAULT_SPIN_TIME_S = 2.0  # upper bound on discovery waits when the graph is not yet complete
+DEFAULT_SPIN_TIME_S = 2.5  # upper bound on discovery waits when the graph is not yet complete
 
 
 class Session:
     """`with Session() as s:` gives s.node, spun by s.spin_until(...)."""
 
-    def __init__(self, name: str = "ros2py"):
+    def __init__(self, spin_time_s: float = DEFAULT_SPIN_TIME_S, name: str = "ros2py"):
+        """spin_time_s: how long waits for nodes and services may take (discovery)."""
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
 
-        self._rclpy = rclpy
+        self.spin_time_s = spin_time_s
         self.context = rclpy.Context()
         rclpy.init(args=[], context=self.context)
         self.node = rclpy.create_node(f"_{name}_{os.getpid()}", context=self.context,
@@ -61,12 +62,11 @@ class Session:
     def spin_for(self, duration_s: float) -> None:
         self.spin_until(lambda: False, duration_s)
 
-    def discover(self, spin_time_s: float = DEFAULT_SPIN_TIME_S, settle_s: float = 0.4,
-                 alone_s: float = 1.0) -> None:
+    def discover(self, spin_time_s: float = DEFAULT_SPIN_TIME_S, settle_s: float = 0.4) -> None:
         """Let discovery run until the graph stops changing for settle_s (at most spin_time_s).
 
-        While only our own node is visible, keep waiting for alone_s: other participants
-        usually answer within a few hundred milliseconds.
+        While only our own node is visible, keep waiting (for up to spin_time_s): another
+        participant's first announcement can take 2 s to arrive on a loaded machine.
         """
         start = time.monotonic()
         state = {"seen": None, "since": start}
@@ -79,7 +79,7 @@ class Session:
             if snapshot != state["seen"]:
                 state["seen"], state["since"] = snapshot, now
             others = len(snapshot[0]) > 1
-            return now - state["since"] >= settle_s and (others or now - start >= alone_s)
+            return others and now - state["since"] >= settle_s
 
         self.spin_until(settled, spin_time_s, step_s=0.1)
 

@@ -1,0 +1,148 @@
+"""`ros2py control ...` against a controller manager stand-in serving canned responses."""
+import re
+import textwrap
+
+import pytest
+
+from harness import python_cmd
+
+pytestmark = pytest.mark.integration
+
+# A small controller manager: real controller_manager_msgs services, lifecycle bookkeeping only.
+FAKE_CONTROLLER_MANAGER = textwrap.dedent("""
+    import rclpy
+    from controller_manager_msgs.msg import ControllerState, HardwareComponentState, HardwareInterface
+    from controller_manager_msgs import srv
+    from lifecycle_msgs.msg import State
+
+    rclpy.init()
+    node = rclpy.create_node('controller_manager')
+    states = {'joint_state_broadcaster': 'active', 'plate_controller': 'inactive'}
+    types = {'joint_state_broadcaster': 'joint_state_broadcaster/JointStateBroadcaster',
+             'plate_controller': 'ball_balance/PlateController'}
+
+    def list_controllers(request, response):
+        for name, state in states.items():
+            c = ControllerState(name=name, state=state, type=types.get(name, 'forward_command_controller/X'),
+                                update_rate=500)
+            if name == 'plate_controller':
+                c.required_command_interfaces = ['joint1/velocity']
+                c.claimed_interfaces = ['joint1/velocity'] if state == 'active' else []
+            response.controller.append(c)
+        return response
+
+    def list_components(request, response):
+        response.component = [HardwareComponentState(
+            name='ur_arm', type='system', plugin_name='mock_components/GenericSystem',
+            state=State(id=3, label='active'),
+            command_interfaces=[HardwareInterface(name='joint1/velocity', is_available=True,
+                                                  is_claimed=states['plate_controller'] == 'active')],
+            state_interfaces=[HardwareInterface(name='joint1/position', is_available=True)])]
+        return response
+
+    def list_interfaces(request, response):
+        response.command_interfaces = [HardwareInterface(name='joint1/velocity', is_available=True)]
+        response.state_interfaces = [HardwareInterface(name='joint1/position', is_available=True)]
+        return response
+
+    def load(request, response):
+        response.ok = request.name not in states
+        states.setdefault(request.name, 'unconfigured')
+        return response
+
+    def configure(request, response):
+        response.ok = states.get(request.name) == 'unconfigured'
+        if response.ok:
+            states[request.name] = 'inactive'
+        return response
+
+    def unload(request, response):
+        response.ok = states.get(request.name) in ('unconfigured', 'inactive')
+        if response.ok:
+            del states[request.name]
+        return response
+
+    def switch(request, response):
+        bad = [n for n in request.activate_controllers if states.get(n) != 'inactive']
+        bad += [n for n in request.deactivate_controllers if states.get(n) != 'active']
+        if bad and request.strictness == srv.SwitchController.Request.STRICT:
+            response.ok, response.message = False, 'cannot switch ' + ', '.join(bad)
+            return response
+        for n in request.deactivate_controllers:
+            if states.get(n) == 'active':
+                states[n] = 'inactive'
+        for n in request.activate_controllers:
+            if states.get(n) == 'inactive':
+                states[n] = 'active'
+        response.ok = True
+        return response
+
+    for name, kind, handler in [
+            ('list_controllers', srv.ListControllers, list_controllers),
+            ('list_hardware_components', srv.ListHardwareComponents, list_components),
+            ('list_hardware_interfaces', srv.ListHardwareInterfaces, list_interfaces),
+            ('load_controller', srv.LoadController, load),
+            ('configure_controller', srv.ConfigureController, configure),
+            ('unload_controller', srv.UnloadController, unload),
+            ('switch_controller', srv.SwitchController, switch)]:
+        node.create_service(kind, '~/' + name, handler)
+    rclpy.spin(node)
+""")
+
+
+def ros2py(launcher, *args, timeout=30):
+    return launcher.run(python_cmd("-m", "ball_balance.cli.main", *args), timeout=timeout)
+
+
+@pytest.fixture
+def manager(launcher, graph):
+    launcher.start(python_cmd("-c", FAKE_CONTROLLER_MANAGER), name="controller_manager")
+    graph.wait_for_service("/controller_manager/switch_controller", timeout=30)
+
+
+def test_list_controllers_prints_aligned_name_type_state(launcher, manager):
+    result = ros2py(launcher, "control", "list_controllers")
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines == [
+        "joint_state_broadcaster joint_state_broadcaster/JointStateBroadcaster  active  ",
+        "plate_controller        ball_balance/PlateController                   inactive",
+    ]
+    verbose = ros2py(launcher, "control", "list_controllers", "-v").stdout
+    assert "\trequired command interfaces:\n\t\tjoint1/velocity\n" in verbose
+
+
+def test_hardware_components_and_interfaces(launcher, manager):
+    components = ros2py(launcher, "control", "list_hardware_components", "-v").stdout
+    assert components.splitlines()[:5] == [
+        "Hardware Component 1", "\tname: ur_arm", "\ttype: system",
+        "\tplugin name: mock_components/GenericSystem", "\tstate: id=3 label=active"]
+    assert "\t\tjoint1/velocity [available] [unclaimed]" in components
+    assert "\tstate interfaces\n\t\tjoint1/position [available]" in components
+    interfaces = ros2py(launcher, "control", "list_hardware_interfaces").stdout
+    assert interfaces == ("command interfaces\n\tjoint1/velocity [available] [unclaimed]\n"
+                          "state interfaces\n\tjoint1/position\n")
+
+
+def test_controller_lifecycle_through_the_verbs(launcher, manager):
+    switched = ros2py(launcher, "control", "switch_controllers", "--activate", "plate_controller", "--strict")
+    assert (switched.returncode, switched.stdout) == (0, "Successfully switched controllers\n")
+    listing = ros2py(launcher, "control", "list_controllers").stdout
+    assert re.search(r"plate_controller\s+\S+\s+active", listing)
+
+    refused = ros2py(launcher, "control", "switch_controllers", "--activate", "nope", "--strict")
+    assert refused.returncode == 1
+    assert refused.stderr.strip() == "ros2py: Error switching controllers: cannot switch nope"
+
+    loaded = ros2py(launcher, "control", "load_controller", "extra", "--set-state", "active")
+    assert loaded.stdout.splitlines() == ["Successfully loaded controller extra", "Successfully activated extra"]
+    deactivated = ros2py(launcher, "control", "set_controller_state", "extra", "inactive")
+    assert deactivated.stdout == "Successfully deactivated extra\n"
+    unloaded = ros2py(launcher, "control", "unload_controller", "extra")
+    assert (unloaded.returncode, unloaded.stdout) == (0, "Successfully unloaded controller extra\n")
+
+
+def test_missing_controller_manager_is_one_line(launcher, ros_domain):
+    result = ros2py(launcher, "control", "list_controllers", "-c", "/nobody", "--spin-time", "1")
+    assert result.returncode == 1
+    assert result.stderr.count("\n") == 1 and "controller manager '/nobody' not found" in result.stderr
