@@ -224,12 +224,12 @@ class MujocoSystem(SystemInterface):
         return CallbackReturn.SUCCESS
 
     def _stop_io(self) -> None:
-        if self.camera is not None:
-            self.camera.stop()
-            self.camera = None
-        if self.ros is not None:
-            self.ros.close()
-            self.ros = None
+        camera, self.camera = self.camera, None  # the loop thread sees None first
+        ros, self.ros = self.ros, None
+        if camera is not None:
+            camera.stop()
+        if ros is not None:
+            ros.close()
 
     # ---- clock ------------------------------------------------------------------------------
     def now(self) -> float:
@@ -237,7 +237,7 @@ class MujocoSystem(SystemInterface):
 
     # ---- real-time loop ---------------------------------------------------------------------
     def read(self, time: float, period: float) -> return_type:
-        world = self.world
+        world, camera, ros = self.world, self.camera, self.ros  # locals: shutdown may clear them
         if self._reset_requested:
             self._reset_requested = False
             world.place_ball(0.0, 0.0)
@@ -251,17 +251,17 @@ class MujocoSystem(SystemInterface):
         t = world.time_s
         if t >= self._next_frame_s:  # a camera frame (rendered, and/or a truth-fed detection)
             self._next_frame_s = max(self._next_frame_s + 1.0 / self.params["camera_rate_hz"], t)
-            if self.camera is not None:
-                self.camera.submit(world.snapshot())
-            if self.ros is not None and self.params["truth_fed"]:
-                self.ros.publish_detection(t, *world.detected_ball())
-        if self.ros is not None:
+            if camera is not None:
+                camera.submit(world.snapshot())
+            if ros is not None and self.params["truth_fed"]:
+                ros.publish_detection(t, *world.detected_ball())
+        if ros is not None:
             if t >= self._next_truth_s:
                 self._next_truth_s = max(self._next_truth_s + 1.0 / self.params["truth_rate_hz"], t)
-                self.ros.publish_truth(world.ball_truth())
+                ros.publish_truth(world.ball_truth())
             if self.provides_clock and t >= self._next_clock_s:
                 self._next_clock_s = max(self._next_clock_s + 1.0 / self.params["clock_rate_hz"], t)
-                self.ros.publish_clock(t)
+                ros.publish_clock(t)
         return return_type.OK
 
     def _steps_for(self, period: float) -> int:
@@ -296,8 +296,9 @@ class MujocoSystem(SystemInterface):
             handle.value = value
         if self._speed_scaling is not None:
             self._speed_scaling.value = world.speed_scaling
-        if self.ros is not None:
-            self.ros.update_dropped(truth.dropped, truth)
+        ros = self.ros
+        if ros is not None:
+            ros.update_dropped(truth.dropped, truth)
 
     def write(self, time: float, period: float) -> return_type:
         target = self._target.copy()
@@ -326,8 +327,9 @@ class MujocoSystem(SystemInterface):
         self._reset_requested = True
 
     def _on_frame(self, image, snapshot) -> None:
-        if self.ros is not None:
-            self.ros.publish_image(image, snapshot.time_s)
+        ros = self.ros
+        if ros is not None:
+            ros.publish_image(image, snapshot.time_s)
 
     def _on_camera_error(self, error: BaseException) -> None:
         self.get_logger().error(f"{self.get_name()}: camera stopped: {error}")

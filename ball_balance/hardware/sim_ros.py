@@ -39,6 +39,7 @@ class SimRosIo:
         self.detection_pub = (node.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
                               if params["truth_fed"] else None)
         self._on_reset = on_reset
+        self._closed = False
         # stamps = sim time + this offset: 0 with sim_time (the component owns /clock), else
         # the wall-clock time at start, so stamps compare with wall-clock nodes
         self.stamp_offset_s = 0.0
@@ -59,6 +60,14 @@ class SimRosIo:
         info.p = [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]
         return info
 
+    def _publish(self, publisher, msg) -> None:
+        """Publish; after close() or the context's shutdown (Ctrl-C, SIGTERM) quietly do nothing."""
+        try:
+            publisher.publish(msg)
+        except Exception:  # noqa: BLE001 - rclpy raises RCLError/InvalidHandle types at shutdown
+            if self.node.context.ok() and not self._closed:
+                raise
+
     # ---- camera thread ------------------------------------------------------------------
     def publish_image(self, image_bgr, time_s: float) -> None:
         height, width = image_bgr.shape[:2]
@@ -67,8 +76,8 @@ class SimRosIo:
         msg.header.frame_id = self.params["camera_frame_id"]
         msg.data = image_bgr.tobytes()
         self._camera_info.header.stamp = msg.header.stamp
-        self.image_pub.publish(msg)
-        self.info_pub.publish(self._camera_info)
+        self._publish(self.image_pub, msg)
+        self._publish(self.info_pub, self._camera_info)
 
     # ---- real-time loop -----------------------------------------------------------------
     def publish_truth(self, truth) -> None:
@@ -79,7 +88,7 @@ class SimRosIo:
                         pixel_u=frame.pixel_u, pixel_v=frame.pixel_v)
         msg.header.stamp = stamp(truth.time_s + self.stamp_offset_s)
         msg.header.frame_id = PLATE_FRAME
-        self.truth_pub.publish(msg)
+        self._publish(self.truth_pub, msg)
 
     def publish_detection(self, time_s: float, x: float, y: float) -> None:
         """truth_fed mode: a tracker-like BallState from the (noisy) truth; no Kalman velocity."""
@@ -88,17 +97,17 @@ class SimRosIo:
                         tracking_valid=not truth.dropped, markers_found=4)
         msg.header.stamp = stamp(time_s + self.stamp_offset_s)
         msg.header.frame_id = PLATE_FRAME
-        self.detection_pub.publish(msg)
+        self._publish(self.detection_pub, msg)
 
     def publish_clock(self, time_s: float) -> None:
         self._clock.clock = stamp(time_s)
-        self.clock_pub.publish(self._clock)
+        self._publish(self.clock_pub, self._clock)
 
     def update_dropped(self, dropped: bool, truth) -> None:
         if dropped == self._dropped:
             return
         self._dropped = dropped
-        self.dropped_pub.publish(Bool(data=dropped))
+        self._publish(self.dropped_pub, Bool(data=dropped))
         if dropped:
             self.logger.warning(f"ball dropped off the plate at t={truth.time_s:.3f} s "
                                 f"(x={truth.x:+.3f} m, y={truth.y:+.3f} m); call /sim/reset_ball to put it back")
@@ -110,6 +119,7 @@ class SimRosIo:
         return response
 
     def close(self) -> None:
+        self._closed = True
         for entity in (self.image_pub, self.info_pub, self.truth_pub, self.dropped_pub, self.clock_pub,
                        self.detection_pub):
             if entity is not None:

@@ -90,7 +90,11 @@ class RobotStatePublisherNode(Node):
             transforms.append(transform_to_msg(matrix_to_transform(T), self.prefix + parent,
                                                self.prefix + child, msg.header.stamp))
         if transforms:
-            self.broadcaster.send_transform(transforms)
+            try:
+                self.broadcaster.send_transform(transforms)
+            except Exception:  # noqa: BLE001 - rclpy raises RCLError once SIGTERM shut the context
+                if self.context.ok():
+                    raise
 
 
 main = main_for(RobotStatePublisherNode)
