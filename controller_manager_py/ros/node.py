@@ -2,9 +2,12 @@
 ros2_control's services, ~/activity, statistics, introspection and /diagnostics.
 
 Threads: the read-update-write loop runs in its own thread (manager/loop.py); services,
-subscriptions, statistics and diagnostics timers run in the executor, so a slow service
-never delays a cycle (the GIL switch interval is lowered so the loop gets the interpreter
-back quickly after its sleep).
+subscriptions and the diagnostics timer run in the executor, so a slow service never
+delays a cycle (the GIL switch interval is lowered so the loop gets the interpreter back
+quickly after its sleep). ~/statistics and ~/introspection_data are filled and published
+in the loop's idle time after a cycle (never when the cycle ran late), because building
+a `full` message holds the interpreter for ~0.2 ms, which from another thread would
+delay the loop's wake-up.
 
 Robot description, first found: parameter `robot_description` (URDF text), parameter
 `robot_description_file` (a path), else the `robot_description_topic` topic (default
@@ -56,7 +59,7 @@ SCHEMA = (
           min=0.1, max=1000.0),
     Param("diagnostics.period", 1.0, "period of /diagnostics (statistics windows restart after each)", unit="s",
           min=0.05),
-    Param("gil_switch_interval", 0.0005, "Python's thread switch interval (lower: less loop jitter)", unit="s",
+    Param("gil_switch_interval", 0.0001, "Python's thread switch interval (lower: less loop jitter)", unit="s",
           min=1e-5, max=0.01),
     *THRESHOLD_PARAMS,
 )
@@ -81,7 +84,9 @@ class ControllerManagerNode(Node):
         self.introspection = StatisticsRegistry(self, "~/introspection_data")
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._published_version = -1
-        self.create_timer(1.0 / self.params["statistics.publish_rate"], self.on_publish_timer)
+        self._idle_cycles = 0
+        self._publish_every = max(1, round(self.cm.update_rate / self.params["statistics.publish_rate"]))
+        self.create_timer(0.05, self.on_registry_timer)
         self.create_timer(self.params["diagnostics.period"], self.on_diagnostics_timer)
         self._description_sub = None
         urdf = self._description_from_parameters()
@@ -196,6 +201,8 @@ class ControllerManagerNode(Node):
             self.get_logger().error(f"cannot activate {activate}: {error}")
         blocking = self.params["hardware_synchronization.expect_blocking_read_write"]
         self.loop = ControlLoop(self.cm, blocking, self.params["hardware_synchronization.minimum_cycle_time"])
+        self.loop.idle_hook = self.on_loop_idle
+        self.on_registry_timer()
         self.loop.start()
         self.get_logger().info(f"update loop running at {self.cm.update_rate} Hz; active controllers: "
                                f"{[s.name for s in self.cm.ordered]}")
@@ -205,15 +212,23 @@ class ControllerManagerNode(Node):
         self.cm.configure_controller(name)
 
     # ---- publishers -------------------------------------------------------------------------
-    def on_publish_timer(self) -> None:
+    def on_registry_timer(self) -> None:
+        """Executor, 20 Hz: after a change, new statistics names and an ~/activity message."""
         version = self.cm.version
         if version != self._published_version:
             self._published_version = version
             self.statistics.set_entries(statistics_entries(self.cm))
             self.introspection.set_entries(introspection_entries(self.cm))
             self.activity_pub.publish(self.cm_services.activity())
-        self.statistics.publish()
-        self.introspection.publish()
+
+    def on_loop_idle(self) -> None:
+        """Loop thread, in a cycle's slack: statistics at statistics.publish_rate, then introspection."""
+        self._idle_cycles += 1
+        k = self._idle_cycles % self._publish_every
+        if k == 0:
+            self.statistics.publish()
+        elif k == 1 or self._publish_every == 1:
+            self.introspection.publish()
 
     def on_diagnostics_timer(self) -> None:
         thresholds = {p.name: self.params[p.name] for p in THRESHOLD_PARAMS}

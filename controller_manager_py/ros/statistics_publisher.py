@@ -1,10 +1,12 @@
 """pal_statistics-style registries: `<prefix>/{full,names,values}` with pal_statistics_msgs.
 
-A registry is a list of (name, getter). `publish()` (a timer in the executor, never the
-loop) publishes `names` only when the list of names changed (transient local, so late
-subscribers get the current list), and `full`/`values` only when someone subscribes; with
-no subscribers it costs three subscription-count checks. The messages are allocated once
-per names version; each publish only refills their value arrays.
+A registry is a list of (name, getter). `set_entries()` (executor thread, when the
+manager's set of controllers/components changed) publishes `names` only when the names
+changed (transient local, so late subscribers get the current list) and swaps in new
+preallocated messages in one assignment. `publish()` fills and sends `full`/`values`
+only when someone subscribes; with no subscribers it costs two subscription-count
+checks. The node calls publish() from the loop's idle time (after a cycle, only when
+half a period is left), so the interpreter time of building `full` never delays a cycle.
 """
 from __future__ import annotations
 
@@ -25,21 +27,21 @@ class StatisticsRegistry:
         self.pub_values = node.create_publisher(StatisticsValues, f"{prefix}/values", 10)
         self.names_version = 0
         self._names: List[str] = []
-        self._getters: List[Callable[[], float]] = []
-        self._full = Statistics()
-        self._values = StatisticsValues()
+        # (getters, full message, values message), replaced as a whole by set_entries
+        self._current = ([], Statistics(), StatisticsValues())
         self.published_values = 0
 
     def set_entries(self, entries: List[Entry]) -> None:
         """Install a new list of entries; publishes /names when the names differ."""
         names = [n for n, _ in entries]
-        self._getters = [g for _, g in entries]
+        getters = [g for _, g in entries]
         if names == self._names and self.names_version:
+            self._current = (getters, self._current[1], self._current[2])
             return
         self._names = names
         self.names_version += 1
-        self._full = Statistics(statistics=[Statistic(name=n, value=0.0) for n in names])
-        self._values = StatisticsValues(values=[0.0] * len(names), names_version=self.names_version)
+        self._current = (getters, Statistics(statistics=[Statistic(name=n, value=0.0) for n in names]),
+                         StatisticsValues(values=[0.0] * len(names), names_version=self.names_version))
         msg = StatisticsNames(names=names, names_version=self.names_version)
         msg.header.stamp = self.node.get_clock().now().to_msg()
         self.pub_names.publish(msg)
@@ -49,19 +51,20 @@ class StatisticsRegistry:
         want_values = self.pub_values.get_subscription_count() > 0
         if not (want_full or want_values):
             return
+        getters, full, values_msg = self._current
         stamp = self.node.get_clock().now().to_msg()
-        values = self._values.values
-        for i, getter in enumerate(self._getters):
+        values = values_msg.values
+        for i, getter in enumerate(getters):
             try:
                 values[i] = float(getter())
             except Exception:  # noqa: BLE001 - an entry that vanished mid-read
                 values[i] = float("nan")
         if want_values:
-            self._values.header.stamp = stamp
-            self.pub_values.publish(self._values)
+            values_msg.header.stamp = stamp
+            self.pub_values.publish(values_msg)
             self.published_values += 1
         if want_full:
-            for statistic, value in zip(self._full.statistics, values):
+            for statistic, value in zip(full.statistics, values):
                 statistic.value = value
-            self._full.header.stamp = stamp
-            self.pub_full.publish(self._full)
+            full.header.stamp = stamp
+            self.pub_full.publish(full)
