@@ -9,9 +9,9 @@ Life of a `PlateLocator`:
   frames without moving, their averaged corners give the reference fit H_full (locked);
 - locked: markers are searched in small windows around their predicted positions (a
   full-image search every `full_scan_period` frames while one is missing); >= 3 markers
-  refit H_full; 1 or 2 markers shift H_full by their mean image displacement (so a hand
-  over some corners does not stop tracking; a tilt since the last full fit then costs a
-  few millimetres, see `update`); with none, the last H_IP is
+  refit H_full; 1 or 2 markers (a hand or the arm over the others) give the plate pose by a
+  fit with a prior that the plate pivots about its centre (`fit_pose_with_pivot_prior`,
+  needs intrinsics), else shift H_full by their mean image displacement; with none, the last H_IP is
   kept for `plate_hold_s`, then the plate counts as not visible.
 """
 from __future__ import annotations
@@ -87,18 +87,49 @@ def estimate_focal_px(H_IP: np.ndarray, principal_point: Tuple[float, float]) ->
     return f if 0.2 * np.linalg.norm(principal_point) < f < 20.0 * np.linalg.norm(principal_point) else None
 
 
-def camera_centre_in_plate(H_IP: np.ndarray, K: np.ndarray) -> np.ndarray:
-    """Camera centre C_P (3,) in the plate frame from H_IP = K [r1 r2 t] (up to scale)."""
+def plate_pose(H_IP: np.ndarray, K: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Plate pose in the camera, (R_CP, t_CP), from H_IP = K [r1 r2 t] (up to scale):
+    X_C = R_CP X_P + t_CP."""
     M = np.linalg.solve(K, H_IP)
     scale = 0.5 * (np.linalg.norm(M[:, 0]) + np.linalg.norm(M[:, 1]))
     r1, r2, t = M[:, 0] / scale, M[:, 1] / scale, M[:, 2] / scale
     if t[2] < 0.0:          # the plate is in front of the camera: t_z > 0
         r1, r2, t = -r1, -r2, -t
-    R_CP = np.column_stack([r1, r2, np.cross(r1, r2)])
-    U, _, Vt = np.linalg.svd(R_CP)
-    R_CP = U @ Vt
-    # X_C = R_CP X_P + t  =>  camera centre C_P = -R_CP^T t
-    return -R_CP.T @ t
+    U, _, Vt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    return U @ Vt, t
+
+
+def camera_centre_in_plate(H_IP: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Camera centre C_P (3,) in the plate frame: X_C = 0  =>  C_P = -R_CP^T t_CP."""
+    R_CP, t_CP = plate_pose(H_IP, K)
+    return -R_CP.T @ t_CP
+
+
+def fit_pose_with_pivot_prior(plate_pts: np.ndarray, image_pts: np.ndarray, K: np.ndarray, R_ref: np.ndarray,
+                              t_ref: np.ndarray, sigma_px: float = 0.5, sigma_t_m: float = 0.005,
+                              sigma_rot_rad: float = 0.3, iterations: int = 5) -> np.ndarray:
+    """H_IP from a few marker corners, for a plate that tilts about its centre.
+
+    Gauss-Newton on x = (rotation vector, t_CP) minimising
+    |image residual|^2 / sigma_px^2 + |t - t_ref|^2 / sigma_t^2 + |rvec - rvec_ref|^2 / sigma_rot^2:
+    the centre stays near where the last full fit saw it (the arm pivots the plate about
+    it), the tilt follows the visible corners. 1-2 markers cannot reveal the tilt on their
+    own (it shows only as perspective), this prior makes it observable.
+    """
+    rvec_ref = cv2.Rodrigues(R_ref)[0].ravel()
+    x_ref = np.concatenate([rvec_ref, t_ref])
+    x = x_ref.copy()
+    points = np.column_stack([plate_pts, np.zeros(len(plate_pts))])
+    Lambda = np.diag([sigma_rot_rad ** -2] * 3 + [sigma_t_m ** -2] * 3)     # prior information
+    w = sigma_px ** -2
+    for _ in range(iterations):
+        projected, J = cv2.projectPoints(points, x[:3], x[3:], K, None)
+        r = (image_pts - projected.reshape(-1, 2)).ravel()                   # residual (px)
+        J = J[:, :6]                                                          # d proj / d (rvec, t)
+        x = x + np.linalg.solve(w * J.T @ J + Lambda, w * J.T @ r - Lambda @ (x - x_ref))
+    R = cv2.Rodrigues(x[:3])[0]
+    H = K @ np.column_stack([R[:, 0], R[:, 1], x[3:]])
+    return H / H[2, 2]
 
 
 class PlateLocator:
@@ -117,6 +148,8 @@ class PlateLocator:
         self.marker_corners_P = {m: np.array(geometry.marker_corners_m(m)) for m in self.marker_ids}
         self.detector = MarkerDetector()
         self.H_full: Optional[np.ndarray] = None   # reference fit (start-up average or >= 3 markers)
+        self.K: Optional[np.ndarray] = None        # intrinsics, when known: 1-2 marker pose fit
+        self._pose_ref: Optional[Tuple[np.ndarray, np.ndarray]] = None   # (R_CP, t_CP) of H_full
         self.H_IP: Optional[np.ndarray] = None     # current plate -> image
         self.H_PI: Optional[np.ndarray] = None     # current image -> plate
         self.last_seen_s: Optional[float] = None   # stamp of the last frame with a marker
@@ -180,9 +213,11 @@ class PlateLocator:
         plate_pts = np.concatenate([self.marker_corners_P[m] for m in ids])
         if len(ids) >= FULL_FIT_MIN_MARKERS:
             self._set(self.fit(plate_pts, image_pts), full=True)
+        elif self._pose_ref is not None:
+            self._set(fit_pose_with_pivot_prior(plate_pts, image_pts, self.K, *self._pose_ref), full=False)
         else:
-            # a tilt shows as a perspective change that 1-2 corner markers cannot reveal
-            # (a similarity fitted on them extrapolates worse than none): shift H_full only
+            # without intrinsics: a tilt shows as a perspective change that 1-2 corner markers
+            # cannot reveal (a similarity fitted on them extrapolates worse than none): shift
             du, dv = (image_pts - apply_homography(self.H_full, plate_pts)).mean(axis=0)
             self._set(np.array([[1.0, 0.0, du], [0.0, 1.0, dv], [0.0, 0.0, 1.0]]) @ self.H_full, full=False)
         return True
@@ -211,15 +246,21 @@ class PlateLocator:
             raise np.linalg.LinAlgError("degenerate marker corners")
         return H
 
+    def set_intrinsics(self, K: Optional[np.ndarray]) -> None:
+        """Intrinsics of the (undistorted) corner pixels, or None: enables the 1-2 marker pose fit."""
+        self.K = K
+        self._pose_ref = plate_pose(self.H_full, K) if (K is not None and self.H_full is not None) else None
+
     def _set(self, H_IP: np.ndarray, full: bool) -> None:
         if full:
             self.H_full = H_IP
+            self._pose_ref = plate_pose(H_IP, self.K) if self.K is not None else None
         self.H_IP = H_IP
         self.H_PI = np.linalg.inv(H_IP)
 
     def reset(self) -> None:
         """Forget the plate pose (back to start-up)."""
-        self.H_full = self.H_IP = self.H_PI = self.last_seen_s = None
+        self.H_full = self.H_IP = self.H_PI = self.last_seen_s = self._pose_ref = None
         self._startup_sum, self._startup_count = None, 0
 
     # -- helpers for the ball search -------------------------------------------------------

@@ -167,10 +167,10 @@ class BallTracker:
         return float(C[0] + s * (p[0] - C[0])), float(C[1] + s * (p[1] - C[1]))
 
     def _update_camera_centre(self, shape) -> None:
-        if not self.config.parallax_correction:
-            return
         K = self.camera.K if self.camera is not None else self._estimate_K(shape)
-        if K is not None:
+        if K is not self.plate.K:
+            self.plate.set_intrinsics(K)
+        if K is not None and self.config.parallax_correction:
             self.C_P = camera_centre_in_plate(self.plate.H_IP, K)
 
     def _estimate_K(self, shape) -> Optional[np.ndarray]:

@@ -56,22 +56,31 @@ def test_startup_needs_all_markers():
     assert not locator.locked
 
 
-@pytest.mark.parametrize("visible", [[3], [0, 1], [0, 1, 2]])
-def test_refit_from_any_visible_markers_after_the_plate_moved(visible):
+@pytest.mark.parametrize("with_intrinsics", [True, False], ids=["pivot_pose_fit", "shift_only"])
+@pytest.mark.parametrize("visible", [[3], [0, 1], [0, 3], [0, 1, 2]])
+def test_refit_from_any_visible_markers_after_the_plate_tilted(visible, with_intrinsics):
     camera = SyntheticCamera()
     scene = SyntheticScene(camera)
     locator = PlateLocator(PlateGeometry(), startup_frames=3)
+    if with_intrinsics:
+        locator.set_intrinsics(camera.K)
     lock(locator, scene.render(None)[0], 3)
-    camera.set_plate_tilt(0.02, -0.015)          # the plate tilts a little
+    camera.set_plate_tilt(0.04, -0.03)           # the plate tilts about its centre
     image, truth = scene.render(None, occlude=[m for m in range(4) if m not in visible])
     markers = locator.find_markers(gray(image))
     assert sorted(markers) == visible
     locator.update(markers, 1.0)
     plate_pts = np.array([[x, y] for x in (-0.2, 0.0, 0.2) for y in (-0.2, 0.0, 0.2)])
-    error_px = apply_homography(locator.H_IP, plate_pts) - apply_homography(truth["H_IP"], plate_pts)
-    # 1-2 markers only shift the start-up fit: the tilt's perspective change is not seen
-    # (about 0.9 px per mm here)
-    assert np.max(np.linalg.norm(error_px, axis=1)) < {1: 3.0, 2: 2.5, 3: 1.0}[len(visible)]
+    error_px = np.max(np.linalg.norm(apply_homography(locator.H_IP, plate_pts)
+                                     - apply_homography(truth["H_IP"], plate_pts), axis=1))
+    # about 0.9 px per mm here. Without intrinsics 1-2 markers only shift the start-up fit:
+    # the tilt's perspective change is not seen (several px)
+    if len(visible) >= 3:
+        assert error_px < 1.0
+    elif with_intrinsics:     # one marker: the tilt about the axis through it stays unseen
+        assert error_px < (2.0 if len(visible) == 1 else 1.0)
+    else:
+        assert error_px > 2.0
 
 
 def test_plate_held_for_hold_time_when_no_marker_is_visible():

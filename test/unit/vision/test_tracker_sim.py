@@ -101,3 +101,18 @@ def test_plate_tilting_under_the_camera_every_frame(world):
         assert r.markers_found == 4 and r.ball_found, i
         errors.append(np.hypot(r.x - truth.ball.x, r.y - truth.ball.y))
     assert 1e3 * np.sqrt(np.mean(np.square(errors[5:]))) < 2.0
+
+
+def test_two_markers_covered_while_the_plate_tilts(world):
+    tracker = locked_tracker(world)
+    q = list(robot.HOME_POSITIONS_RAD)
+    q[3] += 0.04
+    q[4] += 0.03
+    world.set_joint_positions(q)
+    world.place_ball(0.05, -0.1)
+    image, truth = world.render()
+    image[0:200, :] = 60                                # markers 2 and 3 (top of the image) covered
+    tracker.kalman.reset()
+    r = tracker.process(image, 1.0)
+    assert r.markers_found == 2 and r.ball_found
+    assert 1e3 * np.hypot(r.x - truth.ball.x, r.y - truth.ball.y) < 1.5
