@@ -76,7 +76,7 @@ COMMON_SCHEMA = [
           "when estimate_actuation_delay)", "s", 0.0, 0.5, read_only=True),
     Param("estimate_actuation_delay", True, "refine actuation_delay_s online: commanded vs measured tilt "
           "(FK of /joint_states)", read_only=True),
-    Param("max_prediction_s", 0.3, "never extrapolate the state further than this", "s", 0.0, 1.0,
+    Param("max_prediction_s", 0.5, "never extrapolate the state further than this", "s", 0.0, 1.0,
           read_only=True),
     Param("min_markers", 3, "markers needed in a frame to act", "", 0, 4, read_only=True),
     Param("stale_after_s", 0.25, "a ball state older than this is stale", "s", 0.01, 5.0, read_only=True),

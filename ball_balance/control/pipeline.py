@@ -8,6 +8,7 @@ owns time: ROS time in the nodes, simulated time in the benchmark (lock-stepped)
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -30,6 +31,7 @@ class PipelineConfig:
     actuation_delay_s: float = 0.03         # command -> plate tilt (arm + controller); initial value
     estimate_delay: bool = True             # refine actuation_delay_s online from the measured joints
     max_prediction_s: float = 0.3           # never extrapolate further than this
+    reference_resume_s: float = 2.0         # re-engaging within this of a loss continues the reference
     pid: PidGains = field(default_factory=PidGains)
     mpc: MpcConfig = field(default_factory=MpcConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
@@ -56,6 +58,7 @@ class ControlPipeline:
         self.q_cmd: Optional[np.ndarray] = None
         self.u = np.zeros(2)
         self.t_engaged = 0.0
+        self.t_last_active = -math.inf   # last tick ENGAGED or HOLDING
         self.refused_count = 0
 
     def set_reference(self, reference: Reference) -> None:
@@ -88,10 +91,14 @@ class ControlPipeline:
         mode = self.safety.update(now_s, obs, self.at_home())
         if self.safety.reset_requested:
             self.reset_controllers()
-            if mode == Mode.ENGAGED:
-                self.t_engaged = now_s
+            if mode == Mode.ENGAGED and now_s - self.t_last_active > self.cfg.reference_resume_s:
+                self.t_engaged = now_s   # a fresh start: the reference begins again
+        if mode in (Mode.ENGAGED, Mode.HOLDING):
+            self.t_last_active = now_s
         ref = predicted = None
-        if mode == Mode.ENGAGED:
+        if mode == Mode.ENGAGED or (mode == Mode.HOLDING and self._only_late(obs)):
+            # a late but otherwise good state: keep controlling on its prediction (capped at
+            # max_prediction_s); anything worse: hold the last tilt until the grace period ends
             ref, predicted = self._control(now_s, obs)
         elif mode != Mode.HOLDING:
             self.u = np.zeros(2)
@@ -112,6 +119,12 @@ class ControlPipeline:
         if self.cfg.estimate_delay and q_measured is not None and np.all(np.isfinite(q_measured)):
             self.delay.add(tilt_cmd, self.kin.tilt_of(q_measured))
         return TickResult(q_new.copy(), (float(self.u[0]), float(self.u[1])), mode, ref, predicted, refused)
+
+    def _only_late(self, obs: Optional[BallObservation]) -> bool:
+        """The state is usable except for its age (so prediction can bridge the gap)."""
+        if obs is None or not obs.tracking_valid or obs.markers_found < self.cfg.safety.min_markers:
+            return False
+        return all(math.isfinite(v) for v in (obs.x, obs.y, obs.vx, obs.vy, obs.age_s))
 
     def _control(self, now_s: float, obs: BallObservation):
         cfg = self.cfg

@@ -4,7 +4,8 @@ States (`Mode`):
   HOMING     start-up: drive the arm to home, never tilt for the ball.
   READY      at home, waiting for a healthy ball state.
   ENGAGED    controlling the ball.
-  HOLDING    ENGAGED but the state went unhealthy: keep the last tilt for `grace_s`.
+  HOLDING    ENGAGED but the state went unhealthy, for at most `grace_s`: a state that is
+             only late is still used through its prediction; anything else holds the last tilt.
   RETURNING  unhealthy beyond the grace period: go back to home smoothly, then READY.
 
 A ball state is healthy when tracking_valid, markers_found >= min_markers, all numbers are

@@ -118,6 +118,8 @@ class BalanceControllerNode(Node):
 
     # --- the control tick -----------------------------------------------------------------
     def on_tick(self) -> None:
+        if not self.context.ok():
+            return  # shutting down (SIGTERM/Ctrl-C): publishing would fail
         if self._q is None:
             self.get_logger().info("waiting for /joint_states before commanding", throttle_duration_sec=5.0)
             return
@@ -139,7 +141,13 @@ class BalanceControllerNode(Node):
         if result.refused:
             self.get_logger().error(f"refused a non-finite/out-of-limit command ({self.pipeline.refused_count})",
                                     throttle_duration_sec=2.0)
-        stamp = now.to_msg()
+        try:
+            self.publish_outputs(result, now.to_msg())
+        except Exception:  # noqa: BLE001 - rclpy raises RCLError when the context went away
+            if self.context.ok():
+                raise
+
+    def publish_outputs(self, result, stamp) -> None:
         self.publish_joints(result.q_cmd, stamp)
         cmd = Vector3Stamped()
         cmd.header.stamp, cmd.header.frame_id = stamp, PLATE_FRAME

@@ -81,6 +81,15 @@ class VisualizerNode(Node):
         return m
 
     def on_timer(self) -> None:
+        if not self.context.ok():
+            return  # shutting down
+        try:
+            self.publish_markers()
+        except Exception:  # noqa: BLE001 - rclpy raises RCLError when the context went away
+            if self.context.ok():
+                raise
+
+    def publish_markers(self) -> None:
         stamp = self.get_clock().now().to_msg()
         markers = []
         plate = self._marker("plate", Marker.CUBE, stamp)
