@@ -50,6 +50,7 @@ class ControllerManager:
         self._pending: Optional[switching.SwitchPlan] = None
         self._pending_activations: Optional[switching.SwitchPlan] = None
         self._switch_done = threading.Event()
+        self._handoff = threading.Lock()  # pending plan: taken by the loop or withdrawn, never both
         self._cycle = 0
         self._failed: List[str] = []  # reused every cycle
         self._failed_controllers: List[ControllerSpec] = []
@@ -230,11 +231,16 @@ class ControllerManager:
             self._pending = plan
             deadline = _time.monotonic() + timeout if timeout > 0 else None
             while not self._switch_done.wait(0.05):
-                if not self.loop_running or (deadline is not None and _time.monotonic() > deadline):
-                    self._pending = None
-                    if self._switch_done.is_set():
-                        break
-                    raise switching.SwitchError(f"switch not performed within {timeout:g} s (loop busy or stopped)")
+                expired = deadline is not None and _time.monotonic() > deadline
+                if expired or not self.loop_running:
+                    with self._handoff:  # withdraw it unless the loop has picked it up
+                        withdrawn = self._pending is plan
+                        if withdrawn:
+                            self._pending = None
+                    if withdrawn:
+                        raise switching.SwitchError(
+                            f"switch not performed within {timeout:g} s (loop busy or stopped)")
+                # picked up: the loop finishes it within a cycle or two
             return plan
 
     def _apply(self, plan: switching.SwitchPlan, same_cycle: bool) -> None:
@@ -294,15 +300,19 @@ class ControllerManager:
             self._reset_stats = False
             for stats in self.all_stats():
                 stats.reset()
-        plan = self._pending
+        plan = None
+        if self._pending is not None:
+            with self._handoff:
+                plan, self._pending = self._pending, None
         if plan is not None:
-            self._pending = None
             self._apply(plan, same_cycle=False)
-            self._switch_done.set()
+            if self._pending_activations is None:
+                self._switch_done.set()
         elif self._pending_activations is not None:
             plan, self._pending_activations = self._pending_activations, None
             switching.apply_activations(self, plan)
             self._reorder()
+            self._switch_done.set()  # the caller returns once activations are done too
         failed = self._failed
         self.rm.read(time, period, self._cycle, failed)
         if failed:

@@ -35,11 +35,11 @@ def test_switch_waits_for_the_cycle_boundary_and_asap_false_waits_one_more_cycle
     thread, outcome = switch_in_background(cm, ["fwd"], [], STRICT, activate_asap=False, timeout=5.0)
     assert cm.controllers["fwd"].state == State.INACTIVE  # nothing happens between cycles
     run(cm, 1)
-    thread.join(2)
-    assert "plan" in outcome
     assert cm.controllers["fwd"].state == State.INACTIVE  # hardware switched modes: one read first
+    assert thread.is_alive()  # the caller returns only when the controllers are active
     run(cm, 1)
-    assert cm.controllers["fwd"].state == State.ACTIVE
+    thread.join(2)
+    assert "plan" in outcome and cm.controllers["fwd"].state == State.ACTIVE
 
 
 def test_switch_times_out_when_no_cycle_runs_and_is_not_applied_later():
