@@ -23,7 +23,8 @@ import numpy as np
 
 from ball_balance.plate_geometry import PlateGeometry
 
-FULL_FIT_MIN_MARKERS = 3   # fewer visible markers: similarity correction of the last full fit
+FULL_FIT_MIN_MARKERS = 3   # fewer visible markers: pose fit with a pivot prior, or a shift
+STARTUP_PATIENCE = 3       # x startup_frames frames of a moving plate: lock on the latest frame
 
 Window = Tuple[int, int, int, int]   # x0, y0, x1, y1 (pixels, end exclusive)
 
@@ -154,8 +155,9 @@ class PlateLocator:
         self.H_PI: Optional[np.ndarray] = None     # current image -> plate
         self.last_seen_s: Optional[float] = None   # stamp of the last frame with a marker
         self.markers: Dict[int, np.ndarray] = {}   # this frame's markers (image px)
-        self._startup_sum: Optional[np.ndarray] = None
-        self._startup_count = 0
+        self._startup_sum: Optional[np.ndarray] = None   # corners summed over the steady window
+        self._startup_count = 0                          # frames in that sum
+        self._startup_seen = 0                           # frames with all markers before the lock
         self._frames_since_full_scan = 0
 
     @property
@@ -223,17 +225,21 @@ class PlateLocator:
         return True
 
     def _startup(self, markers: Dict[int, np.ndarray]) -> None:
+        """Average all markers' corners over `startup_frames` steady frames, then lock. A plate
+        that keeps moving (more than STARTUP_PATIENCE x startup_frames frames with all markers
+        but never steady) is locked on the latest frame instead of never."""
         if len(markers) < len(self.marker_ids):
             self._startup_sum, self._startup_count = None, 0
             return
         corners = np.stack([markers[m] for m in self.marker_ids])
+        self._startup_seen += 1
         if self._startup_count:
             mean = self._startup_sum / self._startup_count
             if np.max(np.linalg.norm(corners - mean, axis=-1)) > self.startup_max_motion_px:
                 self._startup_sum, self._startup_count = None, 0     # moved: start again
         self._startup_sum = corners if self._startup_sum is None else self._startup_sum + corners
         self._startup_count += 1
-        if self._startup_count >= self.startup_frames:
+        if self._startup_count >= self.startup_frames or self._startup_seen >= STARTUP_PATIENCE * self.startup_frames:
             mean = (self._startup_sum / self._startup_count).reshape(-1, 2)
             plate_pts = np.concatenate([self.marker_corners_P[m] for m in self.marker_ids])
             self._set(self.fit(plate_pts, mean), full=True)
@@ -261,7 +267,7 @@ class PlateLocator:
     def reset(self) -> None:
         """Forget the plate pose (back to start-up)."""
         self.H_full = self.H_IP = self.H_PI = self.last_seen_s = self._pose_ref = None
-        self._startup_sum, self._startup_count = None, 0
+        self._startup_sum, self._startup_count, self._startup_seen = None, 0, 0
 
     # -- helpers for the ball search -------------------------------------------------------
     def plate_window(self, shape, margin_m: float) -> Window:

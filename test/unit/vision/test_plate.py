@@ -48,6 +48,22 @@ def test_locks_only_after_startup_frames_with_all_markers_then_matches_truth():
     assert np.max(np.abs(error_px)) < 0.75
 
 
+def test_startup_restarts_while_the_plate_moves_but_locks_eventually():
+    camera = SyntheticCamera()
+    scene = SyntheticScene(camera)
+    locator = PlateLocator(PlateGeometry(), startup_frames=4, startup_max_motion_px=1.0)
+    for i in range(11):                             # rocking: never 4 steady frames in a row
+        camera.set_plate_tilt(0.03 * (-1) ** i, 0.0)
+        lock(locator, scene.render(None)[0], 1)
+        assert not locator.locked, i
+    camera.set_plate_tilt(0.01, 0.0)
+    image, truth = scene.render(None)
+    lock(locator, image, 1)                          # 3 x startup_frames frames seen: locks
+    assert locator.locked
+    np.testing.assert_allclose(apply_homography(locator.H_IP, np.zeros((1, 2))),
+                               apply_homography(truth["H_IP"], np.zeros((1, 2))), atol=0.5)
+
+
 def test_startup_needs_all_markers():
     scene = SyntheticScene()
     image, _ = scene.render(None, occlude=[2])

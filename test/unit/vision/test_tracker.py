@@ -150,3 +150,15 @@ def test_lens_distortion_is_removed_with_a_calibration(mode):
         r = tracker.process(image, i / FPS)
     assert r.markers_found == 4 and r.ball_found
     assert error_mm(r, xy) < 2.0
+
+
+def test_debug_overlay_draws_on_a_copy():
+    from ball_balance.vision.overlay import draw_overlay
+
+    scene, tracker = make()
+    image = scene.render((0.05, 0.05))[0]
+    for i in range(4):
+        r = tracker.process(image, i / FPS)
+    overlay = draw_overlay(image, tracker.plate, r)
+    assert overlay.shape == image.shape and np.count_nonzero(overlay != image) > 500
+    assert image is not overlay
