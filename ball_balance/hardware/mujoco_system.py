@@ -15,7 +15,9 @@ A thin adapter around ball_balance.sim.SimWorld (the physics) and CameraThread (
   `write()` hands the position commands to the servos (non-finite or out-of-limit commands
   are refused, counted and logged throttled; the last good target is kept).
 - topics (when the manager has a node): /camera/image_raw (bgr8) and /camera/camera_info
-  (sensor data QoS, stamp = capture time, rendered in the camera thread), /sim/ball_truth
+  (reliable keep-last 2, which sensor-data subscribers also match: over best effort most
+  fragmented frames are lost here; image_reliable=false gives sensor-data QoS; stamp =
+  capture time, rendered in the camera thread), /sim/ball_truth
   (BallState, plate frame), /sim/ball_dropped (Bool, transient local), /clock; with
   truth_fed=true also /ball_state from the truth plus detection noise (no tracker needed).
   Service /sim/reset_ball (std_srvs/Trigger): ball back to rest at the plate centre.
@@ -53,6 +55,8 @@ SCHEMA = (
     Param("camera_fovy_deg", 45.0, "vertical field of view", "deg", 5.0, 150.0),
     Param("camera_height_m", 0.65, "camera height above the plate at home", "m", 0.1, 5.0),
     Param("camera_frame_id", "camera_optical_frame", "frame_id of the image messages"),
+    Param("image_reliable", True, "publish images reliable (serves best-effort subscribers too; reliable "
+          "subscribers get every frame) instead of sensor-data QoS"),
     Param("truth_rate_hz", 100.0, "/sim/ball_truth rate (sim time)", "Hz", 0.1, 1000.0),
     Param("truth_fed", False, "also publish /ball_state from the truth plus detection noise"),
     Param("domain", "standard", "evaluation domain (DESIGN.md section 7)"),

@@ -19,6 +19,9 @@ from std_srvs.srv import Trigger
 from ball_balance.plate_geometry import PLATE_FRAME
 from ball_balance.sim.config import camera_intrinsics
 
+# A reliable publisher also serves sensor-data (best-effort) subscribers; reliable ones then get
+# every frame (over best effort Fast DDS loses most fragmented 640x480 frames here).
+IMAGE_RELIABLE = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
 
 
@@ -31,8 +34,9 @@ class SimRosIo:
     def __init__(self, node, world, params: Mapping[str, object], on_reset: Callable[[], None]):
         self.node, self.world, self.params = node, world, params
         self.logger = node.get_logger()
-        self.image_pub = node.create_publisher(Image, "/camera/image_raw", qos_profile_sensor_data)
-        self.info_pub = node.create_publisher(CameraInfo, "/camera/camera_info", qos_profile_sensor_data)
+        image_qos = IMAGE_RELIABLE if params["image_reliable"] else qos_profile_sensor_data
+        self.image_pub = node.create_publisher(Image, "/camera/image_raw", image_qos)
+        self.info_pub = node.create_publisher(CameraInfo, "/camera/camera_info", image_qos)
         self.truth_pub = node.create_publisher(BallState, "/sim/ball_truth", qos_profile_sensor_data)
         self.dropped_pub = node.create_publisher(Bool, "/sim/ball_dropped", LATCHED)
         self.clock_pub = node.create_publisher(Clock, "/clock", QoSProfile(depth=1))

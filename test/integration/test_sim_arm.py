@@ -44,6 +44,9 @@ def test_forward_position_commands_move_the_arm_and_the_camera_sees_the_plate(la
     assert np.allclose(joint_positions(state), robot.HOME_POSITIONS_RAD, atol=1e-3)
 
     image, = graph.collect(Image, "/camera/image_raw", qos=qos_profile_sensor_data, timeout=30)
+    frames = graph.collect(Image, "/camera/image_raw", count=10, qos=10, timeout=30)  # reliable: all frames
+    stamps = [f.header.stamp.sec + f.header.stamp.nanosec * 1e-9 for f in frames]
+    assert all(b > a for a, b in zip(stamps, stamps[1:], strict=False))
     info, = graph.collect(CameraInfo, "/camera/camera_info", qos=qos_profile_sensor_data, timeout=30)
     assert (image.encoding, image.width, image.height, image.step) == ("bgr8", 640, 480, 640 * 3)
     fx, fy, cx, cy = camera_intrinsics(CameraConfig())
