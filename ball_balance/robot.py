@@ -231,6 +231,10 @@ class UrdfKinematics:
     def moving_joints(self) -> List[str]:
         return [n for n, j in self._joints.items() if j[0] in self.MOVING_TYPES]
 
+    def joint(self, name: str) -> Tuple[str, str, str, np.ndarray, np.ndarray]:
+        """(type, parent, child, origin 4x4, axis) of one joint as the URDF gives it."""
+        return self._joints[name]
+
     def fixed_transforms(self) -> List[Tuple[str, str, np.ndarray]]:
         return [(parent, child, origin) for kind, parent, child, origin, _ in self._joints.values()
                 if kind not in self.MOVING_TYPES]

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from geometry_msgs.msg import TransformStamped
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from scipy.spatial.transform import Rotation
@@ -24,7 +25,7 @@ from std_msgs.msg import String
 from ball_balance import robot
 from ball_balance.ros.node_main import StartupError, main_for
 from ball_balance.tf.ros import StaticTransformBroadcaster, TransformBroadcaster, transform_to_msg
-from ball_balance.tf.transform import Transform
+from ball_balance.tf.transform import Transform, quat_multiply
 from controller_manager_py.parameters import Param, declare_parameters
 
 SCHEMA = [
@@ -61,6 +62,13 @@ class RobotStatePublisherNode(Node):
                   for parent, child, T in self.kinematics.fixed_transforms()]
         if static:
             self.static_broadcaster.send_transform(static)
+        # per moving joint: (parent, child, origin translation, origin quaternion, unit axis, kind),
+        # so a joint state costs one quaternion product per joint
+        self.joints = {}
+        for name in self.moving:
+            kind, parent, child, origin, axis = self.kinematics.joint(name)
+            self.joints[name] = (self.prefix + parent, self.prefix + child, origin[:3, 3].copy(),
+                                 matrix_to_transform(origin).rotation, axis / np.linalg.norm(axis), kind)
         self.broadcaster = TransformBroadcaster(self)
         self.create_subscription(JointState, "/joint_states", self.on_joint_states, 10)
         self.get_logger().info(f"robot '{self.kinematics.robot_name}': {len(static)} fixed, "
@@ -86,15 +94,35 @@ class RobotStatePublisherNode(Node):
                 self.get_logger().warn(f"non-finite position for '{name}' skipped ({self.rejected} so far)",
                                        throttle_duration_sec=5.0)
                 continue
-            parent, child, T = self.kinematics.joint_transform(name, position)
-            transforms.append(transform_to_msg(matrix_to_transform(T), self.prefix + parent,
-                                               self.prefix + child, msg.header.stamp))
+            transforms.append(self.joint_msg(name, position, msg.header.stamp))
         if transforms:
             try:
                 self.broadcaster.send_transform(transforms)
             except Exception:  # noqa: BLE001 - rclpy raises RCLError once SIGTERM shut the context
                 if self.context.ok():
                     raise
+
+    def joint_msg(self, name: str, position: float, stamp) -> TransformStamped:
+        """T_parent_child of a moving joint: origin, then the joint's motion about/along its axis."""
+        parent, child, t_origin, q_origin, axis, kind = self.joints[name]
+        msg = TransformStamped()
+        msg.header.frame_id, msg.header.stamp, msg.child_frame_id = parent, stamp, child
+        tr, rot = msg.transform.translation, msg.transform.rotation
+        if kind == "prismatic":
+            q_motion = (0.0, 0.0, 0.0, 1.0)
+            tr.x, tr.y, tr.z = t_origin + rotation_about_quat(q_origin, axis * position)
+        else:
+            half = 0.5 * position
+            s = math.sin(half)
+            q_motion = (axis[0] * s, axis[1] * s, axis[2] * s, math.cos(half))
+            tr.x, tr.y, tr.z = t_origin
+        rot.x, rot.y, rot.z, rot.w = quat_multiply(q_origin, q_motion)
+        return msg
+
+
+def rotation_about_quat(q, v) -> np.ndarray:
+    """Rotate vector v by the unit quaternion q (x, y, z, w)."""
+    return Rotation.from_quat(q).apply(v)
 
 
 main = main_for(RobotStatePublisherNode)
