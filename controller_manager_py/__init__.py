@@ -12,11 +12,15 @@ Rooms (as ros2_control's packages):
   joint_trajectory_controller/JointTrajectoryController, a chainable passthrough).
 - `manager/`: resource manager (claiming, hardware lifecycle, joint limits), controller
   manager core (load/configure/switch, the read-update-write cycle), the loop thread,
-  statistics, diagnostics. No rclpy in the core; `manager/ros_interface.py` holds the
-  services, ~/activity, statistics/introspection publishers.
+  statistics, introspection entries, diagnostics roll-up. No rclpy.
+- `ros/`: the `controller_manager` node (robot description, loop thread, spawning at
+  start), ros2_control's services, pal_statistics registries (~/statistics,
+  ~/introspection_data), ~/activity and /diagnostics.
 - `ros2_control_node.py`, `spawner.py`: the executables.
 - `plugins.py`: plugin discovery through entry points, groups
   `controller_manager_py.hardware` and `controller_manager_py.controllers`
   (entry name = the plugin string, e.g. `mock_components/GenericSystem`).
 - `parameters.py`: the Param schema shared by nodes and controllers.
+
+Usage, parameters and the differences from ros2_control: README.md in this folder.
 """
