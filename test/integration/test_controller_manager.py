@@ -3,6 +3,7 @@ import math
 from pathlib import Path
 
 import pytest
+from builtin_interfaces.msg import Duration
 from controller_manager_msgs.msg import ControllerManagerActivity
 from controller_manager_msgs.srv import (
     ListControllers,
@@ -16,6 +17,7 @@ from pal_statistics_msgs.msg import StatisticsNames, StatisticsValues
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, String
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from harness import ROOT, executable
 
@@ -24,6 +26,8 @@ URDF = ROOT / "config" / "mock_ur.urdf"
 CONTROLLERS = ROOT / "config" / "ur_controllers.yaml"
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 TARGET = [0.1, -1.4, 1.4, -1.5, 1.5, 0.2]
+JOINTS = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint",
+          "wrist_3_joint"]
 
 
 def start_manager(launcher, *params: str, urdf: Path = URDF):
@@ -54,9 +58,7 @@ def test_services_commands_switching_and_numbers_over_dds(launcher, graph):
     assert listed["joint_state_broadcaster"].state == "active"
     assert listed["forward_position_controller"].state == "active"
     assert listed["forward_position_controller"].update_rate == 500
-    assert sorted(listed["forward_position_controller"].claimed_interfaces) == sorted(
-        f"{j}/position" for j in ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
-                                  "wrist_2_joint", "wrist_3_joint"))
+    assert sorted(listed["forward_position_controller"].claimed_interfaces) == sorted(f"{j}/position" for j in JOINTS)
     assert listed["scaled_joint_trajectory_controller"].state == "inactive", node.output()
 
     # commands on /forward_position_controller/commands show up on /joint_states (mock mirrors them)
@@ -78,6 +80,15 @@ def test_services_commands_switching_and_numbers_over_dds(launcher, graph):
     listed = controllers(graph)
     assert listed["scaled_joint_trajectory_controller"].state == "active"
     assert listed["forward_position_controller"].state == "inactive"
+
+    # the trajectory controller takes over from where the arm is and reaches the waypoint
+    goal = [0.0, -1.5, 1.5, -1.5, 1.5, 0.0]
+    trajectory = JointTrajectory(joint_names=list(JOINTS))
+    trajectory.points.append(JointTrajectoryPoint(positions=goal, time_from_start=Duration(nanosec=300_000_000)))
+    graph.node.create_publisher(JointTrajectory, "/scaled_joint_trajectory_controller/joint_trajectory",
+                                10).publish(trajectory)
+    graph.collect(JointState, "/joint_states", timeout=10,
+                  predicate=lambda m: list(m.position) == pytest.approx(goal, abs=1e-9))
     assert switch(graph, activate=["ghost", "forward_position_controller"],
                   deactivate=["scaled_joint_trajectory_controller"], strictness=SwitchController.Request.BEST_EFFORT)
 

@@ -121,3 +121,11 @@ def test_hardware_driven_mode_lets_a_blocking_read_set_the_pace():
     loop.stop()
     assert 5 < loop.cycles < 60  # ~100 Hz from the 10 ms read, not 500 Hz
     assert loop.overruns == 0
+
+
+def test_hardware_rw_rate_reads_every_nth_cycle():
+    urdf = MOCK_UR.replace('type="system">', 'type="system" rw_rate="100">', 1)
+    cm = make_manager(rate=500, urdf=urdf)
+    comp = cm.rm.components["mock_ur"]
+    run(cm, 50)
+    assert comp.divisor == 5 and comp.read_stats.execution_time.sample_count == 10
