@@ -82,6 +82,7 @@ def build_model(urdf_text: str, config: SimConfig = SimConfig(),
     offwidth = max(640, config.camera.width_px)
     offheight = max(480, config.camera.height_px)
     spec.visual.global_.offwidth, spec.visual.global_.offheight = offwidth, offheight
+    spec.visual.quality.offsamples = config.camera.antialias_samples
     spec.visual.headlight.ambient = [0.25, 0.25, 0.25]
     spec.visual.headlight.diffuse = [0.2, 0.2, 0.2]
 

@@ -63,6 +63,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--ball-x", type=float, default=0.06)
     parser.add_argument("--ball-y", type=float, default=0.04)
     parser.add_argument("--tilt-deg", type=float, default=2.0)
+    parser.add_argument("--antialias", type=int, default=4, help="MSAA samples (smoother stills)")
     parser.add_argument("--domain", default="standard")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
@@ -74,7 +75,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     from ball_balance.sim.world import SimWorld
 
     try:
-        config = SimConfig(camera=CameraConfig(width_px=args.width, height_px=args.height, rate_hz=args.fps))
+        config = SimConfig(camera=CameraConfig(width_px=args.width, height_px=args.height, rate_hz=args.fps,
+                                             antialias_samples=args.antialias))
         world = SimWorld(config, DomainKnobs.sample(args.domain, args.seed), seed=args.seed)
     except SimConfigError as error:
         print(f"record: {error}", file=sys.stderr)
