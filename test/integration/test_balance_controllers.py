@@ -116,3 +116,11 @@ def test_visualizer_draws_plate_ball_velocity_reference_and_trail(launcher, grap
     assert ball.pose.position.x == pytest.approx(0.05)
     reference = next(k for k in msg.markers if k.ns == "reference")
     assert max(p.x for p in reference.points) == pytest.approx(0.10, abs=1e-3)
+
+
+def test_real_ur_script_refuses_to_move_without_the_explicit_flag(launcher):
+    result = launcher.run([str(ROOT / "scripts" / "real_ur.sh"), "--controller", "pid"], timeout=30)
+    assert result.returncode == 3
+    assert "--i-know-the-arm-will-move" in result.stderr
+    dry = launcher.run([str(ROOT / "scripts" / "real_ur.sh"), "--controller", "mpc", "--dry-run"], timeout=30)
+    assert dry.returncode == 0 and "--activate scaled_joint_trajectory_controller" in dry.stdout
