@@ -43,6 +43,7 @@ _KNOB = "domain knob; empty = the domain's value"
 SCHEMA = (
     Param("physics_dt", 0.001, "MuJoCo timestep", "s", 1e-4, 0.005),
     Param("servo_lag", 0.005, "joint servo time constant", "s", 5e-4, 0.1),
+    Param("ball_shell", True, "thin-shell ball (rolls at 3/5 g sin(tilt)); false: solid (5/7)"),
     Param("pacing", "lockstep", "lockstep: advance one cycle period per cycle; realtime: follow the wall clock",
           choices=("lockstep", "realtime")),
     Param("cycle_period", 0.002, "sim time per cycle when the manager gives no usable period", "s", 1e-4, 0.1),
@@ -123,7 +124,8 @@ def build_sim(params: Mapping[str, object]):
     camera = CameraConfig(width_px=params["camera_width"], height_px=params["camera_height"],
                           fovy_deg=params["camera_fovy_deg"], height_above_plate_m=params["camera_height_m"],
                           rate_hz=params["camera_rate_hz"], antialias_samples=params["camera_antialias_samples"])
-    config = SimConfig(physics_dt_s=params["physics_dt"], servo_lag_s=params["servo_lag"], camera=camera)
+    config = SimConfig(physics_dt_s=params["physics_dt"], servo_lag_s=params["servo_lag"],
+                       ball_shell=params["ball_shell"], camera=camera)
     knobs = DomainKnobs.sample(params["domain"], params["seed"]).as_dict()
     for name in _KNOB_NAMES:
         text = params[name]

@@ -11,7 +11,7 @@ import random
 from dataclasses import dataclass, field, fields, replace
 from typing import Tuple
 
-from ball_balance.plate_geometry import BALL_MASS_KG, BALL_RADIUS_M, ROLLING_FACTOR_SHELL
+from ball_balance.plate_geometry import BALL_MASS_KG, BALL_RADIUS_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
 
 
 class SimConfigError(ValueError):
@@ -74,7 +74,7 @@ class SimConfig:
     @property
     def rolling_factor(self) -> float:
         """k in x'' = k g sin(tilt) for this ball rolling without slipping."""
-        return ROLLING_FACTOR_SHELL if self.ball_shell else 5.0 / 7.0
+        return ROLLING_FACTOR_SHELL if self.ball_shell else ROLLING_FACTOR_SOLID
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ball_balance import robot
-from ball_balance.plate_geometry import BALL_MASS_KG, GRAVITY_M_S2, ROLLING_FACTOR_SHELL
+from ball_balance.plate_geometry import BALL_MASS_KG, GRAVITY_M_S2, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
 from ball_balance.sim.config import DOMAINS, CameraConfig, DomainKnobs, SimConfig, SimConfigError
 from ball_balance.sim.world import CommandError, SimWorld
 
@@ -24,8 +24,17 @@ def tilted_home(joint_index: int, delta_rad: float) -> np.ndarray:
     return q
 
 
-@pytest.mark.parametrize("joint_index,delta_rad", [(3, 0.1), (4, -0.06)])
-def test_ball_released_on_tilted_plate_accelerates_like_a_rolling_shell(world, joint_index, delta_rad):
+@pytest.fixture(scope="module")
+def solid_world():
+    world = SimWorld(SimConfig(ball_shell=False))
+    yield world
+    world.close()
+
+
+@pytest.mark.parametrize("joint_index,delta_rad,shell", [(3, 0.1, True), (4, -0.06, True), (3, 0.08, False)])
+def test_ball_released_on_tilted_plate_accelerates_as_its_rolling_model_predicts(
+        world, solid_world, joint_index, delta_rad, shell):
+    world = world if shell else solid_world
     world.reset(tilted_home(joint_index, delta_rad))
     world.advance(0.02)  # settle into contact
     _, R_WP = world.plate_pose()
@@ -40,8 +49,9 @@ def test_ball_released_on_tilted_plate_accelerates_like_a_rolling_shell(world, j
     t = np.array(t)
     # s(t) = s0 + v0 t + a t^2 / 2, least squares
     _, _, a = np.linalg.lstsq(np.stack([np.ones_like(t), t, 0.5 * t * t], 1), np.array(s), rcond=None)[0]
-    expected = ROLLING_FACTOR_SHELL * GRAVITY_M_S2 * math.sin(tilt_rad)
-    assert world.config.rolling_factor == ROLLING_FACTOR_SHELL
+    factor = ROLLING_FACTOR_SHELL if shell else ROLLING_FACTOR_SOLID
+    expected = factor * GRAVITY_M_S2 * math.sin(tilt_rad)
+    assert world.config.rolling_factor == factor
     assert a == pytest.approx(expected, rel=0.05)
 
 
