@@ -122,7 +122,9 @@ class HardwareComponentInterface:
         return CallbackReturn.SUCCESS
 
     def on_error(self, previous_state: State) -> CallbackReturn:
-        """After a hook returned ERROR or read/write failed: SUCCESS -> unconfigured, else finalized."""
+        """After a hook returned ERROR (executor thread) or read/write failed (loop thread, after
+        the controllers using this component were deactivated): SUCCESS -> unconfigured, else
+        finalized. Keep it short and non-blocking."""
         return CallbackReturn.SUCCESS
 
     # ---- mode switches (ros2_control semantics) -----------------------------------------

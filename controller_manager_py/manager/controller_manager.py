@@ -99,7 +99,7 @@ class ControllerManager:
 
     def _users_of(self, component: str) -> List[ControllerSpec]:
         owner = self.rm.interface_owner
-        return [s for s in self.controllers.values() if s.state == State.ACTIVE
+        return [s for s in list(self.controllers.values()) if s.state == State.ACTIVE
                 and any(owner.get(i) == component for i in (*s.command_names, *s.state_names))]
 
     # ---- controller lifecycle (executor thread) -------------------------------------------
@@ -252,8 +252,11 @@ class ControllerManager:
         self._reorder()
 
     def _reorder(self) -> None:
-        """Active controllers in chain order: a controller runs before the ones it commands."""
-        active = [s for s in self.controllers.values() if s.state == State.ACTIVE]
+        """Active controllers in chain order: a controller runs before the ones it commands.
+
+        Runs in both threads (switch in the loop, fallback); dicts are copied with list()
+        (atomic under the GIL) because the executor may load a controller meanwhile."""
+        active = [s for s in list(self.controllers.values()) if s.state == State.ACTIVE]
         owner = self.rm.interface_owner
         ordered: List[ControllerSpec] = []
         placed = set()

@@ -35,6 +35,7 @@ class ControlLoop:
         self.overruns = 0
         self.skipped_periods = 0
         self.cycles = 0
+        self.errors = 0  # cycles that raised (a bug): logged throttled, the loop goes on
         self.throttle = Throttle(cm.logger, 5.0)
         self.idle_hook: Optional[Callable[[], None]] = None
         self._stop = threading.Event()
@@ -59,7 +60,11 @@ class ControlLoop:
         try:
             while not stop.is_set():
                 now = cm.now()
-                cm.cycle(now, now - previous if now > previous else period)
+                try:
+                    cm.cycle(now, now - previous if now > previous else period)
+                except Exception as error:  # noqa: BLE001 - a bug in one cycle does not stop the loop
+                    self.errors += 1
+                    self.throttle.error("cycle", f"cycle failed: {error!r} (errors so far: {self.errors})")
                 previous = now
                 self.cycles += 1
                 if self.blocking:
@@ -89,8 +94,6 @@ class ControlLoop:
                     self.throttle.warn("overrun", f"overrun: the cycle took too long, {missed} period(s) of "
                                        f"{period * 1e3:.1f} ms skipped (total {self.skipped_periods})")
                     next_deadline = monotonic()
-        except Exception as error:  # noqa: BLE001 - report, then let the node shut down cleanly
-            cm.logger.error(f"control loop stopped: {error!r}")
         finally:
             cm.loop_running = False
 

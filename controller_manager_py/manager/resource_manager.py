@@ -172,7 +172,7 @@ class ResourceManager:
         self.set_controller_interfaces_state(controller, state)
 
     def set_controller_interfaces_state(self, controller: str, state: State) -> None:
-        for name, owner in self.interface_owner.items():
+        for name, owner in list(self.interface_owner.items()):
             if owner == controller:
                 self.controller_owner_states[name] = state
 
@@ -271,7 +271,8 @@ class ResourceManager:
 
     def write(self, time: float, period: float, cycle: int, failed: List[str]) -> None:
         for comp in self.components.values():
-            if comp.state != State.ACTIVE or comp.async_handler is not None or cycle % comp.divisor:
+            if (comp.state != State.ACTIVE or comp.async_handler is not None or cycle % comp.divisor
+                    or comp.kind == "sensor"):
                 continue
             try:
                 result = comp.write_once(time, period * comp.divisor)

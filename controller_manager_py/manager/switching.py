@@ -62,7 +62,7 @@ def plan_switch(cm: ControllerManager, activate: List[str], deactivate: List[str
         else:
             deact.append(spec)
     leaving = {s.name for s in deact}
-    claimed_after = {itf: ctl for itf, ctl in cm.rm.claimed.items() if ctl not in leaving}
+    claimed_after = {itf: ctl for itf, ctl in list(cm.rm.claimed.items()) if ctl not in leaving}
     act: List[ControllerSpec] = []
     for name in dict.fromkeys(activate):
         spec = cm.controllers.get(name)
@@ -84,7 +84,7 @@ def plan_switch(cm: ControllerManager, activate: List[str], deactivate: List[str
         act.append(spec)
     # a controller whose reference interfaces stay claimed by an active controller must stay active
     for spec in list(deact):
-        users = {claimed_after[i] for i in cm.rm.command_interfaces if cm.rm.interface_owner.get(i) == spec.name
+        users = {claimed_after[i] for i in list(cm.rm.command_interfaces) if cm.rm.interface_owner.get(i) == spec.name
                  and i in claimed_after}
         if users:
             problem(f"cannot deactivate '{spec.name}': its reference interfaces are used by {sorted(users)}")
@@ -165,7 +165,7 @@ def deactivate(cm: ControllerManager, spec: ControllerSpec) -> None:
     for itf in spec.claimed:
         cm.rm.release(itf, spec.name)
         owner = cm.controllers.get(cm.rm.interface_owner.get(itf, ""))
-        if owner is not None and not any(cm.rm.claimed.get(i) for i in cm.rm.command_interfaces
+        if owner is not None and not any(cm.rm.claimed.get(i) for i in list(cm.rm.command_interfaces)
                                          if cm.rm.interface_owner.get(i) == owner.name):
             owner.c.set_chained_mode(False)
     spec.claimed = []
