@@ -184,6 +184,17 @@ class MujocoSystem(SystemInterface):
         self._eff = [self.state_handles.get(f"{n}/effort") for n in robot.JOINT_NAMES]
         self._ball = [self.state_handles[f"ball/{k}"] for k in ("x", "y", "vx", "vy", "dropped")]
         self._speed_scaling = self.state_handles.get("speed_scaling/speed_scaling_factor")
+        gpio = next((g for g in info.gpios if g.name == "speed_scaling"), None)
+        if gpio is not None:  # as the UR driver: <gpio name="speed_scaling"><param initial_...>
+            text = gpio.parameters.get("initial_speed_scaling_factor", "1")
+            try:
+                factor = float(text)
+            except ValueError:
+                factor = math.nan
+            if not 0.0 < factor <= 1.0:
+                self.get_logger().error(f"{info.name}: initial_speed_scaling_factor = {text!r} must be in (0, 1]")
+                return CallbackReturn.ERROR
+            self.world.speed_scaling = factor
         self._target = np.array(robot.HOME_POSITIONS_RAD)
         self._reset_requested = False
         self._copy_states()

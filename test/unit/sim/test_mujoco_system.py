@@ -135,3 +135,29 @@ def test_realtime_pacing_follows_the_wall_clock():
 def test_without_sim_time_the_manager_keeps_its_clock():
     system, result = make_system({"sim_time": False})
     assert result == CallbackReturn.SUCCESS and not system.provides_clock
+
+
+def test_initial_speed_scaling_factor_slows_the_joints(caplog):
+    param = '<param name="initial_speed_scaling_factor">'
+    text = robot.robot_description("mujoco", {"camera_enabled": False}).replace(f"{param}1<", f"{param}0.5<")
+    (info,) = parse_control_resources(text)
+    system = load_class(HARDWARE_GROUP, "ball_balance/MujocoSystem")()
+    system._attach(None, logging.getLogger("test_mujoco_system"))
+    assert system.on_init(info) == CallbackReturn.SUCCESS
+    system.on_configure(State.UNCONFIGURED)
+    system.on_activate(State.INACTIVE)
+    assert system.get_state("speed_scaling/speed_scaling_factor") == 0.5
+    system.set_command("wrist_3_joint/position", 1.0)
+    peak = 0.0
+    for _ in range(150):
+        run_cycles(system, 1)
+        peak = max(peak, abs(system.get_state("wrist_3_joint/velocity")))
+    assert 0.5 * 3.14 * 0.9 < peak <= 0.5 * 3.14 * 1.05
+
+    bad = text.replace('">0.5<', '">0<')
+    (info,) = parse_control_resources(bad)
+    system = load_class(HARDWARE_GROUP, "ball_balance/MujocoSystem")()
+    system._attach(None, logging.getLogger("test_mujoco_system"))
+    with caplog.at_level(logging.ERROR):
+        assert system.on_init(info) == CallbackReturn.ERROR
+    assert "initial_speed_scaling_factor" in caplog.text
