@@ -115,3 +115,16 @@ def test_description_without_plate_link_is_refused():
 def test_malformed_description_is_refused():
     with pytest.raises(robot.RobotDescriptionError, match="not valid XML"):
         robot.check_robot_description("<robot><link name='a'></robot>")
+
+
+@pytest.mark.parametrize("hardware", ["mock", "mujoco"])
+def test_description_loads_in_the_controller_manager(hardware):
+    from controller_manager_py.manager.controller_manager import ControllerManager
+
+    cm = ControllerManager(500)
+    cm.load_robot_description(robot.robot_description(hardware, {"camera_enabled": False} if hardware == "mujoco"
+                                                      else None))
+    names = set(cm.rm.state_interfaces)
+    assert {f"{j}/position" for j in robot.JOINT_NAMES} <= names
+    assert "speed_scaling/speed_scaling_factor" in names
+    cm.shutdown()
