@@ -80,8 +80,11 @@ class PlateMpc:
         H2 = sp.block_diag([sp.csc_matrix(np.triu(H))] * 2, format="csc")
         A_axis = sp.vstack([sp.eye(n), sp.csc_matrix(D)])
         A2 = sp.block_diag([A_axis, A_axis], format="csc")
-        self._l = np.zeros(4 * n)
-        self._u = np.zeros(4 * n)
+        du = cfg.du_max_rad_s * dt
+        one_axis_l = np.concatenate([np.full(n, -cfg.u_max_rad), np.full(n, -du)])
+        self._l0 = np.concatenate([one_axis_l, one_axis_l])
+        self._u0 = -self._l0
+        self._l, self._u = self._l0.copy(), self._u0.copy()
         self._q = np.zeros(2 * n)
         self._solver = osqp.OSQP()
         self._solver.setup(H2, self._q, A2, self._l, self._u, verbose=False, warm_starting=True,
@@ -94,7 +97,7 @@ class PlateMpc:
 
     def reset(self) -> None:
         self._plan[:] = 0.0
-        self._solver.warm_start(x=self._plan)
+        self._solver.warm_start(x=self._plan, y=np.zeros(4 * self.n))
 
     def solve(self, x0: np.ndarray, v0: np.ndarray, ref_p: np.ndarray, ref_v: np.ndarray,
               ref_a: np.ndarray, u_prev: np.ndarray):
@@ -106,27 +109,24 @@ class PlateMpc:
         """
         t_start = time.perf_counter()
         cfg, n = self.cfg, self.n
-        du = cfg.du_max_rad_s * cfg.dt_s
+        # both axes at once: columns are axes. c = S_x x0 - r  (2N x 2), r stacked [p_k, v_k]
+        X0 = np.array([x0, v0], dtype=float)                      # (2, 2): rows p, v
+        R = np.empty((2 * n, 2))
+        R[0::2] = ref_p
+        R[1::2] = ref_v
+        C = self._S_x @ X0 - R
+        U_ff = -ref_a / cfg.k_g                                    # (N, 2)
+        Q = self._F @ C - 2.0 * cfg.r_u * U_ff - np.outer(self._e1_term, u_prev)
+        self._q[:n], self._q[n:] = Q[:, 0], Q[:, 1]
+        # bounds: constant but for the first rate row of each axis (|u_0 - u_prev| <= du)
+        lower, upper = self._l, self._u
         for axis in range(2):
-            r_vec = np.empty(2 * n)
-            r_vec[0::2] = ref_p[:, axis]
-            r_vec[1::2] = ref_v[:, axis]
-            u_ff = -ref_a[:, axis] / cfg.k_g
-            c = self._S_x @ np.array([x0[axis], v0[axis]]) - r_vec
-            sl = slice(axis * n, (axis + 1) * n)
-            self._q[sl] = self._F @ c - 2.0 * cfg.r_u * u_ff - self._e1_term * u_prev[axis]
-            base = axis * 2 * n
-            self._l[base:base + n] = -cfg.u_max_rad
-            self._u[base:base + n] = cfg.u_max_rad
-            self._l[base + n:base + 2 * n] = -du
-            self._u[base + n:base + 2 * n] = du
-            self._l[base + n] += u_prev[axis]
-            self._u[base + n] += u_prev[axis]
-        self._solver.update(q=self._q, l=self._l, u=self._u)
-        # warm start from the previous plan shifted by one step
-        shifted = np.concatenate([self._plan[1:n], self._plan[n - 1:n],
-                                  self._plan[n + 1:], self._plan[-1:]])
-        self._solver.warm_start(x=shifted)
+            row = axis * 2 * n + n
+            lower[row] = self._l0[row] + u_prev[axis]
+            upper[row] = self._u0[row] + u_prev[axis]
+        self._solver.update(q=self._q, l=lower, u=upper)
+        # OSQP warm-starts from its previous primal/dual solution (warm_starting=True)
+        shifted = np.concatenate([self._plan[1:n], self._plan[n - 1:n], self._plan[n + 1:], self._plan[-1:]])
         result = self._solver.solve(raise_error=False)
         self.last_status = result.info.status
         if result.info.status == "solved" and np.all(np.isfinite(result.x)):
@@ -134,6 +134,7 @@ class PlateMpc:
         else:
             self.failures += 1
             self._plan = shifted
+        du = cfg.du_max_rad_s * cfg.dt_s
         u = np.array([self._plan[0], self._plan[n]])
         # the first move must respect both limits whatever the solver returned
         u = np.clip(u, u_prev - du, u_prev + du)
