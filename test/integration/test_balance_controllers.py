@@ -124,3 +124,34 @@ def test_real_ur_script_refuses_to_move_without_the_explicit_flag(launcher):
     assert "--i-know-the-arm-will-move" in result.stderr
     dry = launcher.run([str(ROOT / "scripts" / "real_ur.sh"), "--controller", "mpc", "--dry-run"], timeout=30)
     assert dry.returncode == 0 and "--activate scaled_joint_trajectory_controller" in dry.stdout
+
+
+def test_gains_change_at_run_time_and_bad_values_are_refused(launcher, graph):
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    FakeWorld(graph)
+    _start(launcher, "ball_balance_controller", "pid.yaml")
+    graph.collect(Vector3Stamped, "/plate_cmd", timeout=30, predicate=lambda m: m.vector.x > 0.0)
+
+    def set_param(name, value):
+        request = SetParameters.Request(parameters=[Parameter(name=name, value=ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=value))])
+        return graph.call(SetParameters, "/ball_balance_controller/set_parameters", request).results[0]
+
+    assert set_param("kp", 0.0).successful and set_param("ki", 0.0).successful
+    assert set_param("kd", 0.0).successful
+    (cmd,) = graph.collect(Vector3Stamped, "/plate_cmd", timeout=10, predicate=lambda m: m.vector.x == 0.0)
+    bad = set_param("kp", -1.0)
+    assert not bad.successful and "kp" in bad.reason
+    read_only = set_param("control_rate_hz", 10.0)
+    assert not read_only.successful
+
+
+def test_bad_reference_csv_stops_the_node_with_one_line_naming_the_row(launcher, tmp_path):
+    path = tmp_path / "path.csv"
+    path.write_text("t_s,x_m,y_m\n0,0,0\n1,0.05,oops\n")
+    process = launcher.start([executable("ball_balance_controller"), "--ros-args", "-p", "reference_kind:=csv",
+                              "-p", f"reference_csv_path:={path}"])
+    assert process.wait(30) == 2
+    assert "row 3" in process.output() and "Traceback" not in process.output()
