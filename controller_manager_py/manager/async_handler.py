@@ -16,7 +16,8 @@ from ..hardware_interface.types import return_type
 
 class AsyncHandler:
     def __init__(self, name: str, function: Callable[[float, float], return_type],
-                 detached: bool = False, rate_hz: float = 0.0, clock: Callable[[], float] = _time.monotonic):
+                 detached: bool = False, rate_hz: float = 0.0, clock: Callable[[], float] = _time.monotonic,
+                 thread_priority: int = 0):
         self.name = name
         self._function = function
         self._detached = detached
@@ -32,6 +33,7 @@ class AsyncHandler:
         self.last_exception: BaseException | None = None
         self.last_finish = float("nan")  # clock time of the last completed run (data age)
         self.last_duration = 0.0
+        self.thread_priority = thread_priority  # SCHED_FIFO when > 0 and permitted
         self._thread = threading.Thread(target=self._run, name=f"async:{name}", daemon=True)
         self._thread.start()
 
@@ -73,6 +75,9 @@ class AsyncHandler:
         self.last_duration = _time.monotonic() - start
 
     def _run(self) -> None:
+        if self.thread_priority > 0:
+            from .loop import set_realtime_priority
+            set_realtime_priority(self.thread_priority)
         if self._detached:
             period = self._period or 0.01
             next_time = _time.monotonic()

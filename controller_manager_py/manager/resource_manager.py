@@ -233,7 +233,8 @@ class ResourceManager:
             params = comp.info.async_params
             comp.async_handler = AsyncHandler(comp.name, comp.cycle_async,
                                               detached=params.scheduling_policy == "detached",
-                                              rate_hz=comp.rw_rate or 100, clock=self._clock)
+                                              rate_hz=comp.rw_rate or 100, clock=self._clock,
+                                              thread_priority=params.thread_priority)
         elif not running and comp.async_handler is not None:
             comp.async_handler.stop()
             comp.async_handler = None

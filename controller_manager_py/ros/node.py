@@ -59,6 +59,7 @@ SCHEMA = (
           min=0.1, max=1000.0),
     Param("diagnostics.period", 1.0, "period of /diagnostics (statistics windows restart after each)", unit="s",
           min=0.05),
+    Param("thread_priority", 50, "SCHED_FIFO priority of the loop thread (0 = normal scheduling)", min=0, max=99),
     Param("gil_switch_interval", 0.0001, "Python's thread switch interval (lower: less loop jitter)", unit="s",
           min=1e-5, max=0.01),
     *THRESHOLD_PARAMS,
@@ -200,7 +201,8 @@ class ControllerManagerNode(Node):
         except SwitchError as error:
             self.get_logger().error(f"cannot activate {activate}: {error}")
         blocking = self.params["hardware_synchronization.expect_blocking_read_write"]
-        self.loop = ControlLoop(self.cm, blocking, self.params["hardware_synchronization.minimum_cycle_time"])
+        self.loop = ControlLoop(self.cm, blocking, self.params["hardware_synchronization.minimum_cycle_time"],
+                                self.params["thread_priority"])
         self.loop.idle_hook = self.on_loop_idle
         self.on_registry_timer()
         self.loop.start()
