@@ -128,3 +128,14 @@ def test_description_loads_in_the_controller_manager(hardware):
     assert {f"{j}/position" for j in robot.JOINT_NAMES} <= names
     assert "speed_scaling/speed_scaling_factor" in names
     cm.shutdown()
+
+
+def test_urdf_plate_matches_plate_geometry():
+    import xml.etree.ElementTree as ET
+
+    from ball_balance.plate_geometry import PLATE_MASS_KG, PLATE_SIDE_M, PLATE_THICKNESS_M
+
+    link = ET.fromstring(robot.robot_description()).find("link[@name='plate_center']")
+    sizes = [tuple(float(v) for v in box.get("size").split()) for box in link.iter("box")]
+    assert sizes and all(s == pytest.approx((PLATE_SIDE_M, PLATE_SIDE_M, PLATE_THICKNESS_M)) for s in sizes)
+    assert float(link.find("inertial/mass").get("value")) == pytest.approx(PLATE_MASS_KG)
