@@ -32,6 +32,7 @@ class LiveRecorder:
 
         self.node = node
         self.truth, self.est, self.ref, self.cmd = [], [], [], []
+        self.latency = []      # /plate_cmd stamp - capture stamp of the newest /ball_state then (s)
         self.dropped = False
         self.frames = []       # (t, bgr image)
         self.video_s, self.video_start_s, self.video_fps = video_s, video_start_s, video_fps
@@ -68,6 +69,8 @@ class LiveRecorder:
 
     def on_cmd(self, msg) -> None:
         self.cmd.append((self._t(msg), msg.vector.x, msg.vector.y))
+        if self.est and self.ref:
+            self.latency.append(self._t(msg) - self.est[-1][0])
 
     def on_dropped(self, msg) -> None:
         self.dropped = self.dropped or bool(msg.data)
@@ -120,6 +123,10 @@ class LiveRecorder:
         if s is None:
             return None
         m = episode_metrics(s, self.dropped, float(s["t"][-1]))
+        if self.latency:
+            # camera-to-command: capture stamp of the state in hand -> command stamp (sim time)
+            m["latency_s"] = float(np.mean(self.latency))
+            m["latency_p95_s"] = float(np.percentile(self.latency, 95))
         if self.est:
             est = np.array(self.est, dtype=float)
             m["tracking_valid_fraction"] = float(np.mean(est[:, 5]))
@@ -196,7 +203,7 @@ def format_metrics(m) -> str:
     return (f"drop {'YES' if m['drop'] else 'no'} | RMSE {1e3 * m['rmse_m']:.1f} mm | after 5 s "
             f"{1e3 * m['rmse_steady_m']:.1f} mm | settled to 5 mm at "
             f"{m['settle_s']:.1f} s | peak tilt {math.degrees(m['peak_tilt_rad']):.1f} deg | "
-            f"tilt rate RMS {m['smoothness_rad_s']:.2f} rad/s")
+            f"tilt rate RMS {m['smoothness_rad_s']:.2f} rad/s | camera-to-command {1e3 * m['latency_s']:.0f} ms")
 
 
 def main(argv=None) -> int:
