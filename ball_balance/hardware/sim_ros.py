@@ -8,16 +8,21 @@ from __future__ import annotations
 
 from typing import Callable, Mapping
 
+import numpy as np
 from ball_tracker_msgs.msg import BallState
 from builtin_interfaces.msg import Time
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
+from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
 from ball_balance.plate_geometry import PLATE_FRAME
+from ball_balance.robot import BASE_FRAME
 from ball_balance.sim.config import camera_intrinsics
+from ball_balance.tf.ros import StaticTransformBroadcaster, transform_to_msg
+from ball_balance.tf.transform import Transform
 
 # A reliable publisher also serves sensor-data (best-effort) subscribers; reliable ones then get
 # every frame (over best effort Fast DDS loses most fragmented 640x480 frames here).
@@ -50,8 +55,17 @@ class SimRosIo:
         self.reset_srv = node.create_service(Trigger, "/sim/reset_ball", self._handle_reset)
         self._dropped = None
         self._camera_info = self._make_camera_info()
+        self.static_tf = StaticTransformBroadcaster(node)
+        self.static_tf.send_transform(self._camera_transform())
         self._clock = Clock()
         self.update_dropped(False, None)
+
+    def _camera_transform(self):
+        """base_link -> camera frame (optical convention: z forward, x right, y down in the image)."""
+        c_W, R_WC = self.world.camera_pose()  # MuJoCo camera axes: x right, y up, looking along -z
+        R_W_optical = R_WC @ np.diag([1.0, -1.0, -1.0])
+        transform = Transform.from_values(tuple(c_W), tuple(Rotation.from_matrix(R_W_optical).as_quat()))
+        return transform_to_msg(transform, BASE_FRAME, self.params["camera_frame_id"], None)
 
     def _make_camera_info(self) -> CameraInfo:
         camera = self.world.config.camera

@@ -33,6 +33,23 @@ def start_sim(launcher, tmp_path, trajectory=False, **params):
                            "-p", f"inactive_controllers:=[{inactive}]"])
 
 
+def camera_pose_from_tf(graph) -> np.ndarray:
+    """T_base_camera (4x4) of camera_optical_frame from /tf_static."""
+    from scipy.spatial.transform import Rotation
+
+    from ball_balance.tf.ros import Buffer, TransformListener
+
+    buffer = Buffer()
+    TransformListener(buffer, graph.node)
+    graph.spin_until(lambda: buffer.can_transform("base_link", "camera_optical_frame"), 30,
+                     "base_link -> camera_optical_frame")
+    tf = buffer.lookup_transform("base_link", "camera_optical_frame").transform
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_quat([tf.rotation.x, tf.rotation.y, tf.rotation.z, tf.rotation.w]).as_matrix()
+    T[:3, 3] = [tf.translation.x, tf.translation.y, tf.translation.z]
+    return T
+
+
 def joint_positions(msg: JointState) -> np.ndarray:
     index = {name: i for i, name in enumerate(msg.name)}
     return np.array([msg.position[index[name]] for name in robot.JOINT_NAMES])
@@ -61,6 +78,11 @@ def test_forward_position_commands_move_the_arm_and_the_camera_sees_the_plate(la
     assert truth.header.frame_id == "plate_center" and abs(truth.x) < 0.01 and abs(truth.y) < 0.01
     assert (truth.pixel_u, truth.pixel_v) == pytest.approx((319.5, 239.5), abs=15)
     graph.collect(Clock, "/clock", qos=QoSProfile(depth=1), timeout=30)
+    camera_tf = camera_pose_from_tf(graph)
+    plate = robot.UrdfKinematics(robot.robot_description()).transform(
+        "plate_center", "base_link", robot.joint_dict(robot.HOME_POSITIONS_RAD))
+    assert np.allclose(camera_tf[:3, 3], plate[:3, 3] + [0.0, 0.0, 0.65], atol=1e-6)
+    assert np.allclose(camera_tf[:3, 2], [0.0, 0.0, -1.0], atol=1e-6)  # optical z looks down
 
     target = np.array(robot.HOME_POSITIONS_RAD) + np.array([0.05, 0.0, 0.0, 0.02, -0.02, 0.1])
     pub = graph.node.create_publisher(Float64MultiArray, "/forward_position_controller/commands", 10)
