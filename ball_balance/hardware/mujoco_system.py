@@ -162,6 +162,7 @@ class MujocoSystem(SystemInterface):
 
     # ---- lifecycle (executor thread) -----------------------------------------------------
     def on_init(self, info: HardwareInfo) -> CallbackReturn:
+        """Load time (-> unconfigured): validate params, build the world (ERROR names a bad value)."""
         result = super().on_init(info)
         if result != CallbackReturn.SUCCESS:
             return result
@@ -201,9 +202,11 @@ class MujocoSystem(SystemInterface):
         return CallbackReturn.SUCCESS
 
     def export_unlisted_state_interfaces(self):
+        """The ball's true state as extra state interfaces (called in on_init)."""
         return [("ball", k) for k in ("x", "y", "vx", "vy", "dropped")]
 
     def on_configure(self, previous_state: State) -> CallbackReturn:
+        """unconfigured -> inactive: publishers, reset service, camera thread. Physics runs from now."""
         node = self.get_node()
         if node is not None:
             from ball_balance.hardware.sim_ros import SimRosIo
@@ -221,20 +224,22 @@ class MujocoSystem(SystemInterface):
         self._next_truth_s = self.world.time_s
         self._next_clock_s = self.world.time_s
         self._wall_anchor = None
-        self.register_introspection("ball_x", lambda: self._ball[0].value)
-        self.register_introspection("ball_y", lambda: self._ball[1].value)
-        self.register_introspection("commands_refused", lambda: float(self.commands_refused))
-        self.register_introspection("pacing_overruns", lambda: float(self.overruns))
+        if not self.introspection:  # once, also after cleanup + configure
+            self.register_introspection("ball_x", lambda: self._ball[0].value)
+            self.register_introspection("ball_y", lambda: self._ball[1].value)
+            self.register_introspection("commands_refused", lambda: float(self.commands_refused))
+            self.register_introspection("pacing_overruns", lambda: float(self.overruns))
         return CallbackReturn.SUCCESS
 
     def on_activate(self, previous_state: State) -> CallbackReturn:
-        # start from where the arm is: stale commands never apply
+        """inactive -> active: commands start at the current pose, so stale commands never apply."""
         self._target = self.world.joint_positions()
         for handle, q in zip(self._pos_cmd, self._target, strict=True):
             handle.value = q
         return CallbackReturn.SUCCESS
 
     def on_cleanup(self, previous_state: State) -> CallbackReturn:
+        """inactive -> unconfigured: camera thread stopped, publishers removed."""
         self._stop_io()
         return CallbackReturn.SUCCESS
 
@@ -256,6 +261,7 @@ class MujocoSystem(SystemInterface):
 
     # ---- real-time loop ---------------------------------------------------------------------
     def read(self, time: float, period: float) -> return_type:
+        """Real-time loop (inactive and active): advance physics, copy states, publish at their rates."""
         world, camera, ros = self.world, self.camera, self.ros  # locals: shutdown may clear them
         if self._reset_requested:
             self._reset_requested = False
@@ -320,6 +326,7 @@ class MujocoSystem(SystemInterface):
             ros.update_dropped(truth.dropped, truth)
 
     def write(self, time: float, period: float) -> return_type:
+        """Real-time loop (active): position commands -> servo targets; bad ones refused and counted."""
         target = self._target.copy()
         given = False
         for i, handle in enumerate(self._pos_cmd):
