@@ -46,7 +46,9 @@ URDF="$WORK/ur5e_ball_balance_sim.urdf"
 # the description with the MuJoCo hardware selected and its parameters (the world is built
 # from this same file: robot_description_file points at it)
 python -m ball_balance.robot --hardware mujoco --param "sim_config=$SIM_CONFIG" \
-  --param "robot_description_file=$URDF" ${PARAMS[@]+"${PARAMS[@]}"} >"$URDF"
+  --param "robot_description_file=$URDF" ${PARAMS[@]+"${PARAMS[@]}"} >"$URDF" || { rm -rf "$WORK"; exit 2; }
+# bad parameters: one clear line before anything starts
+python -m ball_balance.hardware.mujoco_system --check "$URDF" || { rm -rf "$WORK"; exit 2; }
 
 if ((TRAJECTORY)); then
   ACTIVE="[joint_state_broadcaster, scaled_joint_trajectory_controller]"

@@ -359,3 +359,31 @@ class MujocoSystem(SystemInterface):
 
     def _on_camera_error(self, error: BaseException) -> None:
         self.get_logger().error(f"{self.get_name()}: camera stopped: {error}")
+
+
+def check_description_params(urdf_text: str) -> None:
+    """Validate the MuJoCo hardware params of a description without building the world
+    (ParameterError / SimConfigError / RobotDescriptionError name the problem)."""
+    robot.check_robot_description(urdf_text)
+    build_sim(parse_hardware_params(robot.hardware_params(urdf_text)))
+
+
+def main(argv=None) -> int:
+    """`python -m ball_balance.hardware.mujoco_system --check FILE`: exit 2 with one line if bad."""
+    import argparse
+    import sys
+
+    parser = argparse.ArgumentParser(description=check_description_params.__doc__)
+    parser.add_argument("--check", required=True, metavar="URDF")
+    args = parser.parse_args(argv)
+    try:
+        with open(args.check) as handle:
+            check_description_params(handle.read())
+    except (OSError, ParameterError, SimConfigError, robot.RobotDescriptionError) as error:
+        print(f"ball_balance/MujocoSystem: {error}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -166,3 +166,9 @@ def test_camera_snapshot_writes_a_png_of_the_running_camera(launcher, graph, tmp
     snapshot = launcher.start([executable("camera_snapshot"), "--ros-args", "-p", f"png:={png}"])
     assert snapshot.wait(60) == 0
     assert cv2.imread(str(png)).shape == (240, 320, 3)
+
+
+def test_sim_arm_script_refuses_bad_parameters_before_starting_anything(launcher):
+    result = launcher.run(["bash", str(ROOT / "scripts" / "sim_arm.sh"), "--param", "camera_width=0"], timeout=60)
+    assert result.returncode == 2
+    assert "camera_width" in result.stderr and "Traceback" not in result.stderr
