@@ -33,7 +33,7 @@ from ..hardware_interface.types import State
 from ..manager.controller_manager import ControllerError, ControllerManager
 from ..manager.diagnostics import THRESHOLD_PARAMS, roll_up
 from ..manager.introspection import introspection_entries, statistics_entries
-from ..manager.loop import ControlLoop
+from ..manager.loop import ControlLoop, set_realtime_priority
 from ..manager.resource_manager import ResourceError
 from ..manager.switching import STRICT, SwitchError
 from ..parameters import Param, ParameterError, declare_parameters
@@ -60,7 +60,9 @@ SCHEMA = (
     Param("diagnostics.period", 1.0, "period of /diagnostics (statistics windows restart after each)", unit="s",
           min=0.05),
     Param("thread_priority", 50, "SCHED_FIFO priority of the loop thread (0 = normal scheduling)", min=0, max=99),
-    Param("gil_switch_interval", 0.0001, "Python's thread switch interval (lower: less loop jitter)", unit="s",
+    Param("executor_thread_priority", 40, "SCHED_FIFO priority of the executor thread (0 = normal): a "
+          "preempted thread holding Python's interpreter lock would stall the loop", min=0, max=99),
+    Param("gil_switch_interval", 2e-5, "Python's thread switch interval (lower: less loop jitter)", unit="s",
           min=1e-5, max=0.01),
     *THRESHOLD_PARAMS,
 )
@@ -200,6 +202,8 @@ class ControllerManagerNode(Node):
             self.cm.switch_controller(started, [], STRICT)
         except SwitchError as error:
             self.get_logger().error(f"cannot activate {activate}: {error}")
+        if self.params["executor_thread_priority"] > 0:  # this callback runs in the executor thread
+            set_realtime_priority(self.params["executor_thread_priority"])
         blocking = self.params["hardware_synchronization.expect_blocking_read_write"]
         self.loop = ControlLoop(self.cm, blocking, self.params["hardware_synchronization.minimum_cycle_time"],
                                 self.params["thread_priority"])
