@@ -34,6 +34,8 @@ CMPY_CONTROLLERS = {
         "controller_manager_py.controllers.joint_trajectory:JointTrajectoryController",
     "chained_controllers/PassthroughController":
         "controller_manager_py.controllers.passthrough:PassthroughController",
+    "ur_controllers/ScaledJointTrajectoryController":
+        "controller_manager_py.controllers.joint_trajectory:ScaledJointTrajectoryController",
 }
 
 setup(

@@ -226,3 +226,11 @@ class JointTrajectoryController(ControllerInterface):
             desired_p[j], desired_v[j] = p, v
             commands[j].value = p
         return return_type.OK
+
+
+class ScaledJointTrajectoryController(JointTrajectoryController):
+    """ur_controllers/ScaledJointTrajectoryController: the UR driver's name for the scaled
+    variant, reading speed_scaling/speed_scaling_factor unless configured otherwise."""
+
+    PARAMS = tuple(Param(p.name, "speed_scaling/speed_scaling_factor", p.description)
+                   if p.name == "speed_scaling_interface_name" else p for p in JointTrajectoryController.PARAMS)

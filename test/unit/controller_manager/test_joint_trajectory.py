@@ -104,3 +104,13 @@ def test_waypoint_velocities_are_used_when_given():
     jtc.on_trajectory(trajectory([(0.5, offset(0.1)), (1.0, offset(0.2))], velocities=[[0.2] * 6, [0.0] * 6]))
     run(cm, 51)
     assert jtc.desired_v == pytest.approx([0.2] * 6, abs=1e-6)
+
+
+def test_ur_scaled_controller_reads_speed_scaling_by_default():
+    cm = make_manager(rate=100)
+    jtc = spawn(cm, "scaled", "ur_controllers/ScaledJointTrajectoryController", {"joints": JOINTS})
+    assert "speed_scaling/speed_scaling_factor" in cm.controllers["scaled"].state_names
+    cm.rm.state_interfaces["speed_scaling/speed_scaling_factor"].value = 0.0  # paused on the pendant
+    jtc.on_trajectory(trajectory([(0.5, offset(0.1))]))
+    run(cm, 100)
+    assert jtc.traj_time == 0.0 and jtc.desired_p == pytest.approx(HOME)
