@@ -38,6 +38,11 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        # A SIGINT/SIGTERM shuts the context down under the executor, which may then raise
+        # "context is not valid" instead of ExternalShutdownException: that is a clean exit.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             try:
