@@ -87,20 +87,22 @@ class ControllerManager:
     def set_hardware_component_state(self, name: str, target: State) -> State:
         with self.lock:
             if target in (State.INACTIVE, State.UNCONFIGURED, State.FINALIZED):
-                self._deactivate_users(name, wait=True)
+                # inactive hardware still reads: only the controllers commanding it must stop
+                self._deactivate_users(name, commands_only=target == State.INACTIVE)
             reached = self.rm.set_component_state(name, target)
             self._changed()
             return reached
 
-    def _deactivate_users(self, component: str, wait: bool) -> None:
-        users = self._users_of(component)
+    def _deactivate_users(self, component: str, commands_only: bool) -> None:
+        users = self._users_of(component, commands_only)
         if users:
             self.switch_controller([], [s.name for s in users], switching.BEST_EFFORT)
 
-    def _users_of(self, component: str) -> List[ControllerSpec]:
+    def _users_of(self, component: str, commands_only: bool = False) -> List[ControllerSpec]:
         owner = self.rm.interface_owner
         return [s for s in list(self.controllers.values()) if s.state == State.ACTIVE
-                and any(owner.get(i) == component for i in (*s.command_names, *s.state_names))]
+                and any(owner.get(i) == component
+                        for i in (s.command_names if commands_only else (*s.command_names, *s.state_names)))]
 
     # ---- controller lifecycle (executor thread) -------------------------------------------
     def load_controller(self, name: str, type_name: str = "", params: Optional[dict] = None) -> ControllerSpec:

@@ -10,6 +10,7 @@ from controller_manager_msgs.srv import (
     ListControllerTypes,
     ListHardwareComponents,
     ListHardwareInterfaces,
+    SetHardwareComponentState,
     SwitchController,
 )
 from diagnostic_msgs.msg import DiagnosticArray
@@ -149,6 +150,15 @@ def test_description_from_topic_and_the_spawner(launcher, graph):
     assert controllers(graph)["extra_jsb"].state == "inactive"
     run = launcher.run([executable("spawner"), "nonexistent_controller"], timeout=30)
     assert run.returncode == 1 and "failed loading controller 'nonexistent_controller'" in run.stderr
+
+    # hardware to inactive: the controllers commanding it are deactivated first
+    request = SetHardwareComponentState.Request(name="mock_ur")
+    request.target_state.id, request.target_state.label = 2, "inactive"
+    response = graph.call(SetHardwareComponentState, "/controller_manager/set_hardware_component_state", request)
+    assert response.ok and response.state.label == "inactive"
+    listed = controllers(graph)
+    assert listed["forward_position_controller"].state == "inactive"
+    assert listed["joint_state_broadcaster"].state == "active"  # states are still read
 
 
 def test_malformed_description_stops_with_one_clear_line(launcher, tmp_path):

@@ -72,3 +72,10 @@ def test_hardware_component_lifecycle_controls_availability():
     assert not cm.rm.state_available("elbow_joint/position")
     with pytest.raises(ResourceError, match="does not exist"):
         cm.set_hardware_component_state("nope", State.ACTIVE)
+
+
+def test_initial_state_keeps_a_component_unconfigured_until_asked():
+    cm = ControllerManager(100)
+    cm.load_robot_description(MOCK_UR, initial_states={"mock_ur": State.UNCONFIGURED})
+    assert cm.rm.components["mock_ur"].state == State.UNCONFIGURED
+    assert cm.set_hardware_component_state("mock_ur", State.ACTIVE) == State.ACTIVE
