@@ -41,6 +41,8 @@ class Session:
         try:
             self.executor.shutdown(timeout_sec=0.5)
             self.node.destroy_node()
+        except Exception:  # noqa: BLE001 - the context may already be shut down (Ctrl-C)
+            pass
         finally:
             self.context.try_shutdown()
 
