@@ -29,7 +29,7 @@ def _verb(subparsers, name: str, target: str, help: str):
     return parser
 
 
-def _spin_time(parser, default: float = 2.5) -> None:
+def _spin_time(parser, default: float = 3.0) -> None:
     parser.add_argument("--spin-time", type=float, default=default,
                         help="seconds to wait for discovery (default: %(default)s)")
 

@@ -12,7 +12,7 @@ from typing import Callable, Dict, List, Optional, Tuple
 
 from ball_balance.cli.errors import CliError
 
-DEFAULT_SPIN_TIME_S = 2.5  # upper bound on discovery waits when the graph is not yet complete
+DEFAULT_SPIN_TIME_S = 3.0  # upper bound on discovery waits (no daemon keeps the graph for us)
 
 
 class Session:
@@ -64,7 +64,7 @@ class Session:
     def spin_for(self, duration_s: float) -> None:
         self.spin_until(lambda: False, duration_s)
 
-    def discover(self, spin_time_s: float = DEFAULT_SPIN_TIME_S, settle_s: float = 0.4) -> None:
+    def discover(self, spin_time_s: float = DEFAULT_SPIN_TIME_S, settle_s: float = 1.0) -> None:
         """Let discovery run until the graph stops changing for settle_s (at most spin_time_s).
 
         While only our own node is visible, keep waiting (for up to spin_time_s): another
