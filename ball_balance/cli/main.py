@@ -2,6 +2,7 @@
 
     ros2py topic list|echo|hz|info|pub     ros2py node list     ros2py service list
     ros2py param get|set|dump|list|load    ros2py bag record    ros2py run PKG EXE
+    ros2py tf echo TARGET SOURCE
     ros2py control list_controllers|list_hardware_components|list_hardware_interfaces|
                    switch_controllers|load_controller|set_controller_state|unload_controller
 
@@ -131,6 +132,15 @@ def _simple_parsers(sub) -> None:
     p.add_argument("-o", "--output", help="output bag folder (default: rosbag2_<date>)")
     p.add_argument("-a", "--all", action="store_true", help="record every topic")
     p.add_argument("--duration", type=float, default=None, help="ros2py extension: stop after this many seconds")
+    _spin_time(p)
+
+    tf = sub.add_parser("tf", help="TF tools").add_subparsers(dest="verb", required=True)
+    p = _verb(tf, "echo", "tf:cmd_echo", "print the transform from SOURCE into TARGET (like tf2_echo)")
+    p.add_argument("target_frame")
+    p.add_argument("source_frame")
+    p.add_argument("--count", type=int, default=None, help="print this many times and exit (default: forever)")
+    p.add_argument("--rate", type=float, default=1.0, help="printing rate in Hz (default: 1)")
+    p.add_argument("--timeout", type=float, default=5.0, help="wait this long for the transform (default: 5)")
     _spin_time(p)
 
     p = sub.add_parser("run", help="run an executable of a package", description="run an executable of a package")
