@@ -7,6 +7,8 @@ a frame's tracker result becomes visible to the controller `vision_delay_s` afte
 with the latest visible result, its age = tick time - capture time; joint commands reach
 the arm after the domain's latency (SimWorld applies it). At t = 0 the arm is at home and
 the ball is released at rest off-centre (radius 0.05-0.10 m, direction from the seed).
+Metrics count from the controller's engagement (the ball rests on the level plate until
+then, while the tracker starts up).
 
 Modes: "vision" renders every frame and runs the real tracker (ArUco + HSV + Kalman);
 "fast" feeds the tracker's Kalman filter with the true position plus Gaussian noise
@@ -180,6 +182,12 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
         if world.ball_dropped:
             break
     series = {k: np.asarray(v, dtype=float) for k, v in rec.items()}
+    # count from the controller's engagement (until then the ball rests on the level plate
+    # while the tracker starts up), as the live recorder does
+    engaged = np.nonzero(series["mode"] > 0)[0]
+    first = int(engaged[0]) if len(engaged) else 0
+    series = {k: v[first:] for k, v in series.items()}
+    series["t"] = series["t"] - (series["t"][0] if len(series["t"]) else 0.0)
     from ball_balance.benchmark.metrics import episode_metrics
 
     metrics = episode_metrics(series, dropped=world.ball_dropped, duration_s=spec.duration_s,

@@ -3,7 +3,7 @@
 - drop: 1 if the ball left the plate.
 - rmse_m: RMS distance between the true ball and the reference over the surviving steps.
 - rmse_steady_m: the same after `steady_after_s` (the release transient excluded).
-- settle_s: time after release until the error stays below 5 mm (inf if never).
+- settle_s: time after release (engagement) until the error stays below 5 mm (inf if never).
 - peak_tilt_rad: max |u| over both axes.
 - smoothness_rad_s: RMS of the commanded tilt rate du/dt.
 - latency_s: mean camera-to-command latency = age of the state at the tick + the domain's
