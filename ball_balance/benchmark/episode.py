@@ -26,7 +26,7 @@ from typing import Dict, Optional
 import numpy as np
 
 from ball_balance.control import config as control_config
-from ball_balance.control.kinematics import Chain, PlateKinematics  # noqa: F401
+from ball_balance.control.kinematics import Chain, PlateKinematics
 from ball_balance.control.pipeline import ControlPipeline
 from ball_balance.control.safety import BallObservation, Mode
 from ball_balance.robot import HOME_POSITIONS_RAD, JOINT_NAMES, robot_description
