@@ -128,18 +128,19 @@ class Session:
                     depth: int = 10):
         """A subscription QoS that matches every publisher on `topic` (as ros2 topic echo does).
 
-        Best effort if any publisher is best effort, transient local only if all are;
+        Reliable only if every publisher is (best effort, which matches any publisher, when
+        none is known yet), transient local only if all publishers are;
         explicit `reliability`/`durability` ('reliable', 'best_effort', 'volatile',
         'transient_local') win.
         """
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
         publishers = self.node.get_publishers_info_by_topic(topic)
-        rel = ReliabilityPolicy.RELIABLE
+        rel = ReliabilityPolicy.BEST_EFFORT  # with no publisher known yet: matches any late one
         dur = DurabilityPolicy.VOLATILE
         if publishers:
-            if any(p.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for p in publishers):
-                rel = ReliabilityPolicy.BEST_EFFORT
+            if all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers):
+                rel = ReliabilityPolicy.RELIABLE
             if all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers):
                 dur = DurabilityPolicy.TRANSIENT_LOCAL
         if reliability:

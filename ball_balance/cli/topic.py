@@ -50,7 +50,7 @@ def cmd_echo(args) -> int:
         type_name = resolve_type(session, topic, args.message_type, args.spin_time)
         msg_cls = get_interface(type_name)
         # Give publishers a moment to be discovered so the QoS can be matched to theirs.
-        session.spin_until(lambda: session.node.count_publishers(topic) > 0, 0.0 if args.message_type else 1.0)
+        session.spin_until(lambda: session.node.count_publishers(topic) > 0, 1.0)
         qos = session.adapted_qos(topic, _policy(args.qos_reliability), _policy(args.qos_durability),
                                   args.qos_depth)
         received = []
