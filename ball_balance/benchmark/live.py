@@ -208,6 +208,7 @@ def format_metrics(m) -> str:
 
 def main(argv=None) -> int:
     import rclpy
+    from rclpy.executors import ExternalShutdownException
     from rclpy.parameter import Parameter
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -258,8 +259,8 @@ def main(argv=None) -> int:
                 break
             if args.duration > 0 and rec.truth and rec.truth[-1][0] - rec.t0 >= args.duration:
                 break
-    except KeyboardInterrupt:
-        pass
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass  # Ctrl-C / SIGTERM: still report what was recorded
     metrics = rec.metrics()
     if metrics is None:
         print("[monitor] no /sim/ball_truth received, or the controller never engaged", file=sys.stderr)
@@ -280,7 +281,10 @@ def main(argv=None) -> int:
                     print(f"[monitor] wrote {out / 'camera.mp4'} ({len(rec.frames)} frames)", flush=True)
                 else:
                     print("[monitor] no camera video (no frames received)", flush=True)
-    node.destroy_node()
+    try:
+        node.destroy_node()
+    except Exception:  # noqa: BLE001 - the context may already be shut down
+        pass
     rclpy.try_shutdown()
     return code
 
