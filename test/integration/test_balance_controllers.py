@@ -155,3 +155,15 @@ def test_bad_reference_csv_stops_the_node_with_one_line_naming_the_row(launcher,
                               "-p", f"reference_csv_path:={path}"])
     assert process.wait(30) == 2
     assert "row 3" in process.output() and "Traceback" not in process.output()
+
+
+def test_without_complete_joint_states_nothing_is_commanded(launcher, graph):
+    world = FakeWorld(graph)
+    world.joint_pub = graph.node.create_publisher(JointState, "/joint_states_unused", 10)  # silence the full one
+    partial = graph.node.create_publisher(JointState, "/joint_states", 10)
+    graph.node.create_timer(0.05, lambda: partial.publish(JointState(name=list(JOINT_NAMES[:5]),
+                                                                     position=list(HOME_POSITIONS_RAD[:5]))))
+    process = _start(launcher, "ball_balance_controller", "pid.yaml")
+    graph.spin_until(lambda: "lacks" in process.output(), 30, "a warning about the incomplete /joint_states")
+    with pytest.raises(TimeoutError):
+        graph.collect(Float64MultiArray, "/forward_position_controller/commands", timeout=2)
