@@ -4,7 +4,7 @@ import textwrap
 
 import pytest
 
-from harness import python_cmd
+from harness import ROOT, executable, python_cmd
 
 pytestmark = pytest.mark.integration
 
@@ -146,3 +146,26 @@ def test_missing_controller_manager_is_one_line(launcher, ros_domain):
     result = ros2py(launcher, "control", "list_controllers", "-c", "/nobody", "--spin-time", "1")
     assert result.returncode == 1
     assert result.stderr.count("\n") == 1 and "controller manager '/nobody' not found" in result.stderr
+
+
+def test_verbs_against_our_ros2_control_node(launcher, graph):
+    launcher.start([executable("ros2_control_node"), "--ros-args", "--params-file",
+                    str(ROOT / "config" / "ur_controllers.yaml"),
+                    "-p", f"robot_description_file:={ROOT / 'config' / 'mock_ur.urdf'}"], name="ros2_control_node")
+    graph.wait_for_service("/controller_manager/list_controllers", timeout=30)
+
+    def states():
+        lines = ros2py(launcher, "control", "list_controllers").stdout.splitlines()
+        return {line.split()[0]: line.split()[-1] for line in lines if line.strip()}
+
+    graph.spin_until(lambda: len(states()) == 3, 30, "the three configured controllers")
+    assert states()["forward_position_controller"] == "active"
+    swapped = ros2py(launcher, "control", "switch_controllers", "--deactivate", "forward_position_controller",
+                     "--activate", "scaled_joint_trajectory_controller", "--strict")
+    assert swapped.returncode == 0, swapped.stderr
+    after = states()
+    assert (after["forward_position_controller"], after["scaled_joint_trajectory_controller"]) == \
+        ("inactive", "active")
+    interfaces = ros2py(launcher, "control", "list_hardware_interfaces").stdout
+    assert "\tshoulder_pan_joint/position [available] [claimed]" in interfaces
+    assert "state interfaces\n" in interfaces
