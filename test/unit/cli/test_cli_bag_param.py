@@ -1,0 +1,50 @@
+"""ros2py helpers without DDS: MCAP schema text, parameter files and values."""
+import pytest
+
+from ball_balance.cli.bag import SEPARATOR, message_definition, nested_types
+from ball_balance.cli.errors import CliError
+from ball_balance.cli.param import flatten, nest, parameters_from_file, python_to_value, value_to_python
+
+
+def test_schema_text_is_the_msg_file_followed_by_each_nested_type_once():
+    text = message_definition("ball_tracker_msgs/msg/BallState")
+    sections = text.split(f"\n{SEPARATOR}\n")
+    assert "float64 pixel_u" in sections[0]
+    assert [s.splitlines()[0] for s in sections[1:]] == ["MSG: std_msgs/Header", "MSG: builtin_interfaces/Time"]
+    tf_text = message_definition("tf2_msgs/msg/TFMessage")
+    assert tf_text.count("MSG: builtin_interfaces/Time") == 1 and "MSG: geometry_msgs/Quaternion" in tf_text
+
+
+def test_nested_types_skip_primitives_constants_and_resolve_short_names():
+    text = "int32 STRICT=2\nstring<=10 name\nfloat64[3] xyz\nHeader header\nPoint[] points # pts\npkg2/Other o\n"
+    assert nested_types(text, "pkg") == ["std_msgs/Header", "pkg/Point", "pkg2/Other"]
+
+
+def test_parameter_values_round_trip_and_refuse_mixed_lists():
+    for value in (True, 3, 0.5, "ball", [1, 2], [0.5, 1], ["a", "b"], [True]):
+        expected = [float(v) for v in value] if value == [0.5, 1] else value
+        assert value_to_python(python_to_value(value)) == expected
+    with pytest.raises(CliError, match="one type"):
+        python_to_value([1, "a"], "mixed")
+    with pytest.raises(CliError, match="cannot set"):
+        python_to_value({"a": 1}, "nested")
+
+
+def test_parameter_files_nest_and_flatten():
+    flat = {"gain": 0.5, "limits.max_tilt": 3, "limits.min_tilt": -3}
+    assert nest(flat) == {"gain": 0.5, "limits": {"max_tilt": 3, "min_tilt": -3}}
+    assert flatten(nest(flat)) == flat
+    text = "/**:\n  ros__parameters:\n    use_sim_time: true\ntracker:\n  ros__parameters:\n    gain: 2.0\n"
+    assert parameters_from_file(text, "/tracker") == {"use_sim_time": True, "gain": 2.0}
+
+
+@pytest.mark.parametrize("text, error", [
+    ("tracker:\n  ros__parameters:\n    gain: [1\n", "not valid YAML"),
+    ("- just a list\n", "at the top level"),
+    ("tracker:\n  gain: 1\n", "no 'ros__parameters' mapping"),
+    ("other:\n  ros__parameters:\n    gain: 1\n", "no parameters for node '/tracker'"),
+])
+def test_malformed_parameter_files_are_one_line_errors(text, error):
+    with pytest.raises(CliError, match=error) as raised:
+        parameters_from_file(text, "/tracker", "bad.yaml")
+    assert "\n" not in str(raised.value) and "bad.yaml" in str(raised.value)
