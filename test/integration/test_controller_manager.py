@@ -130,7 +130,7 @@ def test_services_commands_switching_and_numbers_over_dds(launcher, graph):
     assert {c.name: c.state.label for c in activity.controllers}["forward_position_controller"] == "active"
 
 
-def test_description_from_topic_and_the_spawner(launcher, graph):
+def test_description_from_topic_and_the_spawner(launcher, graph, tmp_path):
     launcher_env_params = ["activate_controllers:=[joint_state_broadcaster]"]
     start_manager(launcher, *launcher_env_params, urdf=None)
     publisher = graph.node.create_publisher(String, "/robot_description", LATCHED)
@@ -148,6 +148,12 @@ def test_description_from_topic_and_the_spawner(launcher, graph):
                         "--inactive"], timeout=30)
     assert run.returncode == 0, run.stderr
     assert controllers(graph)["extra_jsb"].state == "inactive"
+    params = tmp_path / "fwd2.yaml"
+    params.write_text("fwd2:\n  ros__parameters:\n    joints: [elbow_joint]\n")
+    run = launcher.run([executable("spawner"), "fwd2", "-t", "position_controllers/JointGroupPositionController",
+                        "-p", str(params), "--inactive"], timeout=30)
+    assert run.returncode == 0, run.stderr
+    assert list(controllers(graph)["fwd2"].required_command_interfaces) == ["elbow_joint/position"]
     run = launcher.run([executable("spawner"), "nonexistent_controller"], timeout=30)
     assert run.returncode == 1 and "failed loading controller 'nonexistent_controller'" in run.stderr
 
