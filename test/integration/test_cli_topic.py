@@ -109,6 +109,9 @@ def test_bad_input_gives_one_line_and_nonzero_exit(launcher, ros_domain, tmp_pat
     one_line_error(ros2py(launcher, "param", "load", "ball_state_source", str(bad_file)),
                    "not valid YAML", str(bad_file))
     one_line_error(ros2py(launcher, "run", "ball_balance", "no_such_node"), "No executable 'no_such_node'")
+    # a malformed parameter file given to a node started the ros2 way
+    one_line_error(ros2py(launcher, "run", "ball_balance", "ball_tracker", "--ros-args", "--params-file",
+                          str(bad_file)), "not valid YAML", str(bad_file))
 
 
 def test_run_execs_an_installed_executable(launcher, ball_state_source):
