@@ -27,7 +27,7 @@ import enum
 import logging
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Dict, List, Mapping, Sequence
+from typing import Callable, Dict, List, Mapping, Sequence, Tuple
 
 from ..hardware_interface.handle import CommandInterface, StateInterface
 from ..hardware_interface.types import CallbackReturn, State, return_type
@@ -66,6 +66,7 @@ class ControllerInterface:
         self._node = None
         self._logger = logging.getLogger("controller")
         self.manager_update_rate = 0
+        self.introspection: List[Tuple[str, Callable[[], float]]] = []
 
     # ---- plumbing (called by the manager) --------------------------------------------
     def init(self, name: str, node, logger, manager_update_rate: int) -> CallbackReturn:
@@ -94,6 +95,10 @@ class ControllerInterface:
 
     def get_node(self):
         return self._node
+
+    def register_introspection(self, name: str, getter: Callable[[], float]) -> None:
+        """Publish `getter()` as `<controller>.<name>` on ~/introspection_data (call in on_configure)."""
+        self.introspection.append((name, getter))
 
     def get_logger(self):
         return self._logger

@@ -37,6 +37,8 @@ class ForwardCommandController(ControllerInterface):
             return CallbackReturn.ERROR
         self.joints = joints
         self.slot = CommandSlot(self.name, len(joints), self.get_logger())
+        self.introspection.clear()  # (re)configure: the getters read the live attributes
+        self.register_introspection("refused_commands", lambda: float(self.slot.refused))
         node = self.get_node()
         if node is not None and getattr(self, "_subscription", None) is None:
             from std_msgs.msg import Float64MultiArray

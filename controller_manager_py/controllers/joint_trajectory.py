@@ -107,6 +107,15 @@ class JointTrajectoryController(ControllerInterface):
         self.refused = 0
         self._slot: Optional[Goal] = None
         self._sub = None
+        self.traj_time = 0.0
+        self.desired_p = [math.nan] * len(self.joints)
+        self.desired_v = [0.0] * len(self.joints)
+        self.introspection.clear()  # (re)configure: the getters read the live attributes
+        self.register_introspection("trajectory_time", lambda: self.traj_time)
+        self.register_introspection("refused_trajectories", lambda: float(self.refused))
+        for j, joint in enumerate(self.joints):
+            self.register_introspection(f"{joint}.desired_position", lambda j=j: self.desired_p[j])
+            self.register_introspection(f"{joint}.desired_velocity", lambda j=j: self.desired_v[j])
         node = self.get_node()
         if node is not None:
             from trajectory_msgs.msg import JointTrajectory

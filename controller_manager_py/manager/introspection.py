@@ -8,7 +8,9 @@ statistics:
   with <field> in max, min, average, standard_deviation, sample_count, current_value.
 introspection_data:
   `state_interface.<name>`, `command_interface.<name>`, `command_interface.<name>.is_limited`
-  (for joints with limits), and `<component>.<variable>` registered by a component.
+  (for joints with limits), `<component>.<variable>` and `<controller>.<variable>` registered
+  in on_configure, `<component>.data_age` (s, async hardware) and
+  `<controller>.skipped_async_triggers` (async controllers).
 The getters read live values; they are called from the publishing timer, not the loop.
 """
 from __future__ import annotations
@@ -55,4 +57,11 @@ def introspection_entries(cm) -> List[Entry]:
             entries.append((f"command_interface.{name}.is_limited", (lambda h=handle: float(h.is_limited))))
     for comp in rm.components.values():
         entries += [(f"{comp.name}.{var}", getter) for var, getter in comp.plugin.introspection]
+        if comp.info.is_async:
+            entries.append((f"{comp.name}.data_age", lambda c=comp: c.data_age(cm.now())))
+    for spec in list(cm.controllers.values()):
+        entries += [(f"{spec.name}.{var}", getter) for var, getter in spec.c.introspection]
+        if spec.async_handler is not None or spec.c.is_async:
+            entries.append((f"{spec.name}.skipped_async_triggers",
+                            lambda s=spec: s.async_handler.skipped if s.async_handler is not None else 0.0))
     return entries

@@ -45,6 +45,7 @@ def test_statistics_and_introspection_use_ros2_control_names():
     assert intro["state_interface.elbow_joint/position"]() == pytest.approx(math.pi / 2)
     assert intro["command_interface.elbow_joint/position.is_limited"]() == 0.0
     assert "state_interface.speed_scaling/speed_scaling_factor" in intro
+    assert intro["fwd.refused_commands"]() == 0.0  # registered by the controller in on_configure
 
 
 def _controller_with(cm, rate_hz, exec_us, n=50):
