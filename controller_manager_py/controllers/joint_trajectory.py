@@ -177,6 +177,9 @@ class JointTrajectoryController(ControllerInterface):
         """Build knots from the current desired state to the goal's future waypoints."""
         self._active = goal
         self.traj_time = time - goal.stamp if goal.stamp > 0.0 else 0.0
+        if abs(self.traj_time) > 5.0:  # most likely wall-clock stamps against simulated time, or the reverse
+            self.throttle.warn("stamp", f"{self.name}: trajectory stamped {-self.traj_time:+.1f} s from now; "
+                                        "check use_sim_time (a zero stamp starts it on arrival)")
         if not goal.times:  # empty trajectory: stop here
             self._knots = []
             self.desired_v = [0.0] * len(self.joints)
