@@ -8,7 +8,8 @@ What rosbag2's MCAP storage writes, and so do we:
   `topic_type_hash`;
 - messages as the publisher's CDR bytes (a raw subscription: no decode, no re-encode), with
   log and publish time in nanoseconds since the epoch;
-- the bag folder OUT/ holding OUT_0.mcap and a rosbag2 `metadata.yaml`.
+- a metadata record `rosbag2` (`serialized_metadata`, `ROS_DISTRO`), and the bag folder
+  OUT/ holding OUT_0.mcap and a rosbag2 `metadata.yaml` (format version 8).
 """
 from __future__ import annotations
 
@@ -170,14 +171,11 @@ class Recorder:
     def total(self) -> int:
         return sum(self.counts.values())
 
-    def close(self) -> None:
-        import yaml
-
-        self.writer.finish()
-        self._stream.close()
+    def bag_info(self) -> dict:
+        """rosbag2's BagMetadata (version 8: QoS policies as integers) for what was recorded."""
         start = self.first_ns or time.time_ns()
         duration = (self.last_ns - self.first_ns) if self.first_ns else 0
-        info = {
+        return {
             "version": 8, "storage_identifier": "mcap",
             "duration": {"nanoseconds": duration}, "starting_time": {"nanoseconds_since_epoch": start},
             "message_count": self.total,
@@ -189,6 +187,19 @@ class Recorder:
                        "duration": {"nanoseconds": duration}, "message_count": self.total}],
             "custom_data": {}, "ros_distro": "jazzy",
         }
+
+    def close(self) -> None:
+        """Finish the MCAP file (with rosbag2's 'rosbag2' metadata record) and metadata.yaml."""
+        import yaml
+
+        info = self.bag_info()
+        # rosbag2's MCAP reader takes the metadata version (and so how to parse the channels'
+        # offered_qos_profiles) from this record; ros2 bag reads metadata.yaml in the folder.
+        self.writer.add_metadata("rosbag2", {
+            "serialized_metadata": yaml.safe_dump(info, sort_keys=False, width=10 ** 9),
+            "ROS_DISTRO": "jazzy"})
+        self.writer.finish()
+        self._stream.close()
         with open(os.path.join(self.folder, "metadata.yaml"), "w", encoding="utf-8") as handle:
             yaml.safe_dump({"rosbag2_bagfile_information": info}, handle, sort_keys=False, width=10 ** 9)
 

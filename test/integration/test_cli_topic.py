@@ -140,6 +140,8 @@ def test_bag_record_writes_mcap_that_decodes_to_the_published_messages(launcher,
         reader = make_reader(stream)
         assert reader.get_header().profile == "ros2"
         records = list(reader.iter_messages())
+        (rosbag2_record,) = [m for m in reader.iter_metadata() if m.name == "rosbag2"]
+    assert "version: 8" in rosbag2_record.metadata["serialized_metadata"]
     assert len(records) >= 5
     schema, channel, message = records[0]
     assert (schema.name, schema.encoding) == ("ball_tracker_msgs/msg/BallState", "ros2msg")
