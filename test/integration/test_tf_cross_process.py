@@ -60,3 +60,17 @@ def test_tf_echo_prints_the_transform_and_one_line_for_a_missing_frame(launcher,
     assert missing.returncode == 1 and missing.stdout == ""
     (line,) = missing.stderr.strip().splitlines()
     assert "[no_such_frame]" in line and "does not exist" in line
+
+
+def test_listener_with_its_own_thread_serves_lookups_that_wait(launcher, graph):
+    from ball_balance.tf.ros import Buffer, TransformListener
+
+    launcher.start(python_cmd("-c", BROADCASTER), name="tf_source")
+    buffer = Buffer()
+    listener = TransformListener(buffer, graph.node, spin_thread=True)
+    try:
+        msg = buffer.lookup_transform("base", "plate", timeout_s=30.0)  # nobody spins graph.node
+        assert msg.transform.translation.x == pytest.approx(0.5)
+        assert msg.transform.translation.z == pytest.approx(0.1)
+    finally:
+        listener.unregister()
