@@ -85,13 +85,32 @@ class ControllerManager:
             self._changed()
 
     def set_hardware_component_state(self, name: str, target: State) -> State:
+        """Drive a component through its lifecycle (executor thread). The loop skips the
+        component from the next cycle until the hooks are done, so they never run
+        concurrently with its read()/write(). Raises ResourceError."""
         with self.lock:
             if target in (State.INACTIVE, State.UNCONFIGURED, State.FINALIZED):
                 # inactive hardware still reads: only the controllers commanding it must stop
                 self._deactivate_users(name, commands_only=target == State.INACTIVE)
-            reached = self.rm.set_component_state(name, target)
+            comp = self.rm.components.get(name)
+            if comp is not None:
+                comp.transitioning = True
+                self._wait_for_cycle()
+            try:
+                reached = self.rm.set_component_state(name, target)
+            finally:
+                if comp is not None:
+                    comp.transitioning = False
             self._changed()
             return reached
+
+    def _wait_for_cycle(self, timeout: float = 1.0) -> None:
+        """With a running loop: return once the cycle in progress (if any) has finished."""
+        if not self.loop_running:
+            return
+        start, deadline = self._cycle, _time.monotonic() + timeout
+        while self._cycle == start and self.loop_running and _time.monotonic() < deadline:
+            _time.sleep(0.0005)
 
     def _deactivate_users(self, component: str, commands_only: bool) -> None:
         users = self._users_of(component, commands_only)

@@ -39,6 +39,7 @@ class Component:
         self.read_stats, self.write_stats = PeriodicityStats(), PeriodicityStats()
         self.async_handler: Optional[AsyncHandler] = None
         self.read_errors = self.write_errors = 0
+        self.transitioning = False  # a lifecycle transition runs in the executor: the loop leaves it alone
         self._last_read = self._last_write = None
 
     @property
@@ -255,7 +256,7 @@ class ResourceManager:
         """Read every inactive/active component due this cycle; append failing names to `failed`."""
         for comp in self.components.values():
             state = comp.state
-            if (state != State.ACTIVE and state != State.INACTIVE) or cycle % comp.divisor:
+            if (state != State.ACTIVE and state != State.INACTIVE) or cycle % comp.divisor or comp.transitioning:
                 continue
             handler = comp.async_handler
             try:
@@ -273,7 +274,7 @@ class ResourceManager:
     def write(self, time: float, period: float, cycle: int, failed: List[str]) -> None:
         for comp in self.components.values():
             if (comp.state != State.ACTIVE or comp.async_handler is not None or cycle % comp.divisor
-                    or comp.kind == "sensor"):
+                    or comp.kind == "sensor" or comp.transitioning):
                 continue
             try:
                 result = comp.write_once(time, period * comp.divisor)
