@@ -178,9 +178,11 @@ def cmd_pub(args) -> int:
         publisher = session.node.create_publisher(msg_cls, topic, qos)
         wanted = type_name_of(msg_cls)
 
+        def other_types() -> list:  # types other endpoints use on this topic (ours is `wanted`)
+            return [t for t in session.topic_types().get(topic, []) if t != wanted]
+
         def graph_type_conflict() -> bool:
-            known = session.topic_types().get(topic, [])
-            return bool(known) and wanted not in known
+            return bool(other_types())
 
         def ready() -> bool:
             return graph_type_conflict() or publisher.get_subscription_count() >= wait_count
@@ -189,8 +191,7 @@ def cmd_pub(args) -> int:
         if not wait_count:
             session.spin_until(graph_type_conflict, 0.3)
         if graph_type_conflict():
-            known = ", ".join(session.topic_types()[topic])
-            raise CliError(f"topic '{topic}' has type {known} on the graph, not {wanted}")
+            raise CliError(f"topic '{topic}' has type {', '.join(other_types())} on the graph, not {wanted}")
         print("publisher: beginning loop")
         count, period = 0, 1.0 / args.rate if args.rate > 0 else 0.0
         next_time = time.monotonic()

@@ -82,6 +82,12 @@ def test_topic_pub_reaches_a_subscriber_in_another_process(launcher, graph):
     assert msg.data == "hello from ros2py"
 
 
+def test_topic_pub_with_a_type_other_than_the_graph_shows_is_refused(launcher, ball_state_source):
+    one_line_error(ros2py(launcher, "topic", "pub", "/ball_state", "std_msgs/msg/String", "{data: x}", "--once",
+                          "--max-wait-time-secs", "20"),
+                   "'/ball_state' has type ball_tracker_msgs/msg/BallState on the graph, not std_msgs/msg/String")
+
+
 def test_param_get_set_dump_through_the_node_services(launcher, ball_state_source):
     assert ros2py(launcher, "param", "get", "ball_state_source", "gain").stdout == "Double value is: 0.5\n"
     assert ros2py(launcher, "param", "set", "/ball_state_source", "gain", "0.75").stdout == \
