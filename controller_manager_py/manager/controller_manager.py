@@ -247,7 +247,7 @@ class ControllerManager:
                 return plan
             if not self.loop_running:
                 self._apply(plan, same_cycle=True)
-                return plan
+                return self._check_activated(plan, strictness)
             self._switch_done.clear()
             self._pending = plan
             deadline = _time.monotonic() + timeout if timeout > 0 else None
@@ -262,7 +262,17 @@ class ControllerManager:
                         raise switching.SwitchError(
                             f"switch not performed within {timeout:g} s (loop busy or stopped)")
                 # picked up: the loop finishes it within a cycle or two
-            return plan
+            return self._check_activated(plan, strictness)
+
+    def _check_activated(self, plan: switching.SwitchPlan, strictness: int) -> switching.SwitchPlan:
+        """A controller whose on_activate failed (it stays inactive) fails a STRICT switch."""
+        failed = [s.name for s in plan.activate if s.state != State.ACTIVE]
+        if failed:
+            message = f"controller(s) {failed} failed to activate (on_activate failed; see the log)"
+            if strictness != switching.BEST_EFFORT and strictness:
+                raise switching.SwitchError(message)
+            plan.messages.append(message)
+        return plan
 
     def _apply(self, plan: switching.SwitchPlan, same_cycle: bool) -> None:
         switching.apply_deactivations(self, plan)
@@ -329,14 +339,18 @@ class ControllerManager:
             with self._handoff:
                 plan, self._pending = self._pending, None
         if plan is not None:
-            self._apply(plan, same_cycle=False)
-            if self._pending_activations is None:
-                self._switch_done.set()
+            try:
+                self._apply(plan, same_cycle=False)
+            finally:
+                if self._pending_activations is None:
+                    self._switch_done.set()
         elif self._pending_activations is not None:
             plan, self._pending_activations = self._pending_activations, None
-            switching.apply_activations(self, plan)
-            self._reorder()
-            self._switch_done.set()  # the caller returns once activations are done too
+            try:
+                switching.apply_activations(self, plan)
+                self._reorder()
+            finally:
+                self._switch_done.set()  # the caller returns once activations are done too
         failed = self._failed
         self.rm.read(time, period, self._cycle, failed)
         if failed:

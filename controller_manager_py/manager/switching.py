@@ -162,6 +162,11 @@ def deactivate(cm: ControllerManager, spec: ControllerSpec) -> None:
         spec.c.on_deactivate(State.ACTIVE)
     except Exception as error:  # noqa: BLE001 - deactivation proceeds anyway
         cm.logger.error(f"controller '{spec.name}': on_deactivate raised {error!r}")
+    _release(cm, spec)
+
+
+def _release(cm: ControllerManager, spec: ControllerSpec) -> None:
+    """Give back the loaned interfaces; a chained controller nobody feeds leaves chained mode."""
     for itf in spec.claimed:
         cm.rm.release(itf, spec.name)
         owner = cm.controllers.get(cm.rm.interface_owner.get(itf, ""))
@@ -176,16 +181,17 @@ def deactivate(cm: ControllerManager, spec: ControllerSpec) -> None:
 def activate(cm: ControllerManager, spec: ControllerSpec) -> bool:
     """Loop thread: inactive -> active with its interfaces loaned. False (and rolled back) on failure."""
     rm = cm.rm
+    spec.claimed = []
     try:
-        handles = [rm.claim(itf, spec.name) for itf in spec.command_names]
-    except ResourceError as error:
         for itf in spec.command_names:
-            rm.release(itf, spec.name)
-        cm.logger.error(f"controller '{spec.name}': {error}")
+            rm.claim(itf, spec.name)
+            spec.claimed.append(itf)
+        spec.c.command_interfaces = [rm.command_interfaces[i] for i in spec.command_names]
+        spec.c.state_interfaces = [rm.state_interfaces[i] for i in spec.state_names]
+    except (ResourceError, KeyError) as error:
+        cm.logger.error(f"controller '{spec.name}': cannot take its interfaces: {error}")
+        _release(cm, spec)
         return False
-    spec.claimed = list(spec.command_names)
-    spec.c.command_interfaces = handles
-    spec.c.state_interfaces = [rm.state_interfaces[i] for i in spec.state_names]
     for itf in spec.command_names:
         owner = cm.controllers.get(rm.interface_owner.get(itf, ""))
         if owner is not None:
@@ -197,8 +203,7 @@ def activate(cm: ControllerManager, spec: ControllerSpec) -> bool:
         result = CallbackReturn.ERROR
     if result != CallbackReturn.SUCCESS:
         cm.logger.error(f"controller '{spec.name}': on_activate failed; stays inactive")
-        spec.state = State.ACTIVE  # so deactivate() releases what was taken
-        deactivate(cm, spec)
+        _release(cm, spec)
         return False
     spec.state = State.ACTIVE
     spec.start(spec.c.is_async, cm.now)

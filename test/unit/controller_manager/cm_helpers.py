@@ -94,3 +94,10 @@ class BlockingSystem(SystemInterface):
         import time as _time
         _time.sleep(0.01)
         return return_type.OK
+
+
+class RefusingController(CountingController):
+    """on_activate fails (e.g. the device reports a fault)."""
+
+    def on_activate(self, previous_state):
+        return CallbackReturn.FAILURE

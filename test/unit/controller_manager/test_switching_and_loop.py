@@ -139,3 +139,14 @@ def test_switch_with_a_running_loop_is_applied_between_cycles():
         assert cm.controllers["c"].c.calls >= 5
     finally:
         loop.stop()
+
+
+def test_failed_activation_releases_claims_and_fails_a_strict_switch():
+    cm = make_manager()
+    spawn(cm, "r", "cm_helpers:RefusingController", activate=False)
+    cm.controllers["r"].command_names = ["elbow_joint/position"]  # as if it asked for the elbow
+    with pytest.raises(SwitchError, match=r"\['r'\] failed to activate"):
+        cm.switch_controller(["r"], [], STRICT)
+    assert cm.controllers["r"].state == State.INACTIVE and cm.rm.claimed == {}
+    plan = cm.switch_controller(["r"], [], BEST_EFFORT)
+    assert "failed to activate" in plan.messages[-1]
