@@ -5,7 +5,8 @@ accumulate. When a cycle ends after the next deadline the missed periods are cou
 `overruns` / `skipped_periods`, the schedule restarts from now, and one throttled
 warning says how many (ros2_control logs every one). With
 `expect_blocking_read_write` the hardware's blocking read sets the pace: no sleep, only
-`minimum_cycle_time` (s) between cycle starts. The time given to the cycle is the
+`minimum_cycle_time` (s) between cycle starts (0: a tenth of the nominal period, so a read
+that does not block after all cannot make a real-time thread spin at full speed). The time given to the cycle is the
 manager's clock (`cm.now()`: simulated when a component provides the clock); the period
 is the difference of two such times (the nominal period for the first cycle).
 
@@ -78,13 +79,12 @@ class ControlLoop:
                 previous = now
                 self.cycles += 1
                 if self.blocking:
-                    if self.minimum_cycle_time > 0.0:
-                        next_deadline += self.minimum_cycle_time
-                        delay = next_deadline - monotonic()
-                        if delay > 0:
-                            sleep(delay)
-                        else:
-                            next_deadline = monotonic()
+                    next_deadline += self.minimum_cycle_time or 0.1 * period
+                    delay = next_deadline - monotonic()
+                    if delay > 0:
+                        sleep(delay)
+                    else:
+                        next_deadline = monotonic()
                     continue
                 next_deadline += period
                 delay = next_deadline - monotonic()
