@@ -114,3 +114,27 @@ def test_ur_scaled_controller_reads_speed_scaling_by_default():
     jtc.on_trajectory(trajectory([(0.5, offset(0.1))]))
     run(cm, 100)
     assert jtc.traj_time == 0.0 and jtc.desired_p == pytest.approx(HOME)
+
+
+def test_joint_order_of_the_message_does_not_matter_and_an_empty_trajectory_stops():
+    cm = make_manager(rate=100)
+    jtc = spawn(cm, "jtc", JTC, {"joints": JOINTS})
+    goal = offset(0.1)
+    reversed_msg = trajectory([(0.2, goal[::-1])], joints=JOINTS[::-1])
+    assert jtc.on_trajectory(reversed_msg)
+    t = run(cm, 30)
+    assert jtc.desired_p == pytest.approx(goal)
+    jtc.on_trajectory(trajectory([(1.0, offset(0.3))]))
+    t = run(cm, 20, start=t)
+    moving = list(jtc.desired_p)
+    assert jtc.on_trajectory(JointTrajectory(joint_names=list(JOINTS)))  # no points: stop here
+    run(cm, 20, start=t)
+    assert jtc.desired_p == pytest.approx(moving, abs=0.02) and jtc.desired_v == [0.0] * 6
+
+
+def test_partial_goal_holds_the_other_joints_when_allowed():
+    cm = make_manager(rate=100)
+    jtc = spawn(cm, "jtc", JTC, {"joints": JOINTS, "allow_partial_joints_goal": True})
+    assert jtc.on_trajectory(trajectory([(0.2, [0.3])], joints=["elbow_joint"]))
+    run(cm, 30)
+    assert jtc.desired_p == pytest.approx(HOME[:2] + [0.3] + HOME[3:])
