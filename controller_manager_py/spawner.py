@@ -4,15 +4,26 @@ Same command line as ros2_control's spawner (the common options):
     spawner joint_state_broadcaster forward_position_controller [-c /controller_manager]
             [--inactive | --activate] [--load-only] [-t TYPE] [-p PARAM_FILE]
             [--activate-as-group] [--controller-manager-timeout S] [--switch-timeout S]
+            [-u | --unload-on-kill]
 Exits 0 when every controller reached the requested state, 1 otherwise (one line why).
+With --unload-on-kill it then waits; Ctrl-C/SIGTERM deactivates and unloads them.
 """
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import time
 
 import rclpy
-from controller_manager_msgs.srv import ConfigureController, ListControllers, LoadController, SwitchController
+import rclpy.signals
+from controller_manager_msgs.srv import (
+    ConfigureController,
+    ListControllers,
+    LoadController,
+    SwitchController,
+    UnloadController,
+)
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 
@@ -32,6 +43,8 @@ def parse_args(argv):
     state.add_argument("--inactive", action="store_true", help="configure but leave inactive")
     state.add_argument("--activate", action="store_true", help="configure and activate (the default)")
     parser.add_argument("--activate-as-group", action="store_true", help="activate all in one switch")
+    parser.add_argument("-u", "--unload-on-kill", action="store_true",
+                        help="wait until killed, then deactivate and unload the controllers")
     parser.add_argument("--controller-manager-timeout", type=float, default=10.0)
     parser.add_argument("--switch-timeout", type=float, default=5.0)
     parser.add_argument("--service-call-timeout", type=float, default=10.0)
@@ -112,15 +125,37 @@ class Spawner:
             self.switch(to_activate)
             print(f"[spawner] configured and activated {', '.join(to_activate)}")
 
+    def unload(self) -> None:
+        """Deactivate (best effort) and unload this spawner's controllers."""
+        names = list(self.args.controller_names)
+        request = SwitchController.Request(deactivate_controllers=[n for n, s in self.loaded().items()
+                                                                   if n in names and s == "active"],
+                                           strictness=SwitchController.Request.BEST_EFFORT)
+        if request.deactivate_controllers:
+            self.call(SwitchController, "switch_controller", request, self.args.switch_timeout + 5.0)
+        for name in names:
+            self.call(UnloadController, "unload_controller", UnloadController.Request(name=name),
+                      self.args.controller_manager_timeout)
+        print(f"[spawner] deactivated and unloaded {', '.join(names)}")
+
 
 def main(args=None):
     argv = rclpy.utilities.remove_ros_args(args if args is not None else sys.argv)[1:]
     options = parse_args(argv)
-    rclpy.init(args=args)
+    # no rclpy signal handler: Ctrl-C must leave the context usable for --unload-on-kill
+    rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
     node = rclpy.create_node("spawner_" + options.controller_names[0].replace("/", "_"))
     code = 0
+    spawner = Spawner(node, options)
     try:
-        Spawner(node, options).run()
+        spawner.run()
+        if options.unload_on_kill:
+            try:
+                while True:
+                    time.sleep(1.0)
+            except KeyboardInterrupt:
+                spawner.unload()
     except SpawnError as error:
         print(f"spawner: {error}", file=sys.stderr)
         code = 1
@@ -130,6 +165,10 @@ def main(args=None):
         node.destroy_node()
         rclpy.try_shutdown()
     sys.exit(code)
+
+
+def _raise_keyboard_interrupt(signum, frame):
+    raise KeyboardInterrupt
 
 
 if __name__ == "__main__":

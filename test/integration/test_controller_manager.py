@@ -1,5 +1,7 @@
 """ros2_control_node as a real process over DDS: services, topics, switching, spawner."""
 import math
+import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -154,6 +156,13 @@ def test_description_from_topic_and_the_spawner(launcher, graph, tmp_path):
                         "-p", str(params), "--inactive"], timeout=30)
     assert run.returncode == 0, run.stderr
     assert list(controllers(graph)["fwd2"].required_command_interfaces) == ["elbow_joint/position"]
+    # --unload-on-kill: the controller lives as long as the spawner
+    spawner = launcher.start([executable("spawner"), "jsb_tmp", "-t", "joint_state_broadcaster/JointStateBroadcaster",
+                              "--unload-on-kill"], name="spawner_u")
+    graph.spin_until(lambda: getattr(controllers(graph).get("jsb_tmp"), "state", "") == "active", 20, "jsb_tmp")
+    os.killpg(spawner.popen.pid, signal.SIGINT)
+    assert spawner.wait(timeout=20) == 0, spawner.output()
+    assert "jsb_tmp" not in controllers(graph)
     run = launcher.run([executable("spawner"), "nonexistent_controller"], timeout=30)
     assert run.returncode == 1 and "failed loading controller 'nonexistent_controller'" in run.stderr
 
