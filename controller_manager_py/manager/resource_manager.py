@@ -19,6 +19,7 @@ from ..plugins import HARDWARE_GROUP, PluginError, load_class
 from .async_handler import AsyncHandler
 from .joint_limits import JointLimiter
 from .statistics import PeriodicityStats
+from .throttle import Throttle
 
 
 class ResourceError(RuntimeError):
@@ -89,6 +90,7 @@ class ResourceManager:
     def __init__(self, components: List[Component], logger=None, clock=None):
         self.components: Dict[str, Component] = {c.name: c for c in components}
         self.logger = logger or logging.getLogger("resource_manager")
+        self.throttle = Throttle(self.logger)
         self.state_interfaces: Dict[str, StateInterface] = {}
         self.command_interfaces: Dict[str, CommandInterface] = {}
         self.interface_owner: Dict[str, str] = {}  # interface -> component or controller
@@ -261,7 +263,11 @@ class ResourceManager:
             handler = comp.async_handler
             try:
                 if handler is not None:
+                    skipped = handler.skipped
                     result = handler.trigger(time, period * comp.divisor)
+                    if handler.skipped != skipped and comp.info.async_params.print_warnings:
+                        self.throttle.warn(f"{comp.name}.async", f"hardware '{comp.name}': its async read/write "
+                                           f"is still running; cycle skipped ({handler.skipped} so far)")
                 else:
                     result = comp.read_once(time, period * comp.divisor)
             except Exception as error:  # noqa: BLE001 - a component bug is a read error
