@@ -74,8 +74,9 @@ def test_services_commands_switching_and_numbers_over_dds(launcher, graph):
         return all(math.isclose(a, b, abs_tol=1e-9) for a, b in zip(msg.position, TARGET))
     graph.collect(JointState, "/joint_states", predicate=arrived, timeout=10)
     publisher.publish(Float64MultiArray(data=[1.0, 2.0]))  # wrong length: refused, nothing moves
-    (msg,) = graph.collect(JointState, "/joint_states", count=1)
-    assert list(msg.position) == pytest.approx(TARGET)
+    publisher.publish(Float64MultiArray(data=[math.nan] + TARGET[1:]))  # non-finite: refused
+    later = graph.collect(JointState, "/joint_states", count=100)  # ~0.2 s: the commands have arrived
+    assert all(list(m.position) == pytest.approx(TARGET) for m in later)
 
     # claiming conflict (STRICT) changes nothing; a swap in one switch works
     assert not switch(graph, activate=["scaled_joint_trajectory_controller"])
@@ -89,10 +90,17 @@ def test_services_commands_switching_and_numbers_over_dds(launcher, graph):
     goal = [0.0, -1.5, 1.5, -1.5, 1.5, 0.0]
     trajectory = JointTrajectory(joint_names=list(JOINTS))
     trajectory.points.append(JointTrajectoryPoint(positions=goal, time_from_start=Duration(nanosec=300_000_000)))
-    graph.node.create_publisher(JointTrajectory, "/scaled_joint_trajectory_controller/joint_trajectory",
-                                10).publish(trajectory)
+    trajectories = graph.node.create_publisher(JointTrajectory, "/scaled_joint_trajectory_controller/joint_trajectory",
+                                               10)
+    graph.spin_until(lambda: trajectories.get_subscription_count() > 0, 10, "the trajectory subscription")
+    trajectories.publish(trajectory)
     graph.collect(JointState, "/joint_states", timeout=10,
                   predicate=lambda m: list(m.position) == pytest.approx(goal, abs=1e-9))
+    bad = JointTrajectory(joint_names=list(JOINTS[:5]) + ["knee_joint"])  # unknown joint: refused
+    bad.points.append(JointTrajectoryPoint(positions=TARGET, time_from_start=Duration(nanosec=100_000_000)))
+    trajectories.publish(bad)
+    later = graph.collect(JointState, "/joint_states", count=100)
+    assert all(list(m.position) == pytest.approx(goal, abs=1e-9) for m in later)
     assert switch(graph, activate=["ghost", "forward_position_controller"],
                   deactivate=["scaled_joint_trajectory_controller"], strictness=SwitchController.Request.BEST_EFFORT)
 
