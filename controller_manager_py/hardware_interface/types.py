@@ -81,6 +81,11 @@ class JointLimits:
     max_position: float = float("inf")
     max_velocity: float = float("inf")
     max_effort: float = float("inf")
+    disabled: frozenset = frozenset()
+    """Command interfaces excluded by `<limits enable="false"/>` (on the joint: all of them)."""
+
+    def enforced(self, interface: str) -> bool:
+        return "*" not in self.disabled and interface not in self.disabled
 
     @property
     def has_position_limits(self) -> bool:

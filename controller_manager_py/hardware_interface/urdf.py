@@ -5,13 +5,15 @@ Follows ros2_control's component_parser: `<ros2_control name type is_async rw_ra
 `<joint>`/`<sensor>`/`<gpio>` with `<command_interface>`/`<state_interface>` whose `<param>`
 children `min`, `max`, `initial_value` are understood. Joint limits come from the URDF
 `<joint><limit lower upper velocity effort/>` (continuous joints have no position limits),
-narrowed by the command interface min/max params. Any problem raises DescriptionError with
+narrowed by the command interface min/max params; `<limits enable="false"/>` in a joint or
+one of its command interfaces turns enforcement off there, as in ros2_control. Any problem raises DescriptionError with
 one line naming the offending element.
 """
 from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 from typing import Dict, List
 
 from .types import AsyncParams, ComponentInfo, HardwareInfo, InterfaceInfo, JointLimits
@@ -70,11 +72,14 @@ def _parse_block(block: ET.Element, urdf_limits: Dict[str, JointLimits]) -> Hard
         if info.async_params.scheduling_policy not in ("synchronized", "detached"):
             raise DescriptionError(f"<ros2_control name='{name}'>: scheduling_policy must be "
                                    f"synchronized or detached, got {info.async_params.scheduling_policy!r}")
+    disabled: Dict[str, List[str]] = {}  # joint -> interfaces with <limits enable="false"/> ("*": all)
     for tag, target in (("joint", info.joints), ("sensor", info.sensors), ("gpio", info.gpios)):
         for element in block.findall(tag):
             target.append(_component(element, tag, name))
+            if tag == "joint":
+                disabled[element.get("name")] = _limits_disabled(element)
     for joint in info.joints:
-        limits = urdf_limits.get(joint.name, JointLimits())
+        limits = replace(urdf_limits.get(joint.name, JointLimits()), disabled=frozenset(disabled.get(joint.name, ())))
         for itf in joint.command_interfaces:
             if itf.name == "position":
                 if itf.min is not None:
@@ -85,6 +90,15 @@ def _parse_block(block: ET.Element, urdf_limits: Dict[str, JointLimits]) -> Hard
                 limits.max_velocity = min(limits.max_velocity, abs(itf.max))
         info.limits[joint.name] = limits
     return info
+
+
+def _limits_disabled(joint: ET.Element) -> List[str]:
+    """ros2_control's `<limits enable="false"/>` on a joint ("*") or on its command interfaces."""
+    def off(element) -> bool:
+        limits = element.find("limits")
+        return limits is not None and limits.get("enable", "true").strip().lower() in ("false", "0")
+    names = ["*"] if off(joint) else []
+    return names + [itf.get("name", "") for itf in joint.findall("command_interface") if off(itf)]
 
 
 def _component(element: ET.Element, tag: str, block: str) -> ComponentInfo:

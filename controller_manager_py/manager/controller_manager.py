@@ -69,13 +69,16 @@ class ControllerManager:
 
     # ---- hardware -----------------------------------------------------------------------
     def load_robot_description(self, urdf: str, node=None,
-                               initial_states: Optional[Mapping[str, State]] = None) -> None:
+                               initial_states: Optional[Mapping[str, State]] = None,
+                               enforce_command_limits: bool = True) -> None:
         """Load hardware from a URDF; components are activated unless `initial_states` says
-        otherwise (ros2_control's hardware_components_initial_state). Raises ResourceError."""
+        otherwise (ros2_control's hardware_components_initial_state). enforce_command_limits:
+        ros2_control's switch for the joint limits stage. Raises ResourceError."""
         with self.lock:
             if self.rm.components:
                 raise ControllerError("a robot description is already loaded")
-            rm = ResourceManager.from_description(urdf, self.update_rate, node, self.logger)
+            rm = ResourceManager.from_description(urdf, self.update_rate, node, self.logger,
+                                                  enforce_command_limits)
             rm._clock = self.now
             self.rm = rm
             for name in rm.components:

@@ -33,10 +33,10 @@ class JointLimiter:
         self._velocities: List[tuple] = []
         for joint, lim in limits.items():
             pos = commands.get(f"{joint}/position")
-            if pos is not None and (lim.has_position_limits or lim.has_velocity_limits):
+            if pos is not None and (lim.has_position_limits or lim.has_velocity_limits) and lim.enforced("position"):
                 self._positions.append(_PositionLimit(pos, states.get(f"{joint}/position"), lim))
             vel = commands.get(f"{joint}/velocity")
-            if vel is not None and lim.has_velocity_limits:
+            if vel is not None and lim.has_velocity_limits and lim.enforced("velocity"):
                 self._velocities.append((vel, lim.max_velocity))
 
     def limited_names(self) -> List[str]:

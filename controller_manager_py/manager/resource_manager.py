@@ -29,11 +29,13 @@ class ResourceError(RuntimeError):
 class Component:
     """One loaded hardware component and the manager's bookkeeping around it."""
 
-    def __init__(self, info: HardwareInfo, plugin: HardwareComponentInterface, manager_rate: int):
+    def __init__(self, info: HardwareInfo, plugin: HardwareComponentInterface, manager_rate: int,
+                 enforce_command_limits: bool = True):
         self.info, self.plugin = info, plugin
         self.name = info.name
         self.state = State.UNCONFIGURED
-        self.limiter = JointLimiter(info.limits, plugin.command_handles, plugin.state_handles)
+        self.limiter = JointLimiter(info.limits if enforce_command_limits else {}, plugin.command_handles,
+                                    plugin.state_handles)
         rate = info.rw_rate if 0 < info.rw_rate <= manager_rate else manager_rate
         self.divisor = max(1, round(manager_rate / rate)) if rate else 1
         self.rw_rate = manager_rate // self.divisor if manager_rate else 0
@@ -115,7 +117,8 @@ class ResourceManager:
         self.interface_owner[name] = owner
 
     @classmethod
-    def from_description(cls, urdf: str, manager_rate: int, node=None, logger=None) -> ResourceManager:
+    def from_description(cls, urdf: str, manager_rate: int, node=None, logger=None,
+                         enforce_command_limits: bool = True) -> ResourceManager:
         logger = logger or logging.getLogger("resource_manager")
         try:
             infos = parse_control_resources(urdf)
@@ -139,7 +142,7 @@ class ResourceManager:
                 used = manager_rate // max(1, round(manager_rate / info.rw_rate))
                 logger.warning(f"hardware '{info.name}': rw_rate {info.rw_rate} Hz is not a divisor of "
                                f"{manager_rate} Hz; using {used} Hz")
-            components.append(Component(info, plugin, manager_rate))
+            components.append(Component(info, plugin, manager_rate, enforce_command_limits))
         return cls(components, logger)
 
     # ---- availability and claiming ---------------------------------------------------------

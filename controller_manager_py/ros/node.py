@@ -53,6 +53,7 @@ SCHEMA = (
           "hardware read() blocks and sets the pace: the loop does not sleep"),
     Param("hardware_synchronization.minimum_cycle_time", 0.0, "with blocking read/write: least time per cycle",
           unit="s", min=0.0),
+    Param("enforce_command_limits", True, "clamp commands to the URDF joint limits before write()"),
     Param("activate_controllers", _NONE, "controllers loaded, configured and activated at start (in order)"),
     Param("inactive_controllers", _NONE, "controllers loaded and configured at start"),
     Param("statistics.publish_rate", 20.0, "rate of ~/statistics and ~/introspection_data", unit="Hz",
@@ -135,7 +136,8 @@ class ControllerManagerNode(Node):
 
     def _load_hardware(self, urdf: str, at_startup: bool) -> bool:
         try:
-            self.cm.load_robot_description(urdf, node=self, initial_states=self._initial_states())
+            self.cm.load_robot_description(urdf, node=self, initial_states=self._initial_states(),
+                                           enforce_command_limits=self.params["enforce_command_limits"])
         except (ResourceError, ControllerError) as error:
             if at_startup:  # run_node prints it as one line and exits non-zero
                 raise ParameterError(f"robot description: {error}") from None

@@ -5,7 +5,7 @@ import pytest
 from cm_helpers import HOME, JOINTS, make_manager, positions, run, spawn
 
 from controller_manager_py.hardware_interface import State
-from controller_manager_py.manager.controller_manager import ControllerError
+from controller_manager_py.manager.controller_manager import ControllerError, ControllerManager
 
 FORWARD = "position_controllers/JointGroupPositionController"
 JSB = "joint_state_broadcaster/JointStateBroadcaster"
@@ -100,3 +100,24 @@ def test_joint_limits_clamp_position_and_rate_and_flag_is_limited():
     run(cm, 1000)
     assert elbow.value == pytest.approx(math.pi)  # URDF upper limit
     assert not cm.rm.command_interfaces["shoulder_pan_joint/position"].is_limited
+
+
+def test_limits_can_be_switched_off_per_joint_or_globally():
+    from cm_helpers import MOCK_UR
+
+    tag = '<joint name="elbow_joint">\n'
+    urdf = MOCK_UR.replace(tag, tag + '      <limits enable="false"/>\n')
+    assert '<limits enable="false"/>' in urdf
+    for cm in (make_manager(urdf=urdf), make_manager_without_limits()):
+        fwd = spawn(cm, "fwd", FORWARD, {"joints": JOINTS})
+        fwd.slot.offer([0.0, -1.5707963267948966, 5.0, -1.5707963267948966, 1.5707963267948966, 0.0])
+        run(cm, 1)
+        assert cm.rm.command_interfaces["elbow_joint/position"].value == 5.0
+
+
+def make_manager_without_limits():
+    from cm_helpers import MOCK_UR
+
+    cm = ControllerManager(500)
+    cm.load_robot_description(MOCK_UR, enforce_command_limits=False)
+    return cm
