@@ -1,7 +1,8 @@
 """joint_state_broadcaster/JointStateBroadcaster: joint states -> /joint_states.
 
-Parameters: `joints` (empty: every joint with a position/velocity/effort state) and
-`interfaces` (default position, velocity, effort); `use_local_topics` publishes on
+Parameters: `joints` (empty: every joint with a position/velocity/effort state; else these,
+in this order) and `interfaces` (default position, velocity, effort: those a joint has are
+published); `use_local_topics` publishes on
 `~/joint_states` instead. The message is built once at activation; update() only copies
 the values into its arrays and publishes (a joint without an interface reports NaN, as
 ros2_control does). The stamp is the manager's time (simulated when hardware owns the clock).
@@ -40,14 +41,17 @@ class JointStateBroadcaster(ControllerInterface):
         return CallbackReturn.SUCCESS
 
     def state_interface_configuration(self) -> InterfaceConfiguration:
-        if self.joints:
-            return InterfaceConfiguration(interface_configuration_type.INDIVIDUAL,
-                                          [f"{j}/{i}" for j in self.joints for i in self.interfaces])
-        return InterfaceConfiguration(interface_configuration_type.ALL)
+        return InterfaceConfiguration(interface_configuration_type.ALL)  # filtered at activation
 
     def on_activate(self, previous_state: State) -> CallbackReturn:
-        handles = [h for h in self.state_interfaces if h.interface_name in self.interfaces]
-        names = list(dict.fromkeys(h.prefix_name for h in handles))
+        handles = [h for h in self.state_interfaces if h.interface_name in self.interfaces
+                   and (not self.joints or h.prefix_name in self.joints)]
+        present = {h.prefix_name for h in handles}
+        missing = [j for j in self.joints if j not in present]
+        if missing:
+            self.get_logger().error(f"{self.name}: joints {missing} have none of the interfaces {self.interfaces}")
+            return CallbackReturn.ERROR
+        names = [j for j in self.joints] if self.joints else list(dict.fromkeys(h.prefix_name for h in handles))
         nan = float("nan")
         msg = self.msg
         msg.name = names

@@ -121,3 +121,11 @@ def make_manager_without_limits():
     cm = ControllerManager(500)
     cm.load_robot_description(MOCK_UR, enforce_command_limits=False)
     return cm
+
+
+def test_joint_state_broadcaster_with_listed_joints_publishes_those_in_order():
+    cm = make_manager()
+    jsb = spawn(cm, "jsb", JSB, {"joints": ["elbow_joint", "shoulder_pan_joint"]})
+    run(cm, 1)
+    assert list(jsb.msg.name) == ["elbow_joint", "shoulder_pan_joint"]
+    assert list(jsb.msg.position) == [HOME[2], HOME[0]]
