@@ -157,13 +157,19 @@ class ControllerManagerNode(Node):
 
     # ---- controller nodes ------------------------------------------------------------------
     def _make_controller_node(self, name: str):
-        cli_args = None
+        """The controller's own node. Like ros2_control, it does not take the manager's global
+        command line as is (a `-r __node:=...` or `-p` meant for the manager would hit every
+        controller): it gets the manager's --params-file files and remaps (node renames left
+        out), the manager's use_sim_time, and `<name>.params_file` when set."""
         params_file = self.cm.controller_config.get(name, {}).get("params_file")
         if self.has_parameter(f"{name}.params_file"):
             params_file = self.get_parameter(f"{name}.params_file").value
+        use_sim_time = bool(self.get_parameter("use_sim_time").value)
+        cli_args = ["--ros-args", *forwarded_ros_args(sys.argv), "-p", f"use_sim_time:={str(use_sim_time).lower()}"]
         if params_file:
-            cli_args = ["--ros-args", "--params-file", str(params_file)]
-        node = rclpy.create_node(name, namespace=self.get_namespace(), context=self.context, cli_args=cli_args)
+            cli_args += ["--params-file", str(params_file)]
+        node = rclpy.create_node(name, namespace=self.get_namespace(), context=self.context, cli_args=cli_args,
+                                 use_global_arguments=False)
         if self.executor is not None:
             self.executor.add_node(node)
         else:
@@ -258,3 +264,23 @@ class ControllerManagerNode(Node):
         except Exception as error:  # noqa: BLE001 - best effort at exit
             self.get_logger().error(f"shutdown: {error!r}")
         return super().destroy_node()
+
+
+def forwarded_ros_args(argv) -> list:
+    """From the manager's command line: the --params-file files, remaps (except node renames)
+    and the log level, for a controller's node."""
+    out, inside, i = [], False, 0
+    while i < len(argv):
+        token = argv[i]
+        if token == "--ros-args":
+            inside = True
+        elif token == "--":
+            inside = False
+        elif inside and token in ("--params-file", "-r", "--remap", "--log-level") and i + 1 < len(argv):
+            value = argv[i + 1]
+            rename = token in ("-r", "--remap") and ("__node:=" in value or "__name:=" in value)
+            if not rename:
+                out += [token, value]
+            i += 1
+        i += 1
+    return out
