@@ -194,3 +194,36 @@ def cmd_unload_controller(args) -> int:
                                           "unloading")
     print(f"Successfully unloaded controller {args.controller_name}")
     return 0
+
+
+def cmd_list_controller_types(args) -> int:
+    with Session(args.spin_time) as session:
+        response = _manager(args, session).call("list_controller_types", "ListControllerTypes")
+    for type_name, base_class in zip(response.types, response.base_classes, strict=False):
+        print(f"{type_name:70s} {base_class}")
+    return 0
+
+
+def cmd_configure_controller(args) -> int:
+    with Session(args.spin_time) as session:
+        _manager(args, session).expect_ok("configure_controller", "ConfigureController", args.controller_name,
+                                          "configuring")
+    print(f"Successfully configured {args.controller_name}")
+    return 0
+
+
+_HARDWARE_STATES = {"unconfigured": UNCONFIGURED, "inactive": INACTIVE, "active": ACTIVE}
+
+
+def cmd_set_hardware_component_state(args) -> int:
+    from lifecycle_msgs.msg import State
+
+    target = State(id=_HARDWARE_STATES[args.state], label=args.state)
+    with Session(args.spin_time) as session:
+        response = _manager(args, session).call("set_hardware_component_state", "SetHardwareComponentState",
+                                                name=args.hardware_component_name, target_state=target)
+    if not response.ok:
+        raise CliError(f"Error setting hardware component {args.hardware_component_name} to {args.state} "
+                       f"(it is {response.state.label or 'unknown'}), check controller_manager logs")
+    print(f"Successfully set {args.hardware_component_name} to state {response.state.label or args.state}")
+    return 0

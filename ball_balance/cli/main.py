@@ -184,6 +184,13 @@ def _control_parsers(sub) -> None:
     p.add_argument("state", choices=["inactive", "active"])
     p = verb("unload_controller", "cmd_unload_controller", "unload a controller")
     p.add_argument("controller_name")
+    verb("list_controller_types", "cmd_list_controller_types", "output the available controller types")
+    p = verb("configure_controller", "cmd_configure_controller", "configure a loaded controller")
+    p.add_argument("controller_name")
+    p = verb("set_hardware_component_state", "cmd_set_hardware_component_state",
+             "bring a hardware component to a lifecycle state")
+    p.add_argument("hardware_component_name")
+    p.add_argument("state", choices=["unconfigured", "inactive", "active"])
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -169,3 +169,9 @@ def test_verbs_against_our_ros2_control_node(launcher, graph):
     interfaces = ros2py(launcher, "control", "list_hardware_interfaces").stdout
     assert "\tshoulder_pan_joint/position [available] [claimed]" in interfaces
     assert "state interfaces\n" in interfaces
+    types = ros2py(launcher, "control", "list_controller_types").stdout
+    assert "joint_state_broadcaster/JointStateBroadcaster" in types
+    hardware = ros2py(launcher, "control", "set_hardware_component_state", "mock_ur", "inactive")
+    assert (hardware.returncode, hardware.stdout) == (0, "Successfully set mock_ur to state inactive\n")
+    components = ros2py(launcher, "control", "list_hardware_components").stdout
+    assert "\tname: mock_ur\n" in components and "\tstate: id=2 label=inactive\n" in components
