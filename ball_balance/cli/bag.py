@@ -16,6 +16,7 @@ from __future__ import annotations
 import os
 import re
 import signal
+import struct
 import sys
 import time
 from typing import Dict, List, Optional
@@ -248,4 +249,64 @@ def cmd_record(args) -> int:
             recorder.close()
     print(("\n" if tty else "") + f"Recorded {recorder.total} messages on {len(recorder.channels)} topics "
           f"to '{folder}'", file=sys.stderr, flush=True)
+    return 0
+
+
+def _mcap_files(path: str) -> List[str]:
+    if os.path.isdir(path):
+        files = sorted(os.path.join(path, f) for f in os.listdir(path) if f.endswith(".mcap"))
+        if not files:
+            raise CliError(f"no .mcap file in bag folder '{path}'")
+        return files
+    if not os.path.isfile(path):
+        raise CliError(f"bag '{path}' does not exist")
+    return [path]
+
+
+def _stamp(ns: int) -> str:
+    return time.strftime("%b %d %Y %H:%M:%S", time.localtime(ns / 1e9)) + f".{ns % 1_000_000_000:09d} " \
+        f"({ns // 1_000_000_000}.{ns % 1_000_000_000:09d})"
+
+
+def cmd_info(args) -> int:
+    """Summary of an MCAP bag (folder or file), laid out like `ros2 bag info`."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+
+    files = _mcap_files(args.bag_path)
+    topics: Dict[str, list] = {}  # topic -> [type, count, encoding]
+    start, end, total, distro = None, None, 0, ""
+    for path in files:
+        try:
+            with open(path, "rb") as stream:
+                reader = make_reader(stream)
+                summary = reader.get_summary()
+                if summary is None or summary.statistics is None:
+                    raise CliError(f"'{path}' has no summary section (recording interrupted?)")
+                stats = summary.statistics
+                for record in reader.iter_metadata():
+                    distro = distro or record.metadata.get("ROS_DISTRO", "")
+        except (McapError, struct.error, ValueError, EOFError) as error:
+            raise CliError(f"'{path}' is not a readable MCAP file: {error}") from None
+        if stats.message_count:
+            start = min(start or stats.message_start_time, stats.message_start_time)
+            end = max(end or stats.message_end_time, stats.message_end_time)
+        total += stats.message_count
+        for channel_id, channel in summary.channels.items():
+            schema = summary.schemas.get(channel.schema_id)
+            entry = topics.setdefault(channel.topic, [schema.name if schema else "?", 0, channel.message_encoding])
+            entry[1] += stats.channel_message_counts.get(channel_id, 0)
+    size = sum(os.path.getsize(p) for p in files)
+    duration = ((end or 0) - (start or 0)) / 1e9
+    print(f"Files:             {', '.join(os.path.basename(p) for p in files)}")
+    print(f"Bag size:          {size / 2 ** 20:.1f} MiB")
+    print("Storage id:        mcap")
+    print(f"ROS Distro:        {distro or 'unknown'}")
+    print(f"Duration:          {duration:.9f}s")
+    if start is not None:
+        print(f"Start:             {_stamp(start)}")
+        print(f"End:               {_stamp(end)}")
+    print(f"Messages:          {total}")
+    lines = [f"Topic: {t} | Type: {v[0]} | Count: {v[1]} | Serialization Format: {v[2]}" for t, v in topics.items()]
+    print("Topic information: " + "\n                   ".join(lines or ["none"]))
     return 0

@@ -126,13 +126,15 @@ def _simple_parsers(sub) -> None:
     p.add_argument("parameter_file")
     _spin_time(p, WAIT_FOR_NODE_S)
 
-    bag = sub.add_parser("bag", help="record topics to MCAP").add_subparsers(dest="verb", required=True)
+    bag = sub.add_parser("bag", help="record MCAP bags, summarize them").add_subparsers(dest="verb", required=True)
     p = _verb(bag, "record", "bag:cmd_record", "record topics into an MCAP bag (rosbag2 layout)")
     p.add_argument("topics", nargs="*", help="topics to record")
     p.add_argument("-o", "--output", help="output bag folder (default: rosbag2_<date>)")
     p.add_argument("-a", "--all", action="store_true", help="record every topic")
     p.add_argument("--duration", type=float, default=None, help="ros2py extension: stop after this many seconds")
     _spin_time(p)
+    p = _verb(bag, "info", "bag:cmd_info", "print a summary of an MCAP bag (folder or .mcap file)")
+    p.add_argument("bag_path")
 
     tf = sub.add_parser("tf", help="TF tools").add_subparsers(dest="verb", required=True)
     p = _verb(tf, "echo", "tf:cmd_echo", "print the transform from SOURCE into TARGET (like tf2_echo)")

@@ -158,3 +158,6 @@ def test_bag_record_writes_mcap_that_decodes_to_the_published_messages(launcher,
     assert (msg.x, msg.markers_found, msg.header.frame_id) == (0.125, 3, "plate_center")
     metadata = (out / "metadata.yaml").read_text()
     assert "storage_identifier: mcap" in metadata and f"message_count: {len(records)}" in metadata
+    info = ros2py(launcher, "bag", "info", str(out)).stdout
+    assert f"Messages:          {len(records)}\n" in info and "ROS Distro:        jazzy\n" in info
+    assert f"Topic: /ball_state | Type: ball_tracker_msgs/msg/BallState | Count: {len(records)} |" in info
