@@ -49,12 +49,14 @@ def test_listener_composes_static_and_dynamic_transforms_from_another_process(la
     assert buffer.core.parent_of("tool") == "base" and buffer.core.parent_of("base") == "world"
 
 
-def test_tf_echo_prints_the_transform_and_one_line_for_a_missing_frame(launcher, ros_domain):
+def test_tf_echo_and_latched_tf_static_and_one_line_for_a_missing_frame(launcher, ros_domain):
     launcher.start(python_cmd("-c", BROADCASTER), name="tf_source")
     echo = launcher.run([executable("ros2py"), "tf", "echo", "world", "tool", "--count", "1",
                          "--timeout", "20"], timeout=40)
     assert echo.returncode == 0, echo.stderr
     assert "- Translation: [0.500, 0.000, 1.000]" in echo.stdout
+    latched = launcher.run([executable("ros2py"), "topic", "echo", "/tf_static", "--once"], timeout=40)
+    assert "  child_frame_id: base\n" in latched.stdout and "  child_frame_id: tool\n" in latched.stdout
     missing = launcher.run([executable("ros2py"), "tf", "echo", "world", "no_such_frame", "--count", "1",
                             "--timeout", "3"], timeout=40)
     assert missing.returncode == 1 and missing.stdout == ""
