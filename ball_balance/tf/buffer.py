@@ -168,6 +168,15 @@ class BufferCore:
             T_common_target = self._compose(target_chain, stamp_ns)
             return T_common_target.inverse() * T_common_source, stamp_ns
 
+    def lookup_transform_full(self, target: str, target_ns: int, source: str, source_ns: int,
+                              fixed: str) -> Transform:
+        """T_target(target_ns)_source(source_ns) through a frame `fixed` that does not move
+        between the two times (tf2's advanced lookup; e.g. a ball seen by a moving camera at
+        capture time, expressed in the plate frame now, with fixed = "world")."""
+        T_fixed_source, _ = self.lookup_transform(fixed, source, source_ns)
+        T_target_fixed, _ = self.lookup_transform(target, fixed, target_ns)
+        return T_target_fixed * T_fixed_source
+
     def wait_for_transform(self, target: str, source: str, stamp_ns: int = 0,
                            timeout_s: float = 0.0) -> Tuple[Transform, int]:
         """lookup_transform, retried as data arrives until timeout_s; then its error."""

@@ -146,3 +146,13 @@ def test_leading_slash_is_ignored_and_bad_quaternions_refused():
         Transform.from_values((0, 0, 0), (0, 0, 0, 0))
     with pytest.raises(ValueError, match="finite"):
         Transform.from_values((math.nan, 0, 0), (0, 0, 0, 1))
+
+
+def test_time_travel_through_a_fixed_frame():
+    buf = BufferCore()
+    # the camera moves along world x: at 1 s it is at x = 1, at 2 s at x = 2
+    buf.set_transform("world", "camera", 1 * S, Transform((1.0, 0, 0)))
+    buf.set_transform("world", "camera", 2 * S, Transform((2.0, 0, 0)))
+    # where the camera was at 1 s, seen from the camera at 2 s: 1 m behind it
+    T = buf.lookup_transform_full("camera", 2 * S, "camera", 1 * S, "world")
+    assert close(T.translation, (-1.0, 0.0, 0.0))
