@@ -97,6 +97,14 @@ class Buffer:
             target_frame, source_frame, stamp_to_ns(time), timeout_s)
         return transform_to_msg(transform, target_frame, source_frame, stamp_ns)
 
+    def lookup_transform_full(self, target_frame: str, target_time, source_frame: str, source_time,
+                              fixed_frame: str) -> TransformStamped:
+        """source_frame at source_time in target_frame at target_time, via fixed_frame."""
+        target_ns = stamp_to_ns(target_time)
+        transform = self.core.lookup_transform_full(target_frame, target_ns, source_frame,
+                                                    stamp_to_ns(source_time), fixed_frame)
+        return transform_to_msg(transform, target_frame, source_frame, target_ns)
+
     def can_transform(self, target_frame: str, source_frame: str, time=None) -> bool:
         return self.core.can_transform(target_frame, source_frame, stamp_to_ns(time))
 

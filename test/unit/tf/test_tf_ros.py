@@ -68,6 +68,8 @@ def test_buffer_returns_transform_stamped_and_refuses_non_finite_input():
     buffer.set_transform(transform_to_msg(Transform((0.5, 0, 0)), "base", "plate", 2_000_000_000))
     out = buffer.lookup_transform("world", "plate")
     assert (out.transform.translation.x, out.transform.translation.z, out.header.stamp.sec) == (0.5, 1.0, 2)
+    full = buffer.lookup_transform_full("plate", 2_000_000_000, "base", 0, "world")
+    assert (full.header.frame_id, full.transform.translation.x) == ("plate", -0.5)
     with pytest.raises(TransformException, match=r"\[nowhere\]"):
         buffer.lookup_transform("world", "nowhere", timeout_s=0.2)
     bad = transform_to_msg(Transform(), "world", "x")
