@@ -1,4 +1,5 @@
 """ros2py's entry point: every failure is one line and a non-zero exit, never a traceback."""
+import subprocess
 import sys
 import types
 
@@ -55,6 +56,4 @@ def test_ctrl_c_exits_quietly(monkeypatch, capsys):
 def test_help_needs_no_ros_import():
     code = ("import sys\nfrom ball_balance.cli.main import build_parser\nbuild_parser()\n"
             "sys.exit('rclpy' in sys.modules or 'yaml' in sys.modules)")
-    import subprocess
-
     assert subprocess.run([sys.executable, "-c", code], timeout=60).returncode == 0
