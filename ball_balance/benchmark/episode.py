@@ -89,6 +89,18 @@ def controller_values(controller: str, reference: str, overrides=()) -> dict:
     return dict(validate(schema, values, allow_unknown=True))
 
 
+def tracker_values() -> dict:
+    """The tracker parameters the graph runs with (config/ball_tracker.yaml), for both modes."""
+    from pathlib import Path
+
+    import yaml
+
+    path = Path(__file__).resolve().parents[2] / "config" / "ball_tracker.yaml"
+    if not path.exists():
+        return {}
+    return dict(yaml.safe_load(path.read_text())["ball_tracker"]["ros__parameters"])
+
+
 def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
     from ball_balance.sim.config import DomainKnobs, SimConfig
     from ball_balance.sim.world import SimWorld
@@ -106,7 +118,7 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
 
     pipeline = ControlPipeline(control_config.pipeline_config(values, spec.controller), _kinematics(values),
                                control_config.reference(values))
-    tracker_cfg = TrackerConfig.from_values({"rolling_factor": values["rolling_factor"]})
+    tracker_cfg = TrackerConfig.from_values(tracker_values())
     tracker = BallTracker(tracker_cfg) if spec.mode == "vision" else None
     kalman = None
     if spec.mode == "fast":
@@ -146,7 +158,7 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
                 fields_ = (tr.x, tr.y, tr.vx, tr.vy, True, 4)
             else:
                 zx, zy = world.detected_ball()
-                accel = (-kg * math.sin(u_cmd[0]), -kg * math.sin(u_cmd[1]))
+                accel = (-kg * math.sin(u_cmd[0]), -kg * math.sin(u_cmd[1])) if tracker_cfg.use_plate_cmd else None
                 est = kalman.step(t, (zx, zy), accel)
                 fields_ = (est.x, est.y, est.vx, est.vy, est.valid, 4)
             pending.append((t + spec.vision_delay_s, fields_, t))
