@@ -14,9 +14,10 @@ from ball_balance.cli.errors import CliError
 
 # Fast DDS sends 5 participant announcements at start, then one every 3 s. In about half
 # of the runs measured here, a new participant learnt of the others only from their next
-# periodic announcement (0-3 s later); 20 initial announcements brought discovery to about
-# 0.15 s in 18 of 20 runs. Used only for our own short-lived participant, and only when the
-# user has not chosen a Fast DDS profile.
+# periodic announcement (0-3 s later). With 20 initial announcements: 18 of 20 probe runs
+# discovered in about 0.15 s, and benchmarks/cli_bench.py saw 8 of 24 slow `topic echo`
+# runs instead of 12 of 24. Used only for our own short-lived participant, and only when
+# the user has not chosen a Fast DDS profile.
 FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 <profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
   <participant profile_name="ros2py" is_default_profile="true">
