@@ -2,7 +2,7 @@
 
     ros2py topic list|echo|hz|info|pub     ros2py node list     ros2py service list
     ros2py param get|set|dump|list|load    ros2py bag record    ros2py run PKG EXE
-    ros2py tf echo TARGET SOURCE
+    ros2py tf echo TARGET SOURCE           ros2py interface show TYPE
     ros2py control list_controllers|list_hardware_components|list_hardware_interfaces|
                    switch_controllers|load_controller|set_controller_state|unload_controller
 
@@ -135,6 +135,11 @@ def _simple_parsers(sub) -> None:
     _spin_time(p)
     p = _verb(bag, "info", "bag:cmd_info", "print a summary of an MCAP bag (folder or .mcap file)")
     p.add_argument("bag_path")
+
+    interface = sub.add_parser("interface", help="show interface definitions").add_subparsers(
+        dest="verb", required=True)
+    p = _verb(interface, "show", "interface:cmd_show", "print a message or service definition")
+    p.add_argument("type_name", help="e.g. ball_tracker_msgs/msg/BallState")
 
     tf = sub.add_parser("tf", help="TF tools").add_subparsers(dest="verb", required=True)
     p = _verb(tf, "echo", "tf:cmd_echo", "print the transform from SOURCE into TARGET (like tf2_echo)")

@@ -48,3 +48,15 @@ def test_malformed_parameter_files_are_one_line_errors(text, error):
     with pytest.raises(CliError, match=error) as raised:
         parameters_from_file(text, "/tracker", "bad.yaml")
     assert "\n" not in str(raised.value) and "bad.yaml" in str(raised.value)
+
+
+def test_interface_show_expands_nested_types_with_tabs():
+    from ball_balance.cli.interface import interface_text
+
+    text = interface_text("ball_tracker_msgs/msg/BallState")
+    assert "std_msgs/Header header" in text and "\n\tbuiltin_interfaces/Time stamp\n" in text
+    assert "\n\t\tint32 sec\n" in text and "\nfloat64 pixel_v" in text
+    service = interface_text("controller_manager_msgs/srv/SwitchController")
+    assert "\n---\n" in service and "\n\tint32 sec\n" in service
+    with pytest.raises(CliError, match="foo/msg/Bar"):
+        interface_text("foo/msg/Bar")
