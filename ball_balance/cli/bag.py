@@ -41,27 +41,26 @@ def msg_file_text(package: str, name: str) -> str:
     raise CliError(f"cannot find the definition of {package}/msg/{name} (no {name}.msg in AMENT_PREFIX_PATH)")
 
 
+def nested_type_of(line: str, package: str) -> Optional[str]:
+    """'pkg/Type' for a .msg line declaring a field of a non-primitive type, else None."""
+    code = line.split("#", 1)[0].strip()
+    if not code or code == "---" or re.match(r"\S+\s+\w+\s*=", code):  # blank, separator, constant
+        return None
+    base = code.split()[0].split("[", 1)[0].split("<=", 1)[0]
+    if base in PRIMITIVES:
+        return None
+    if "/" in base:
+        parts = base.split("/")
+        return f"{parts[0]}/{parts[-1]}"
+    return "std_msgs/Header" if base == "Header" else f"{package}/{base}"
+
+
 def nested_types(text: str, package: str) -> List[str]:
     """'pkg/Type' of every non-primitive field in a .msg text, in order of appearance."""
     found = []
     for line in text.splitlines():
-        line = line.split("#", 1)[0].strip()
-        if not line:
-            continue
-        if re.match(r"\S+\s+\w+\s*=", line):
-            continue  # a constant: TYPE NAME=VALUE
-        field_type = line.split()[0]
-        base = field_type.split("[", 1)[0].split("<=", 1)[0]
-        if base in PRIMITIVES:
-            continue
-        if "/" in base:
-            parts = base.split("/")
-            full = f"{parts[0]}/{parts[-1]}"
-        elif base == "Header":
-            full = "std_msgs/Header"
-        else:
-            full = f"{package}/{base}"
-        if full not in found:
+        full = nested_type_of(line, package)
+        if full and full not in found:
             found.append(full)
     return found
 

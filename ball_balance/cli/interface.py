@@ -2,27 +2,12 @@
 from __future__ import annotations
 
 import os
-import re
 from typing import List
 
-from ball_balance.cli.bag import PRIMITIVES, msg_file_text
+from ball_balance.cli.bag import msg_file_text, nested_type_of
 from ball_balance.cli.errors import CliError
 from ball_balance.cli.messages import split_type_name
 from ball_balance.cli.run import prefixes
-
-
-def _nested_type(line: str, package: str):
-    """'pkg/Type' for a field line of a non-primitive type, else None."""
-    code = line.split("#", 1)[0].strip()
-    if not code or re.match(r"\S+\s+\w+\s*=", code) or code == "---":
-        return None
-    base = code.split()[0].split("[", 1)[0].split("<=", 1)[0]
-    if base in PRIMITIVES:
-        return None
-    if "/" in base:
-        parts = base.split("/")
-        return f"{parts[0]}/{parts[-1]}"
-    return "std_msgs/Header" if base == "Header" else f"{package}/{base}"
 
 
 def expand(text: str, package: str, indent: str = "") -> List[str]:
@@ -31,7 +16,7 @@ def expand(text: str, package: str, indent: str = "") -> List[str]:
         if indent and not line.strip():
             continue
         lines.append(f"{indent}{line}" if line else line)
-        nested = _nested_type(line, package)
+        nested = nested_type_of(line, package)
         if nested:
             nested_package, nested_name = nested.split("/")
             lines.extend(expand(msg_file_text(nested_package, nested_name), nested_package, indent + "\t"))
