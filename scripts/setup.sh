@@ -8,6 +8,7 @@
 #
 #   scripts/setup.sh            set up (or bring up to date)
 #   scripts/setup.sh --force    redo every step
+#   BALL_BALANCE_PYTHON=python3.12 scripts/setup.sh   choose the interpreter (3.11 or 3.12)
 #
 # Afterwards `source env.sh` gives a shell where our nodes, `ros2py` and pytest work.
 set -euo pipefail
@@ -36,7 +37,7 @@ elif [[ -n "${ROS_DISTRO:-}" ]]; then
 else
   MODE=wheels
   PYTHON=""
-  for candidate in python3 python3.12 python3.11; do
+  for candidate in ${BALL_BALANCE_PYTHON:-} python3 python3.12 python3.11; do
     if command -v "$candidate" >/dev/null 2>&1 && "$candidate" 2>/dev/null -c 'import sys; sys.exit(sys.version_info[:2] not in ((3, 11), (3, 12)))'; then
       PYTHON="$("$candidate" -c 'import sys; print(sys.executable)')"; break
     fi
