@@ -24,7 +24,7 @@ from typing import Dict, List, Optional
 from ball_balance.cli.errors import CliError
 from ball_balance.cli.messages import split_type_name
 from ball_balance.cli.run import prefixes
-from ball_balance.cli.session import Session, is_hidden
+from ball_balance.cli.session import Session, absolute_name, is_hidden
 
 PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
               "int32", "uint32", "int64", "uint64", "string", "wstring"}
@@ -117,7 +117,7 @@ class Recorder:
         from mcap.writer import CompressionType, Writer
 
         self.session, self.folder, self.record_all = session, folder, record_all
-        self.wanted = [t if t.startswith("/") else f"/{t}" for t in topics]
+        self.wanted = [absolute_name(t) for t in topics]
         self.file_name = f"{os.path.basename(os.path.normpath(folder))}_0.mcap"
         os.makedirs(folder)
         self._stream = open(os.path.join(folder, self.file_name), "wb")

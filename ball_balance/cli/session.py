@@ -189,9 +189,12 @@ def _join(namespace: str, name: str) -> str:
     return f"{namespace.rstrip('/')}/{name}"
 
 
-def full_node_name(name: str) -> str:
-    """'talker' -> '/talker'; '/ns/talker' stays."""
+def absolute_name(name: str) -> str:
+    """'talker' -> '/talker'; '/ns/talker' stays (node and topic names alike)."""
     return name if name.startswith("/") else f"/{name}"
+
+
+full_node_name = absolute_name
 
 
 def is_hidden(name: str) -> bool:

@@ -6,17 +6,13 @@ import sys
 import time
 
 from ball_balance.cli.errors import CliError
-from ball_balance.cli.session import Session, name_type_pairs
+from ball_balance.cli.session import Session, absolute_name, name_type_pairs
 
 
 def _session_discovered(args) -> Session:
     session = Session()
     session.discover(args.spin_time)
     return session
-
-
-def resolve_topic(name: str) -> str:
-    return name if name.startswith("/") else f"/{name}"
 
 
 def resolve_type(session: Session, topic: str, given: str = None, wait_s: float = 2.0) -> str:
@@ -44,7 +40,7 @@ def cmd_list(args) -> int:
 def cmd_echo(args) -> int:
     from ball_balance.cli.messages import get_field, get_interface, message_to_yaml
 
-    topic = resolve_topic(args.topic_name)
+    topic = absolute_name(args.topic_name)
     truncate = None if args.full_length else args.truncate_length
     with Session() as session:
         type_name = resolve_type(session, topic, args.message_type, args.spin_time)
@@ -95,7 +91,7 @@ def cmd_hz(args) -> int:
 
     from ball_balance.cli.messages import get_interface
 
-    topic = resolve_topic(args.topic_name)
+    topic = absolute_name(args.topic_name)
     with Session() as session:
         msg_cls = get_interface(resolve_type(session, topic, None, args.spin_time))
         qos = session.adapted_qos(topic, _policy(args.qos_reliability), _policy(args.qos_durability),
@@ -132,7 +128,7 @@ def cmd_hz(args) -> int:
 
 
 def cmd_info(args) -> int:
-    topic = resolve_topic(args.topic_name)
+    topic = absolute_name(args.topic_name)
     with Session() as session:
         type_name = resolve_type(session, topic, None, args.spin_time)
         session.discover(min(args.spin_time, 1.0), settle_s=0.3)
@@ -160,7 +156,7 @@ def cmd_pub(args) -> int:
 
     from ball_balance.cli.messages import get_interface, parse_yaml_values, set_message_fields, type_name_of
 
-    topic = resolve_topic(args.topic_name)
+    topic = absolute_name(args.topic_name)
     msg_cls = get_interface(args.message_type)
     values = parse_yaml_values(args.values)
     set_message_fields(msg_cls(), values)  # refuse bad values before touching the network
