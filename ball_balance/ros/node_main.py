@@ -5,6 +5,7 @@ resource) prints one line naming the problem and exits non-zero, instead of a tr
 """
 from __future__ import annotations
 
+import os
 import sys
 from typing import Any, Callable, Optional, Sequence
 
@@ -21,7 +22,15 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
     import rclpy
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 
-    name = getattr(make_node, "__name__", "node")
+    from ball_balance.cli.errors import CliError
+    from ball_balance.cli.run import check_params_files
+
+    name = os.path.basename(sys.argv[0]) or getattr(make_node, "__name__", "node")
+    try:  # before rcl, which would log its own error line for a malformed file
+        check_params_files(list(sys.argv[1:] if args is None else args))
+    except CliError as error:
+        print(f"{name}: cannot start: {error}", file=sys.stderr)
+        return 2
     try:
         rclpy.init(args=args)
     except Exception as error:  # rcl reports a malformed --params-file here
