@@ -28,6 +28,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from ball_balance.plate_geometry import PLATE_FRAME
+from ball_balance.rotations import axis_angle
 
 PACKAGE = "ball_balance"
 DESCRIPTION_FILE = "ur5e_ball_balance.urdf"
@@ -187,14 +188,6 @@ def _param_text(value: object) -> str:
 # ----------------------------------------------------------------------------------------
 # URDF kinematics (yourdfpy parses; the math is a product of joint transforms)
 
-def rotation_about_axis(axis: Sequence[float], angle_rad: float) -> np.ndarray:
-    """3x3 rotation by `angle_rad` about the unit vector `axis` (Rodrigues)."""
-    k = np.asarray(axis, dtype=float)
-    k = k / np.linalg.norm(k)
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + math.sin(angle_rad) * K + (1.0 - math.cos(angle_rad)) * (K @ K)
-
-
 class UrdfKinematics:
     """Joint transforms of a URDF: T_parent_child = origin @ motion(q).
 
@@ -218,7 +211,11 @@ class UrdfKinematics:
         self.robot_name = urdf.robot.name
         self._joints = {}
         self._parent_joint = {}
+        self._position_limits = {}
         for joint in urdf.robot.joints:
+            limit = joint.limit
+            if joint.type == "revolute" and limit is not None and None not in (limit.lower, limit.upper):
+                self._position_limits[joint.name] = (float(limit.lower), float(limit.upper))
             origin = np.eye(4) if joint.origin is None else np.asarray(joint.origin, dtype=float)
             axis = np.array([1.0, 0.0, 0.0]) if joint.axis is None else np.asarray(joint.axis, dtype=float)
             self._joints[joint.name] = (joint.type, joint.parent, joint.child, origin, axis)
@@ -235,6 +232,20 @@ class UrdfKinematics:
         """(type, parent, child, origin 4x4, axis) of one joint as the URDF gives it."""
         return self._joints[name]
 
+    def position_limits(self, name: str) -> Tuple[float, float]:
+        """(lower, upper) [rad] of a revolute joint; unbounded for other joints."""
+        return self._position_limits.get(name, (-math.inf, math.inf))
+
+    def chain(self, base: str, tip: str) -> List[str]:
+        """Names of the joints from `base` down to `tip`, in order from the base."""
+        names, link = [], tip
+        while link != base:
+            if link not in self._parent_joint:
+                raise RobotDescriptionError(f"no chain from '{base}' to '{tip}' (link '{link}' has no parent joint)")
+            names.append(self._parent_joint[link])
+            link = self._joints[names[-1]][1]
+        return names[::-1]
+
     def fixed_transforms(self) -> List[Tuple[str, str, np.ndarray]]:
         return [(parent, child, origin) for kind, parent, child, origin, _ in self._joints.values()
                 if kind not in self.MOVING_TYPES]
@@ -243,7 +254,7 @@ class UrdfKinematics:
         kind, parent, child, origin, axis = self._joints[name]
         motion = np.eye(4)
         if kind in ("revolute", "continuous"):
-            motion[:3, :3] = rotation_about_axis(axis, position)
+            motion[:3, :3] = axis_angle(axis, position)
         elif kind == "prismatic":
             motion[:3, 3] = axis / np.linalg.norm(axis) * position
         return parent, child, origin @ motion

@@ -4,9 +4,9 @@ J_r of the wrist joints, the (u_x, u_y) -> world-rotation wiring and least-squar
 
 Chain: the URDF joints from `base_link` to `plate_center`, each joint transform being
 T_origin(xyz, rpy) * Rot(axis, q) as in URDF (rpy = fixed-axis roll, pitch, yaw:
-R = Rz(yaw) Ry(pitch) Rx(roll)). We walk the chain ourselves (xml.etree) rather than
-depend on a URDF library: ~40 lines, no mesh loading, the same convention the
-robot_state_publisher applies, so FK(joint_states) equals TF base_link -> plate_center.
+R = Rz(yaw) Ry(pitch) Rx(roll)). The joints come from ball_balance.robot.UrdfKinematics, the
+URDF reader the robot_state_publisher uses too, so FK(joint_states) equals TF
+base_link -> plate_center.
 
 Wiring (DESIGN.md section 5): u_x is the tilt about the plate y axis and u_y the tilt about
 the plate x axis, signed so that positive u drives the ball toward negative x / y under
@@ -20,59 +20,16 @@ i.e. tilts are measured from the home orientation (the level plate).
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
-from typing import List, Optional, Sequence, Tuple
+from typing import Sequence, Tuple
 
 import numpy as np
+
+from ball_balance.rotations import axis_angle, matrix_to_rotvec, rotvec_to_matrix  # noqa: F401 (re-exported)
 
 
 class KinematicsError(ValueError):
     """The robot description lacks the chain or joints we need."""
-
-
-def rot_x(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
-
-
-def rot_y(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-
-
-def rot_z(a):
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-
-
-def rpy_matrix(roll, pitch, yaw) -> np.ndarray:
-    return rot_z(yaw) @ rot_y(pitch) @ rot_x(roll)
-
-
-def axis_angle(axis, angle) -> np.ndarray:
-    """Rodrigues: rotation by `angle` [rad] about unit `axis`."""
-    return rotvec_to_matrix(np.asarray(axis, dtype=float) * angle)
-
-
-def rotvec_to_matrix(w) -> np.ndarray:
-    w = np.asarray(w, dtype=float)
-    theta = float(np.linalg.norm(w))
-    K = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]])
-    if theta < 1e-12:
-        return np.eye(3) + K
-    K /= theta
-    return np.eye(3) + math.sin(theta) * K + (1 - math.cos(theta)) * K @ K
-
-
-def matrix_to_rotvec(R) -> np.ndarray:
-    """Inverse of rotvec_to_matrix for angles below pi."""
-    cos_t = min(1.0, max(-1.0, (np.trace(R) - 1.0) / 2.0))
-    theta = math.acos(cos_t)
-    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    if theta < 1e-9:
-        return 0.5 * v
-    return theta / (2.0 * math.sin(theta)) * v
 
 
 @dataclass(frozen=True)
@@ -107,36 +64,23 @@ class Chain:
     @classmethod
     def from_urdf(cls, urdf_xml: str, joint_names: Sequence[str], base: str = "base_link",
                   tip: str = "plate_center") -> Chain:
+        """The chain base -> tip of a robot description, parsed by ball_balance.robot (the one
+        URDF reader, shared with the robot_state_publisher and the simulation)."""
+        from ball_balance.robot import RobotDescriptionError, UrdfKinematics
+
         try:
-            root = ET.fromstring(urdf_xml)
-        except ET.ParseError as error:
-            raise KinematicsError(f"robot description is not valid XML: {error}") from None
-        by_child = {}
-        for j in root.findall("joint"):
-            child = j.find("child").get("link")
-            by_child[child] = j
-        chain: List[ChainJoint] = []
-        link = tip
-        while link != base:
-            j = by_child.get(link)
-            if j is None:
-                raise KinematicsError(f"no chain from '{base}' to '{tip}' (link '{link}' has no parent joint)")
-            kind = j.get("type")
+            urdf = UrdfKinematics(urdf_xml)
+            names = urdf.chain(base, tip)
+        except RobotDescriptionError as error:
+            raise KinematicsError(str(error)) from None
+        joints = []
+        for name in names:
+            kind, _, _, origin, axis = urdf.joint(name)
             if kind not in ("revolute", "continuous", "fixed"):
-                raise KinematicsError(f"joint '{j.get('name')}' has unsupported type '{kind}'")
-            origin = j.find("origin")
-            xyz = _floats(origin.get("xyz") if origin is not None else None, 3)
-            rpy = _floats(origin.get("rpy") if origin is not None else None, 3)
-            axis_el = j.find("axis")
-            axis = np.array(_floats(axis_el.get("xyz") if axis_el is not None else "1 0 0", 3))
-            limit = j.find("limit")
-            lower, upper = -math.inf, math.inf
-            if kind == "revolute" and limit is not None:
-                lower, upper = float(limit.get("lower", "-inf")), float(limit.get("upper", "inf"))
-            chain.append(ChainJoint(j.get("name"), kind, rpy_matrix(*rpy), np.array(xyz),
-                                    axis / np.linalg.norm(axis), lower, upper))
-            link = j.find("parent").get("link")
-        return cls(list(reversed(chain)), joint_names)
+                raise KinematicsError(f"joint '{name}' has unsupported type '{kind}'")
+            joints.append(ChainJoint(name, kind, origin[:3, :3], origin[:3, 3].copy(),
+                                     axis / np.linalg.norm(axis), *urdf.position_limits(name)))
+        return cls(joints, joint_names)
 
     def frames(self, q: Sequence[float]):
         """World (base) pose of each movable joint frame and of the tip.
@@ -172,15 +116,6 @@ class Chain:
         J_r = np.stack(axes, axis=1)
         J_p = np.stack([np.cross(a, p_tip - joint_p[n]) for a, n in zip(axes, names, strict=True)], axis=1)
         return np.vstack([J_r, J_p])
-
-
-def _floats(text: Optional[str], n: int) -> List[float]:
-    if not text:
-        return [0.0] * n
-    values = [float(v) for v in text.split()]
-    if len(values) != n:
-        raise KinematicsError(f"expected {n} numbers, got '{text}'")
-    return values
 
 
 @dataclass(frozen=True)
