@@ -20,9 +20,9 @@ Outputs
                  capture time, frame_id plate_center. A frame that cannot be decoded (wrong
                  encoding, size 0, truncated data) is dropped, counted and reported throttled.
   ~/debug_image  sensor_msgs/Image bgr8 overlay, only with `publish_debug_image`.
-  ~/statistics/names, ~/statistics/values (pal_statistics_msgs): per-stage times (ms) and
-                 counters; names latched (transient local) and re-sent only when they change,
-                 values sent per frame only while someone subscribes.
+  ~/statistics/{full,names,values} (pal_statistics_msgs, the controller manager's
+                 StatisticsRegistry): per-stage times (ms) and counters; names latched
+                 (transient local), full/values sent per frame only while someone subscribes.
 Start-up errors (a bad parameter, a missing calibration file, a camera or file that cannot be
 opened) print one line and exit non-zero.
 """
@@ -37,9 +37,8 @@ import numpy as np
 import rclpy
 from ball_tracker_msgs.msg import BallState
 from geometry_msgs.msg import Vector3Stamped
-from pal_statistics_msgs.msg import StatisticsNames, StatisticsValues
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 
 from ball_balance.plate_geometry import PLATE_FRAME
@@ -50,6 +49,7 @@ from ball_balance.vision.overlay import draw_overlay
 from ball_balance.vision.sources import CaptureSource, SourceError
 from ball_balance.vision.tracker import STAGES, BallTracker, TrackerResult
 from controller_manager_py.parameters import Param, declare_parameters
+from controller_manager_py.ros.statistics_publisher import StatisticsRegistry
 
 NODE_SCHEMA = (
     Param("image_qos", "auto", "image subscription reliability: match the publishers, or force one",
@@ -64,11 +64,6 @@ SCHEMA = SOURCE_SCHEMA + TRACKER_SCHEMA + NODE_SCHEMA
 
 BAD_FRAME_WARN_PERIOD_S = 5.0
 IMAGE_QOS_CHECK_PERIOD_S = 1.0
-LATCHED_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                         history=HistoryPolicy.KEEP_LAST, depth=1)
-STAT_NAMES = tuple(f"{stage}_ms" for stage in STAGES) + (
-    "frames", "bad_frames", "markers_found", "ball_found", "tracking_valid", "gated", "track_resets",
-    "bad_plate_cmd")
 
 
 class BallTrackerNode(Node):
@@ -93,11 +88,10 @@ class BallTrackerNode(Node):
         self.state_pub = self.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
         self.debug_pub = (self.create_publisher(Image, "~/debug_image", qos_profile_sensor_data)
                           if p["publish_debug_image"] else None)
-        self.names_pub = self.values_pub = None
-        if p["publish_statistics"]:
-            self.names_pub = self.create_publisher(StatisticsNames, "~/statistics/names", LATCHED_QOS)
-            self.values_pub = self.create_publisher(StatisticsValues, "~/statistics/values", 10)
-            self._publish_names()
+        self._last_result: Optional[TrackerResult] = None
+        self.statistics = StatisticsRegistry(self, "~/statistics") if p["publish_statistics"] else None
+        if self.statistics is not None:
+            self.statistics.set_entries(self._statistics_entries())
         self.create_subscription(Vector3Stamped, p["plate_cmd_topic"], self.on_plate_cmd, 10)
         if p["camera_info_topic"] and self.calibration is None:
             self.create_subscription(CameraInfo, p["camera_info_topic"], self.on_camera_info,
@@ -208,8 +202,9 @@ class BallTrackerNode(Node):
         self.state_pub.publish(ball_state(result, stamp_msg))
         if self.debug_pub is not None and self.debug_pub.get_subscription_count() > 0:
             self.debug_pub.publish(encode_image(draw_overlay(image, self.tracker.plate, result), stamp_msg))
-        if self.values_pub is not None and self.values_pub.get_subscription_count() > 0:
-            self._publish_values(result, stamp_msg)
+        if self.statistics is not None:
+            self._last_result = result
+            self.statistics.publish()  # values are read only when someone subscribes
 
     def _camera_for(self, shape) -> None:
         """Give the tracker intrinsics matching the frame size (scaled if calibrated at another)."""
@@ -229,19 +224,20 @@ class BallTrackerNode(Node):
             self.get_logger().warn(f"{why} ({self.bad_frames} bad frames so far)")
 
     # -- statistics (pal_statistics names/values) ------------------------------------------------
-    def _publish_names(self) -> None:
-        msg = StatisticsNames(names=list(STAT_NAMES), names_version=1)
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.names_pub.publish(msg)
+    def _statistics_entries(self):
+        """(name, getter) per statistic; getters read the last frame's result lazily."""
+        def stage_ms(stage):
+            return lambda: 1e3 * self._last_result.timings_s.get(stage, 0.0)
 
-    def _publish_values(self, result: TrackerResult, stamp_msg) -> None:
         t, k = self.tracker, self.tracker.kalman
-        values = [1e3 * result.timings_s.get(stage, 0.0) for stage in STAGES] + [
-            t.frames, self.bad_frames, result.markers_found, result.ball_found, result.tracking_valid,
-            k.gated_count, k.reset_count, self.bad_plate_cmd]
-        msg = StatisticsValues(values=[float(v) for v in values], names_version=1)
-        msg.header.stamp = stamp_msg
-        self.values_pub.publish(msg)
+        counters = {
+            "frames": lambda: t.frames, "bad_frames": lambda: self.bad_frames,
+            "markers_found": lambda: self._last_result.markers_found,
+            "ball_found": lambda: self._last_result.ball_found,
+            "tracking_valid": lambda: self._last_result.tracking_valid,
+            "gated": lambda: k.gated_count, "track_resets": lambda: k.reset_count,
+            "bad_plate_cmd": lambda: self.bad_plate_cmd}
+        return [(f"{stage}_ms", stage_ms(stage)) for stage in STAGES] + list(counters.items())
 
     def destroy_node(self):
         if self.source is not None:
