@@ -83,9 +83,11 @@ class LiveRecorder:
             return
         if self.frames and t - self.frames[-1][0] < 1.0 / self.video_fps - 1e-6:
             return
-        image = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.width, 3)
-        if msg.encoding == "rgb8":
-            image = image[:, :, ::-1]
+        from ball_balance.ros.images import decode_image
+
+        image, _ = decode_image(msg)
+        if image is None:
+            return
         self.frames.append((t, image.copy(), self.est[-1] if self.est else None, self.ref[-1] if self.ref else None))
 
     # --- results ---------------------------------------------------------------------------

@@ -20,6 +20,7 @@ from std_srvs.srv import Trigger
 
 from ball_balance.plate_geometry import PLATE_FRAME
 from ball_balance.robot import BASE_FRAME
+from ball_balance.ros.images import encode_image
 from ball_balance.sim.config import camera_intrinsics
 from ball_balance.tf.ros import StaticTransformBroadcaster, transform_to_msg
 from ball_balance.tf.transform import Transform
@@ -88,11 +89,7 @@ class SimRosIo:
 
     # ---- camera thread ------------------------------------------------------------------
     def publish_image(self, image_bgr, time_s: float) -> None:
-        height, width = image_bgr.shape[:2]
-        msg = Image(height=height, width=width, encoding="bgr8", is_bigendian=0, step=width * 3)
-        msg.header.stamp = stamp(time_s + self.stamp_offset_s)
-        msg.header.frame_id = self.params["camera_frame_id"]
-        msg.data = image_bgr.tobytes()
+        msg = encode_image(image_bgr, stamp(time_s + self.stamp_offset_s), self.params["camera_frame_id"])
         self._camera_info.header.stamp = msg.header.stamp
         self._publish(self.image_pub, msg)
         self._publish(self.info_pub, self._camera_info)

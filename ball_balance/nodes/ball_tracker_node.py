@@ -42,6 +42,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_
 from sensor_msgs.msg import CameraInfo, Image
 
 from ball_balance.plate_geometry import PLATE_FRAME
+from ball_balance.ros.images import decode_image, encode_image
 from ball_balance.ros.node_main import StartupError, main_for
 from ball_balance.vision.camera import CalibrationError, CameraModel, load_calibration
 from ball_balance.vision.config import SOURCE_SCHEMA, TRACKER_SCHEMA, TrackerConfig
@@ -201,7 +202,7 @@ class BallTrackerNode(Node):
             result = self.tracker.process(image, stamp_s, self.get_clock().now().nanoseconds * 1e-9)
         self.state_pub.publish(ball_state(result, stamp_msg))
         if self.debug_pub is not None and self.debug_pub.get_subscription_count() > 0:
-            self.debug_pub.publish(encode_image(draw_overlay(image, self.tracker.plate, result), stamp_msg))
+            self.debug_pub.publish(encode_image(draw_overlay(image, self.tracker.plate, result), stamp_msg, "camera"))
         if self.statistics is not None:
             self._last_result = result
             self.statistics.publish()  # values are read only when someone subscribes
@@ -245,31 +246,6 @@ class BallTrackerNode(Node):
             self._thread.join(timeout=2.0)
             self.source.close()
         return super().destroy_node()
-
-
-def decode_image(msg: Image):
-    """sensor_msgs/Image (bgr8/rgb8) -> (BGR array, None), or (None, why it is unusable)."""
-    if msg.encoding not in ("bgr8", "rgb8"):
-        return None, f"encoding '{msg.encoding}' (expected bgr8 or rgb8)"
-    width, height, step = msg.width, msg.height, msg.step
-    if width == 0 or height == 0:
-        return None, f"size {width}x{height}"
-    if step < 3 * width or len(msg.data) < step * height:
-        return None, f"corrupt: {len(msg.data)} bytes for {width}x{height} with step {step}"
-    rows = np.frombuffer(msg.data, np.uint8, count=step * height).reshape(height, step)
-    image = rows[:, :3 * width].reshape(height, width, 3)
-    if msg.encoding == "rgb8":
-        return cv2.cvtColor(image, cv2.COLOR_RGB2BGR), None
-    return image, None
-
-
-def encode_image(image_bgr: np.ndarray, stamp_msg) -> Image:
-    msg = Image(height=image_bgr.shape[0], width=image_bgr.shape[1], encoding="bgr8",
-                step=3 * image_bgr.shape[1])
-    msg.data = np.ascontiguousarray(image_bgr).tobytes()
-    msg.header.stamp = stamp_msg
-    msg.header.frame_id = "camera"
-    return msg
 
 
 def ball_state(result: TrackerResult, stamp_msg) -> BallState:

@@ -7,11 +7,11 @@ at `fps`, then exits. For a machine without a display: look at the files instead
 """
 from __future__ import annotations
 
-import numpy as np
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 
+from ball_balance.ros.images import decode_image
 from ball_balance.ros.node_main import StartupError, main_for
 from controller_manager_py.parameters import Param, declare_parameters
 
@@ -22,15 +22,6 @@ SCHEMA = [
     Param("fps", 30.0, "video frame rate", "Hz", 1.0, 240.0, read_only=True),
     Param("topic", "/camera/image_raw", "sensor_msgs/Image topic (bgr8 or rgb8)", read_only=True),
 ]
-
-
-def image_to_bgr(msg: Image) -> np.ndarray:
-    """sensor_msgs/Image (bgr8/rgb8) -> H x W x 3 uint8 BGR (ValueError for other encodings)."""
-    if msg.encoding not in ("bgr8", "rgb8"):
-        raise ValueError(f"unsupported encoding '{msg.encoding}' (bgr8 or rgb8)")
-    rows = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.step)
-    image = rows[:, :msg.width * 3].reshape(msg.height, msg.width, 3)
-    return np.ascontiguousarray(image[:, :, ::-1] if msg.encoding == "rgb8" else image)
 
 
 class CameraSnapshotNode(Node):
@@ -46,10 +37,9 @@ class CameraSnapshotNode(Node):
     def on_image(self, msg: Image) -> None:
         import cv2
 
-        try:
-            image = image_to_bgr(msg)
-        except ValueError as error:
-            self.get_logger().error(str(error), throttle_duration_sec=5.0)
+        image, problem = decode_image(msg)
+        if image is None:
+            self.get_logger().error(f"unusable image: {problem}", throttle_duration_sec=5.0)
             return
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         if self.first_stamp is None:

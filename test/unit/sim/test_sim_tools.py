@@ -1,7 +1,6 @@
 """Tools around the simulation: the description CLI, the PNG/MP4 recorder, image conversion."""
 import cv2
 import numpy as np
-import pytest
 
 from ball_balance import robot
 from ball_balance.sim import record
@@ -34,15 +33,16 @@ def test_recorder_refuses_a_zero_resolution(tmp_path, capsys):
     assert "width_px" in capsys.readouterr().err
 
 
-def test_camera_snapshot_converts_rgb8_and_bgr8_and_refuses_others():
+def test_image_messages_convert_rgb8_and_bgr8_and_refuse_others():
     from sensor_msgs.msg import Image
 
-    from ball_balance.nodes.camera_snapshot_node import image_to_bgr
+    from ball_balance.ros.images import decode_image, encode_image
 
     bgr = np.random.default_rng(0).integers(0, 255, (4, 5, 3), dtype=np.uint8)
     msg = Image(height=4, width=5, encoding="bgr8", step=15, data=bgr.tobytes())
-    assert np.array_equal(image_to_bgr(msg), bgr)
+    assert np.array_equal(decode_image(msg)[0], bgr)
     msg = Image(height=4, width=5, encoding="rgb8", step=15, data=bgr[:, :, ::-1].tobytes())
-    assert np.array_equal(image_to_bgr(msg), bgr)
-    with pytest.raises(ValueError, match="mono8"):
-        image_to_bgr(Image(height=4, width=5, encoding="mono8", step=5, data=bytes(20)))
+    assert np.array_equal(decode_image(msg)[0], bgr)
+    assert np.array_equal(decode_image(encode_image(bgr, msg.header.stamp, "camera"))[0], bgr)
+    image, problem = decode_image(Image(height=4, width=5, encoding="mono8", step=5, data=bytes(20)))
+    assert image is None and "mono8" in problem
