@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import threading
 import time as _time
-from typing import Callable
+from typing import Callable, Sequence
 
 from ..hardware_interface.types import return_type
 
@@ -17,7 +17,7 @@ from ..hardware_interface.types import return_type
 class AsyncHandler:
     def __init__(self, name: str, function: Callable[[float, float], return_type],
                  detached: bool = False, rate_hz: float = 0.0, clock: Callable[[], float] = _time.monotonic,
-                 thread_priority: int = 0):
+                 thread_priority: int = 0, affinity: Sequence[int] = ()):
         self.name = name
         self._function = function
         self._detached = detached
@@ -34,6 +34,7 @@ class AsyncHandler:
         self.last_finish = float("nan")  # clock time of the last completed run (data age)
         self.last_duration = 0.0
         self.thread_priority = thread_priority  # SCHED_FIFO when > 0 and permitted
+        self.affinity = tuple(affinity)  # CPUs for the thread (empty: any)
         self._thread = threading.Thread(target=self._run, name=f"async:{name}", daemon=True)
         self._thread.start()
 
@@ -75,9 +76,12 @@ class AsyncHandler:
         self.last_duration = _time.monotonic() - start
 
     def _run(self) -> None:
+        from .loop import set_cpu_affinity, set_realtime_priority
+
         if self.thread_priority > 0:
-            from .loop import set_realtime_priority
             set_realtime_priority(self.thread_priority)
+        if self.affinity:
+            set_cpu_affinity(self.affinity)
         if self._detached:
             period = self._period or 0.01
             next_time = _time.monotonic()

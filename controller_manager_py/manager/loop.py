@@ -21,7 +21,7 @@ import ctypes
 import os
 import threading
 import time as _time
-from typing import Callable, Optional
+from typing import Callable, Optional, Sequence
 
 from .controller_manager import ControllerManager
 from .throttle import Throttle
@@ -29,8 +29,9 @@ from .throttle import Throttle
 
 class ControlLoop:
     def __init__(self, cm: ControllerManager, expect_blocking_read_write: bool = False,
-                 minimum_cycle_time: float = 0.0, thread_priority: int = 0):
-        """thread_priority: SCHED_FIFO priority of the loop thread (1..99; 0 = leave it normal)."""
+                 minimum_cycle_time: float = 0.0, thread_priority: int = 0, cpu_affinity: Sequence[int] = ()):
+        """thread_priority: SCHED_FIFO priority of the loop thread (1..99; 0 = leave it normal).
+        cpu_affinity: CPUs the loop thread may run on (empty: any)."""
         self.cm = cm
         self.period = 1.0 / cm.update_rate
         self.blocking = expect_blocking_read_write
@@ -42,6 +43,7 @@ class ControlLoop:
         self.throttle = Throttle(cm.logger, 5.0)
         self.idle_hook: Optional[Callable[[], None]] = None
         self.thread_priority = thread_priority
+        self.cpu_affinity = tuple(cpu_affinity)
         self.realtime = False  # True when the SCHED_FIFO priority was granted
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="controller_manager_loop", daemon=True)
@@ -64,6 +66,9 @@ class ControlLoop:
                 self.cm.logger.warning(f"could not give the loop thread SCHED_FIFO priority {self.thread_priority} "
                                        "(needs CAP_SYS_NICE or an rtprio limit); running at normal priority, "
                                        "expect more jitter under load")
+        if self.cpu_affinity and not set_cpu_affinity(self.cpu_affinity):
+            self.cm.logger.warning(f"could not pin the loop thread to CPUs {list(self.cpu_affinity)}; "
+                                   "running on any CPU")
         cm, period, stop = self.cm, self.period, self._stop
         monotonic, sleep = _time.monotonic, _time.sleep
         previous = cm.now() - period
@@ -114,6 +119,15 @@ def _set_timer_slack_ns(ns: int) -> None:
         ctypes.CDLL(None, use_errno=True).prctl(29, ctypes.c_ulong(ns), 0, 0, 0)
     except (OSError, AttributeError):
         pass
+
+
+def set_cpu_affinity(cpus: Sequence[int]) -> bool:
+    """Pin the calling thread to `cpus` (Linux applies affinity per thread); False when refused."""
+    try:
+        os.sched_setaffinity(0, set(cpus))
+        return True
+    except (OSError, AttributeError, ValueError):
+        return False
 
 
 def set_realtime_priority(priority: int) -> bool:

@@ -240,7 +240,8 @@ class ResourceManager:
             comp.async_handler = AsyncHandler(comp.name, comp.cycle_async,
                                               detached=params.scheduling_policy == "detached",
                                               rate_hz=comp.rw_rate or 100, clock=self._clock,
-                                              thread_priority=params.thread_priority)
+                                              thread_priority=params.thread_priority,
+                                              affinity=params.affinity)
         elif not running and comp.async_handler is not None:
             comp.async_handler.stop()
             comp.async_handler = None

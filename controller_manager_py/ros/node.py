@@ -61,6 +61,7 @@ SCHEMA = (
     Param("diagnostics.period", 1.0, "period of /diagnostics (statistics windows restart after each)", unit="s",
           min=0.05),
     Param("thread_priority", 50, "SCHED_FIFO priority of the loop thread (0 = normal scheduling)", min=0, max=99),
+    Param("cpu_affinity", [-1], "CPUs the loop thread may run on ([-1]: any)"),
     Param("executor_thread_priority", 40, "SCHED_FIFO priority of the executor thread (0 = normal): a "
           "preempted thread holding Python's interpreter lock would stall the loop", min=0, max=99),
     Param("gil_switch_interval", 2e-5, "Python's thread switch interval (lower: less loop jitter)", unit="s",
@@ -214,7 +215,8 @@ class ControllerManagerNode(Node):
             set_realtime_priority(self.params["executor_thread_priority"])
         blocking = self.params["hardware_synchronization.expect_blocking_read_write"]
         self.loop = ControlLoop(self.cm, blocking, self.params["hardware_synchronization.minimum_cycle_time"],
-                                self.params["thread_priority"])
+                                self.params["thread_priority"],
+                                [cpu for cpu in self.params["cpu_affinity"] if cpu >= 0])
         self.loop.idle_hook = self.on_loop_idle
         self.on_registry_timer()
         self.loop.start()

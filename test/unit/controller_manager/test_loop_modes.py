@@ -1,5 +1,6 @@
 """Loop modes: switching timing (between cycles, activate_asap, timeout), async hardware,
 simulated clock, hardware-driven pacing, AUTO strictness, hardware state changes."""
+import os
 import threading
 import time
 
@@ -7,6 +8,8 @@ import pytest
 from cm_helpers import JOINTS, MOCK_UR, make_manager, run, spawn
 
 from controller_manager_py.hardware_interface import State
+from controller_manager_py.hardware_interface.types import return_type
+from controller_manager_py.manager.async_handler import AsyncHandler
 from controller_manager_py.manager.loop import ControlLoop
 from controller_manager_py.manager.switching import AUTO, FORCE_AUTO, STRICT, SwitchError
 
@@ -129,3 +132,20 @@ def test_hardware_rw_rate_reads_every_nth_cycle():
     comp = cm.rm.components["mock_ur"]
     run(cm, 50)
     assert comp.divisor == 5 and comp.read_stats.execution_time.sample_count == 10
+
+
+def test_loop_and_async_threads_run_on_the_cpus_they_are_pinned_to():
+    cpus = sorted(os.sched_getaffinity(0))
+    cm = make_manager()
+    loop = ControlLoop(cm, cpu_affinity=[cpus[-1]])
+    loop.start()
+    handler = AsyncHandler("pinned", lambda time, period: return_type.OK, affinity=[cpus[0]])
+    try:
+        deadline = time.monotonic() + 3
+        while (loop.cycles < 5 or handler._thread.native_id is None) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert os.sched_getaffinity(loop._thread.native_id) == {cpus[-1]}
+        assert os.sched_getaffinity(handler._thread.native_id) == {cpus[0]}
+    finally:
+        loop.stop()
+        handler.stop()
