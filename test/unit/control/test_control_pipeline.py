@@ -17,9 +17,9 @@ DT = 0.02
 STEP = 0.03
 
 
-def _pipeline(controller):
+def _pipeline(controller, mode="wrist"):
     kin = PlateKinematics(Chain.from_urdf(URDF.read_text(), UR_JOINTS), LEVEL_HOME,
-                          shaper=ShaperConfig(max_joint_step_rad=STEP))
+                          shaper=ShaperConfig(max_joint_step_rad=STEP), mode=mode)
     return ControlPipeline(PipelineConfig(controller=controller), kin, Stationary())
 
 
@@ -30,9 +30,10 @@ def _observe(plant, **kw):
     return BallObservation(**values)
 
 
-@pytest.mark.parametrize("controller", ["pid", "mpc"])
-def test_homes_engages_and_balances_an_off_centre_ball(controller):
-    pipe = _pipeline(controller)
+@pytest.mark.parametrize("controller, mode", [("pid", "wrist"), ("mpc", "wrist"), ("pid", "pivot"),
+                                              ("mpc", "pivot")])
+def test_homes_engages_and_balances_an_off_centre_ball(controller, mode):
+    pipe = _pipeline(controller, mode)
     plant = DelayedPlant(x0=(0.08, -0.06))
     q_prev = np.array(LEVEL_HOME) + 0.2   # start away from home
     modes = []
