@@ -102,8 +102,9 @@ def tracker_values() -> dict:
 
 
 def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
-    from ball_balance.sim.config import DomainKnobs, SimConfig
+    from ball_balance.sim.config import DomainKnobs, SimConfig, camera_intrinsics
     from ball_balance.sim.world import SimWorld
+    from ball_balance.vision.camera import CameraModel
     from ball_balance.vision.config import TrackerConfig
     from ball_balance.vision.kalman import BallKalman
     from ball_balance.vision.tracker import BallTracker
@@ -119,7 +120,11 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
     pipeline = ControlPipeline(control_config.pipeline_config(values, spec.controller), _kinematics(values),
                                control_config.reference(values))
     tracker_cfg = TrackerConfig.from_values(tracker_values())
-    tracker = BallTracker(tracker_cfg) if spec.mode == "vision" else None
+    tracker = None
+    if spec.mode == "vision":  # the rendered camera's intrinsics, as /camera/camera_info gives them
+        camera = world.config.camera
+        tracker = BallTracker(tracker_cfg, CameraModel.pinhole(camera.width_px, camera.height_px,
+                                                               *camera_intrinsics(camera)))
     kalman = None
     if spec.mode == "fast":
         noise = max(knobs.detection_noise_m, spec.fast_noise_floor_m)

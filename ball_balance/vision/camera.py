@@ -44,6 +44,11 @@ class CameraModel:
             return None
         return cls(int(width), int(height), K, np.array(d, dtype=np.float64).ravel(), distortion_model or "plumb_bob")
 
+    @classmethod
+    def pinhole(cls, width: int, height: int, fx: float, fy: float, cx: float, cy: float) -> CameraModel:
+        """An ideal camera (no distortion), e.g. the simulation's rendered one."""
+        return cls(int(width), int(height), np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]), np.zeros(5))
+
     def scaled_to(self, width: int, height: int) -> CameraModel:
         """The same camera at another resolution (same field of view)."""
         if (width, height) == (self.width, self.height):

@@ -22,8 +22,7 @@ def world():
 def sim_camera(world) -> CameraModel:
     """Intrinsics as the simulation's /camera/camera_info gives them."""
     cam = world.config.camera
-    fx, fy, cx, cy = sim_config.camera_intrinsics(cam)
-    return CameraModel(cam.width_px, cam.height_px, np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), np.zeros(5))
+    return CameraModel.pinhole(cam.width_px, cam.height_px, *sim_config.camera_intrinsics(cam))
 
 
 def locked_tracker(world, **params):
