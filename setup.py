@@ -48,6 +48,7 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(f for f in glob.glob("config/*") if "." in f)),
         (f"share/{PACKAGE}/scripts", sorted(glob.glob("scripts/*.sh"))),
+        (f"share/{PACKAGE}/scripts/lib", sorted(glob.glob("scripts/lib/*.sh"))),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

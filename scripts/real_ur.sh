@@ -109,16 +109,8 @@ PY
 echo "real_ur.sh: [2/4] ${CTL[*]} switch_controllers --activate $ACTIVATE --deactivate $DEACTIVATE" >&2
 "${CTL[@]}" switch_controllers --activate "$ACTIVATE" --deactivate "$DEACTIVATE" --strict
 
-PIDS=()
-stop_all() {
-  trap - INT TERM EXIT
-  for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
-  for pid in "${PIDS[@]}"; do
-    for _ in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
-    kill -KILL "$pid" 2>/dev/null || true
-  done
-  echo "real_ur.sh: stopped; the arm holds its last commanded pose" >&2
-}
+source "$ROOT/scripts/lib/stop_all.sh"
+on_stopped() { echo "real_ur.sh: stopped; the arm holds its last commanded pose" >&2; }
 trap stop_all INT TERM EXIT
 echo "real_ur.sh: [3/4] tracker on the USB camera" >&2
 "$ROOT/scripts/tracker_usb.sh" ${TRACKER_ARGS[@]+"${TRACKER_ARGS[@]}"} &

@@ -58,17 +58,8 @@ else
   INACTIVE="[scaled_joint_trajectory_controller]"
 fi
 
-PIDS=()
-stop_all() {
-  trap - INT TERM EXIT
-  # background jobs of a script ignore SIGINT; rclpy shuts down cleanly on SIGTERM
-  for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
-  for pid in "${PIDS[@]}"; do
-    for _ in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
-    kill -KILL "$pid" 2>/dev/null || true
-  done
-  rm -rf "$WORK"
-}
+source "$ROOT/scripts/lib/stop_all.sh"
+on_stopped() { rm -rf "$WORK"; }
 trap stop_all INT TERM EXIT
 
 robot_state_publisher --ros-args -p "robot_description_file:=$URDF" &

@@ -78,18 +78,9 @@ VIS_PARAMS=()
 SIM_CONFIG="$ROOT/config/sim.yaml"
 ((TRUTH_FED)) && SIM_CONFIG="$ROOT/config/sim_truth_fed.yaml"
 LOGS="$(mktemp -d /tmp/ball_balance_graph.XXXXXX)"
-PIDS=()
+source "$ROOT/scripts/lib/stop_all.sh"
 NAMES=()
-stop_all() {
-  trap - INT TERM EXIT
-  # background jobs of a script ignore SIGINT; every node shuts down cleanly on SIGTERM
-  for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
-  for pid in "${PIDS[@]}"; do
-    for _ in $(seq 60); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
-    kill -KILL "$pid" 2>/dev/null || true
-  done
-  echo "sim_balance.sh: stopped (logs in $LOGS)" >&2
-}
+on_stopped() { echo "sim_balance.sh: stopped (logs in $LOGS)" >&2; }
 trap stop_all INT TERM EXIT
 start() {  # start NAME CMD...: in the background, output to $LOGS/NAME.log
   local name="$1"; shift
