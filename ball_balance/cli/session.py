@@ -209,3 +209,13 @@ def node_names(session: Session, include_hidden: bool = False) -> List[str]:
 
 def name_type_pairs(pairs: List[Tuple[str, List[str]]], include_hidden: bool = False):
     return sorted((name, types) for name, types in pairs if include_hidden or not is_hidden(name))
+
+
+def print_name_type_pairs(pairs: List[Tuple[str, List[str]]], count_only: bool, show_types: bool) -> int:
+    """Print as `ros2 topic list` / `ros2 service list` do: the count, or one name per line."""
+    if count_only:
+        print(len(pairs))
+        return 0
+    for name, types in pairs:
+        print(f"{name} [{', '.join(types)}]" if show_types else name)
+    return 0

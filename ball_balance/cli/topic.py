@@ -6,7 +6,7 @@ import sys
 import time
 
 from ball_balance.cli.errors import CliError
-from ball_balance.cli.session import Session, absolute_name, name_type_pairs
+from ball_balance.cli.session import Session, absolute_name, name_type_pairs, print_name_type_pairs
 
 
 def _session_discovered(args) -> Session:
@@ -29,12 +29,7 @@ def resolve_type(session: Session, topic: str, given: str = None, wait_s: float 
 def cmd_list(args) -> int:
     with _session_discovered(args) as session:
         pairs = name_type_pairs(session.node.get_topic_names_and_types(), args.include_hidden_topics)
-    if args.count_topics:
-        print(len(pairs))
-        return 0
-    for name, types in pairs:
-        print(f"{name} [{', '.join(types)}]" if args.show_types else name)
-    return 0
+    return print_name_type_pairs(pairs, args.count_topics, args.show_types)
 
 
 def cmd_echo(args) -> int:
