@@ -41,13 +41,17 @@ def _qos(parser, depth_default: int = 10) -> None:
     parser.add_argument("--qos-depth", type=int, default=depth_default, help="queue depth (default: %(default)s)")
 
 
+def _list_options(p, noun: str) -> None:
+    """The options `ros2 topic list` and `ros2 service list` share (-t, -c, hidden ones)."""
+    p.add_argument("-t", "--show-types", action="store_true", help=f"additionally show the {noun} type")
+    p.add_argument("-c", f"--count-{noun}s", action="store_true", help=f"only show the number of {noun}s")
+    p.add_argument(f"--include-hidden-{noun}s", action="store_true", help=f"consider hidden {noun}s as well")
+    _spin_time(p)
+
+
 def _topic_parsers(sub) -> None:
     topic = sub.add_parser("topic", help="inspect and publish topics").add_subparsers(dest="verb", required=True)
-    p = _verb(topic, "list", "topic:cmd_list", "output a list of available topics")
-    p.add_argument("-t", "--show-types", action="store_true", help="additionally show the topic type")
-    p.add_argument("-c", "--count-topics", action="store_true", help="only show the number of topics")
-    p.add_argument("--include-hidden-topics", action="store_true", help="consider hidden topics as well")
-    _spin_time(p)
+    _list_options(_verb(topic, "list", "topic:cmd_list", "output a list of available topics"), "topic")
 
     p = _verb(topic, "echo", "topic:cmd_echo", "output messages from a topic")
     p.add_argument("topic_name", help="name of the topic, e.g. /ball_state")
@@ -98,11 +102,8 @@ def _simple_parsers(sub) -> None:
     _spin_time(p)
 
     service = sub.add_parser("service", help="list services").add_subparsers(dest="verb", required=True)
-    p = _verb(service, "list", "graph:cmd_service_list", "output a list of available services")
-    p.add_argument("-t", "--show-types", action="store_true", help="additionally show the service type")
-    p.add_argument("-c", "--count-services", action="store_true", help="only show the number of services")
-    p.add_argument("--include-hidden-services", action="store_true", help="consider hidden services as well")
-    _spin_time(p)
+    _list_options(_verb(service, "list", "graph:cmd_service_list", "output a list of available services"),
+                  "service")
 
     param = sub.add_parser("param", help="node parameters").add_subparsers(dest="verb", required=True)
     p = _verb(param, "get", "param:cmd_get", "get a parameter")
