@@ -5,11 +5,12 @@ from setuptools import find_packages, setup
 
 PACKAGE = "ball_balance"
 
-# `ros2 run ball_balance <name>`: the executables of DESIGN.md section 4 plus tools.
+# `ros2 run ball_balance <name>`: the executables of docs/design.md section 4 plus tools.
 EXECUTABLES = {
     "ball_tracker": "ball_balance.nodes.ball_tracker_node:main",
     "ball_balance_controller": "ball_balance.nodes.pid_controller_node:main",
     "ball_balance_mpc": "ball_balance.nodes.mpc_controller_node:main",
+    "ball_balance_policy": "ball_balance.nodes.policy_node:main",
     "ball_balance_visualizer": "ball_balance.nodes.visualizer_node:main",
     "robot_state_publisher": "ball_balance.nodes.robot_state_publisher_node:main",
     "ros2_control_node": "controller_manager_py.ros2_control_node:main",
@@ -32,10 +33,14 @@ CMPY_CONTROLLERS = {
         "controller_manager_py.controllers.forward_command:ForwardCommandController",
     "joint_trajectory_controller/JointTrajectoryController":
         "controller_manager_py.controllers.joint_trajectory:JointTrajectoryController",
+    "onnx_policy_controller/OnnxPolicyController":
+        "controller_manager_py.controllers.onnx_policy:OnnxPolicyController",
     "chained_controllers/PassthroughController":
         "controller_manager_py.controllers.passthrough:PassthroughController",
     "ur_controllers/ScaledJointTrajectoryController":
         "controller_manager_py.controllers.joint_trajectory:ScaledJointTrajectoryController",
+    "ball_balance_controllers/BallBalanceController":
+        "ball_balance.controllers.ball_balance_controller:BallBalanceController",
 }
 
 setup(
@@ -47,6 +52,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(f for f in glob.glob("config/*") if "." in f)),
+        (f"share/{PACKAGE}/config/policies", sorted(glob.glob("config/policies/*"))),
         (f"share/{PACKAGE}/scripts", sorted(glob.glob("scripts/*.sh"))),
         (f"share/{PACKAGE}/scripts/lib", sorted(glob.glob("scripts/lib/*.sh"))),
     ],

@@ -1,4 +1,4 @@
-"""The plate, its ArUco markers and the ball: the one source of these numbers (DESIGN.md §5).
+"""The plate, its ArUco markers and the ball: the one source of these numbers (docs/design.md section 5).
 
 Plate frame `plate_center`: origin at the plate's geometric centre, z along the normal,
 x to the right and y up as seen by the overhead camera. Lengths in metres, mass in kg.
@@ -38,7 +38,7 @@ GRAVITY_M_S2 = 9.81
 
 @dataclass(frozen=True)
 class PlateGeometry:
-    """Plate and marker layout, overridable by parameters (defaults from DESIGN.md)."""
+    """Plate and marker layout, overridable by parameters (defaults: docs/design.md section 5)."""
 
     side_m: float = PLATE_SIDE_M
     marker_side_m: float = MARKER_SIDE_M

@@ -2,10 +2,16 @@
 """Closed-loop benchmark: domains x references x controllers x seeded episodes.
 
 Lock-stepped (simulated time), so the numbers do not depend on machine load. Prints the
-table and writes <out>/closed_loop.csv and <out>/closed_loop.png.
+table (headline: RMSE after 5 s, settling time, drops, push recovery) and writes
+<out>/closed_loop.csv and <out>/closed_loop.png. With --protocol both, every cell is also
+run with the reference system's own protocol (released 0-2 cm off centre, 20 s, RMSE at
+30 Hz from the release before a drop) and printed beside its published figures.
 
     python benchmarks/closed_loop_bench.py                       # small: 2 episodes, fast mode
-    python benchmarks/closed_loop_bench.py --episodes 30         # the full DESIGN.md section 7 set
+    python benchmarks/closed_loop_bench.py --episodes 30         # the full docs/design.md section 7 set
+    python benchmarks/closed_loop_bench.py --controllers pid,mpc,policy --domains harsh
+    python benchmarks/closed_loop_bench.py --protocol both --domains standard,high_gravity
+    python benchmarks/closed_loop_bench.py --combine artifacts/bench/a artifacts/bench/b --out artifacts/bench/all
     python benchmarks/closed_loop_bench.py --mode vision --domains standard --references circle
     python benchmarks/closed_loop_bench.py --live --episodes 1 --domains standard   # the multi-process graph
 """
@@ -19,9 +25,39 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from ball_balance.benchmark.episode import REFERENCES, EpisodeSpec, run_episode  # noqa: E402
-from ball_balance.benchmark.report import aggregate, format_table, plot, write_csv  # noqa: E402
-from ball_balance.sim.config import DOMAINS  # noqa: E402
+from ball_balance.benchmark.episode import REFERENCES, EpisodeSpec, reference_protocol, run_episode  # noqa: E402
+from ball_balance.benchmark.report import aggregate, format_table, plot, read_csv, sort_rows, write_csv  # noqa: E402
+from ball_balance.sim.config import DOMAIN_ALIASES, DOMAINS  # noqa: E402
+
+# domain groups for --domains
+DESIGN_DOMAINS = ["standard", "slippery", "sticky", "heavy_ball", "low_gravity", "high_gravity", "noisy_vision",
+                  "high_latency", "full_dr"]
+DOMAIN_GROUPS = {"all": list(DOMAINS), "design": DESIGN_DOMAINS,
+                 "harsh": ["noise_5mm", "latency_200ms", "low_gravity", "high_gravity", "extreme_dr"],
+                 "disturbances": ["solid_ball", "pushes"], "hands": ["hand_1", "hand_2", "hand_3"]}
+
+
+def names(text: str, known, what: str, groups=None) -> list:
+    """A comma- (or space-) separated list of names, groups expanded; unknown names refused."""
+    out = []
+    for name in text.replace(",", " ").split():
+        expanded = (groups or {}).get(name, [name])
+        for item in expanded:
+            if known is not None and item not in known:
+                raise SystemExit(f"unknown {what} '{item}': expected one of {sorted(known)}"
+                                 + (f" or a group {sorted(groups)}" if groups else ""))
+            if item not in out:
+                out.append(item)
+    return out
+
+
+def known_controllers():
+    """Controllers the control pipeline declares (CONTROLLERS), else None (any name; the
+    pipeline refuses one it does not know)."""
+    from ball_balance.control import pipeline
+
+    found = getattr(pipeline, "CONTROLLERS", None)
+    return set(found) if found else None
 
 
 def run_live(spec: EpisodeSpec, out: Path):
@@ -56,9 +92,16 @@ def run_live(spec: EpisodeSpec, out: Path):
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--controllers", nargs="+", default=["pid", "mpc"], choices=["pid", "mpc"])
-    parser.add_argument("--domains", nargs="+", default=list(DOMAINS), choices=list(DOMAINS))
-    parser.add_argument("--references", nargs="+", default=list(REFERENCES), choices=list(REFERENCES))
+    parser.add_argument("--controllers", nargs="+", default=["pid,mpc"],
+                        help="comma-separated controllers the control pipeline knows (pid, mpc, policy, ...)")
+    parser.add_argument("--domains", nargs="+", default=["all"],
+                        help=f"comma-separated domains or groups {sorted(DOMAIN_GROUPS)}: "
+                             f"{', '.join(list(DOMAINS) + list(DOMAIN_ALIASES))}")
+    parser.add_argument("--references", nargs="+", default=[",".join(REFERENCES)],
+                        help=f"comma-separated: {', '.join(REFERENCES)}")
+    parser.add_argument("--protocol", default="ours", choices=["ours", "reference", "both"],
+                        help="ours: released 5-10 cm off centre, headline RMSE after 5 s; reference: the reference "
+                             "system's (0-2 cm, 20 s, RMSE from the release); both: each cell twice")
     parser.add_argument("--episodes", type=int, default=2, help="seeded episodes per cell (design: 30)")
     parser.add_argument("--duration", type=float, default=20.0, help="episode length [s]")
     parser.add_argument("--mode", default="fast", choices=["fast", "vision", "truth"],
@@ -67,27 +110,43 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default=str(ROOT / "artifacts" / "bench"), help="output folder")
     parser.add_argument("--live", action="store_true",
                         help="run the live multi-process graph (scripts/sim_balance.sh) instead: wall-clock, slow")
+    parser.add_argument("--combine", nargs="+", metavar="DIR",
+                        help="print one table from the closed_loop.csv of earlier runs (e.g. run in parallel) "
+                             "and write it to --out; runs nothing")
     args = parser.parse_args(argv)
+    out = Path(args.out)
+    if args.combine:
+        rows = sort_rows([row for folder in args.combine for row in read_csv(Path(folder) / "closed_loop.csv")])
+        print(format_table(rows))
+        write_csv(rows, out / "closed_loop.csv")
+        plot(rows, out / "closed_loop.png")
+        print(f"\nwrote {out / 'closed_loop.csv'} and {out / 'closed_loop.png'}")
+        return 0
+    controllers = names(" ".join(args.controllers), known_controllers(), "controller")
+    domains = names(" ".join(args.domains), set(DOMAINS) | set(DOMAIN_ALIASES), "domain", DOMAIN_GROUPS)
+    references = names(" ".join(args.references), set(REFERENCES), "reference")
+    protocols = ["ours", "reference"] if args.protocol == "both" else [args.protocol]
 
-    cells = [(c, r, d) for r in args.references for d in args.domains for c in args.controllers]
+    cells = [(c, r, d, p) for p in protocols for r in references for d in domains for c in controllers]
     total = len(cells) * args.episodes
     print(f"closed-loop benchmark: {len(cells)} cells x {args.episodes} episodes = {total} episodes of "
           f"{args.duration:.0f} s, mode {args.mode}", flush=True)
     results = []
     t_start = time.monotonic()
-    for i, (controller, reference, domain) in enumerate(cells):
+    for i, (controller, reference, domain, protocol) in enumerate(cells):
         for k in range(args.episodes):
             spec = EpisodeSpec(controller=controller, domain=domain, reference=reference, seed=args.seed + k,
                                duration_s=args.duration, mode=args.mode)
+            if protocol == "reference":
+                spec = reference_protocol(spec)
             results.append(run_live(spec, Path(args.out)) if args.live else run_episode(spec))
         done = (i + 1) * args.episodes
-        print(f"  [{done}/{total}] {controller} {reference} {domain}: "
+        print(f"  [{done}/{total}] {controller} {protocol} {reference} {domain}: "
               f"drops {sum(r.metrics['drop'] for r in results[-args.episodes:]):.0f}, "
               f"{time.monotonic() - t_start:.0f} s elapsed", flush=True)
     rows = aggregate(results)
     print()
     print(format_table(rows))
-    out = Path(args.out)
     write_csv(rows, out / "closed_loop.csv")
     plot(rows, out / "closed_loop.png")
     print(f"\nwrote {out / 'closed_loop.csv'} and {out / 'closed_loop.png'}")

@@ -5,20 +5,15 @@
 2. Position RMSE at rest and rolling, velocity RMSE, detection rate: synthetic frames
    (known camera) and, when ball_balance.sim is importable, MuJoCo-rendered frames with the
    simulation's truth (intrinsics as its /camera/camera_info gives them).
-3. End-to-end latency: the ball_tracker executable as its own process on a private ROS
-   domain; this process publishes 640x480 frames (reliable) stamped with the send time and
-   receives /ball_state; latency = receipt time - frame stamp.
+The tracker as a process over DDS (frames answered, image stamp -> /ball_state latency,
+per-stage times): benchmarks/transport_bench.py; in the live graph, camera capture -> joint
+command: benchmarks/latency_budget_bench.py.
 
-usage: python benchmarks/tracker_bench.py [--timing-frames 600] [--no-sim] [--no-latency]
+usage: python benchmarks/tracker_bench.py [--timing-frames 600] [--no-sim]
 """
 from __future__ import annotations
 
 import argparse
-import os
-import subprocess
-import sys
-import time
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -29,7 +24,6 @@ from ball_balance.vision.config import TrackerConfig
 from ball_balance.vision.synthetic import SyntheticCamera, SyntheticScene
 from ball_balance.vision.tracker import STAGES, BallTracker
 
-ROOT = Path(__file__).resolve().parents[1]
 FPS = 30.0
 
 
@@ -159,79 +153,10 @@ def sim_accuracy():
     return rest, rolling, times
 
 
-# -- 3. latency ------------------------------------------------------------------------------
-def latency(seconds=6.0):
-    import rclpy
-    from ball_tracker_msgs.msg import BallState
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import qos_profile_sensor_data
-    from sensor_msgs.msg import CameraInfo, Image
-
-    sys.path.insert(0, str(ROOT / "test"))
-    from harness import DomainLease, executable, ros_env
-
-    lease = DomainLease()
-    env = ros_env(lease.domain_id)
-    tracker = subprocess.Popen([executable("ball_tracker"), "--ros-args", "--params-file",
-                                str(ROOT / "config" / "ball_tracker.yaml")], env=env,
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    os.environ.update(ROS_DOMAIN_ID=str(lease.domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=lease.domain_id)
-    node = rclpy.create_node("tracker_bench", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    scene = SyntheticScene()
-    image = scene.render((0.05, 0.05), noise_std=2.0)[0]
-    msg = Image(height=480, width=640, encoding="bgr8", step=640 * 3)
-    msg.data = image.tobytes()
-    info = CameraInfo(width=640, height=480, distortion_model="plumb_bob")
-    info.k = [float(v) for v in scene.camera.K.ravel()]
-    info.d = [0.0] * 5
-    image_pub = node.create_publisher(Image, "/camera/image_raw", 10)
-    info_pub = node.create_publisher(CameraInfo, "/camera/camera_info", qos_profile_sensor_data)
-    latencies_ms, found = [], []
-
-    def on_state(state):
-        sent = state.header.stamp.sec * 1_000_000_000 + state.header.stamp.nanosec
-        latencies_ms.append((time.time_ns() - sent) / 1e6)
-        found.append(state.ball_found)
-
-    node.create_subscription(BallState, "/ball_state", on_state, qos_profile_sensor_data)
-    sent = [0]
-
-    def tick():
-        now = time.time_ns()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now, 1_000_000_000)
-        image_pub.publish(msg)
-        info_pub.publish(info)
-        sent[0] += 1
-
-    timer = node.create_timer(1 / FPS, tick)
-    deadline = time.monotonic() + 30.0
-    while time.monotonic() < deadline and sum(found) < 5:      # discovery, QoS match, plate lock
-        executor.spin_once(timeout_sec=0.05)
-    latencies_ms.clear()
-    sent[0] = 0
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        executor.spin_once(timeout_sec=0.05)
-    node.destroy_timer(timer)
-    received = len(latencies_ms)
-    executor.shutdown()
-    node.destroy_node()
-    context.try_shutdown()
-    os.killpg(tracker.pid, 2)
-    tracker.wait(timeout=10)
-    lease.release()
-    return latencies_ms, sent[0], received
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--timing-frames", type=int, default=600)
     parser.add_argument("--no-sim", action="store_true")
-    parser.add_argument("--no-latency", action="store_true")
     args = parser.parse_args()
     cv2.setNumThreads(1)
 
@@ -259,13 +184,6 @@ def main():
             print(sim_rolling.row("rendered (MuJoCo), rolling"))
             print(f"  rendered frames, total time per frame: median {pct(sim_times, 50):.3f} ms, "
                   f"p99 {pct(sim_times, 99):.3f} ms")
-
-    if not args.no_latency:
-        lat, sent, received = latency()
-        print("\n3. end-to-end latency, image stamp -> /ball_state received in this process (640x480, 30 Hz, "
-              "reliable images)")
-        print(f"   median {pct(lat, 50):.2f} ms, p90 {pct(lat, 90):.2f} ms, p99 {pct(lat, 99):.2f} ms, "
-              f"max {max(lat, default=float('nan')):.2f} ms; {received}/{sent} frames answered")
 
 
 if __name__ == "__main__":

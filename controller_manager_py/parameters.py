@@ -5,13 +5,19 @@ description). `declare_parameters` declares them on an rclpy node (with descript
 `ros2 param describe` shows them) and returns a validated, immutable snapshot; a bad value
 raises `ParameterError` naming the parameter, which `run_node` turns into one clear line at
 start-up. `validate` does the same for a plain dict (no ROS), for tests and tools.
+
+`report_unknown_parameters` catches the other mistake: a value given to a node (parameter
+file or `-p`) under a name it never declares, e.g. `kp_typo`, which rclpy keeps silently. It
+logs one warning naming them (and the closest declared name), or refuses to start when the
+node's `unknown_parameters` parameter is `error`.
 """
 from __future__ import annotations
 
+import difflib
 import math
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, Callable, Iterable, Mapping, Optional, Sequence
+from typing import Any, Callable, Iterable, List, Mapping, Optional, Sequence
 
 
 class ParameterError(ValueError):
@@ -112,3 +118,53 @@ def declare_parameters(node, schema: Iterable[Param]) -> Mapping[str, Any]:
             raise ParameterError(f"parameter '{p.name}': {error}") from None
         values[p.name] = p.validate(value)
     return MappingProxyType(values)
+
+
+UNKNOWN_PARAMETERS = Param(
+    "unknown_parameters", "warn",
+    "a value given to this node (parameter file or -p) for a parameter it does not declare: "
+    "'warn' logs the names, 'error' refuses to start", choices=("warn", "error"), read_only=True)
+
+
+def unknown_parameter_names(given: Iterable[str], declared: Iterable[str]) -> List[str]:
+    """The names in `given` that are not `declared` (sorted)."""
+    return sorted(set(given) - set(declared))
+
+
+def closest_name(name: str, declared: Iterable[str]) -> Optional[str]:
+    """The declared name `name` was probably meant to be (kp_typo -> kp), or None."""
+    declared = sorted(declared)
+    close = difflib.get_close_matches(name, declared, n=1, cutoff=0.6) or \
+        [d for d in declared if name.startswith(f"{d}_")][-1:]
+    return close[0] if close else None
+
+
+def describe_unknown(unknown: Sequence[str], declared: Iterable[str]) -> str:
+    """'kp_typo (did you mean kp?), foo' for a message."""
+    declared = list(declared)
+    parts = []
+    for name in unknown:
+        close = closest_name(name, declared)
+        parts.append(f"{name} (did you mean {close}?)" if close else name)
+    return ", ".join(parts)
+
+
+def report_unknown_parameters(node) -> List[str]:
+    """Check the values given to `node` against what it declared; call once it declared them all.
+
+    Returns the unknown names. Logs one warning naming them, or raises ParameterError when
+    the node's `unknown_parameters` parameter (declared here if the node has not) is 'error'.
+    """
+    if not node.has_parameter(UNKNOWN_PARAMETERS.name):
+        declare_parameters(node, [UNKNOWN_PARAMETERS])
+    policy = UNKNOWN_PARAMETERS.validate(node.get_parameter(UNKNOWN_PARAMETERS.name).value)
+    declared = list(node._parameters)  # rclpy keeps overrides apart from declared parameters
+    unknown = unknown_parameter_names(getattr(node, "_parameter_overrides", {}), declared)
+    if not unknown:
+        return unknown
+    text = (f"unknown parameter(s) given to {node.get_fully_qualified_name()}: {describe_unknown(unknown, declared)} "
+            "(not declared by this node; `ros2 param list` shows the declared ones)")
+    if policy == "error":
+        raise ParameterError(f"{text}; unknown_parameters is 'error'")
+    node.get_logger().warning(f"{text}: ignored")
+    return unknown

@@ -4,7 +4,7 @@
 # controller, the visualizer), release the ball off-centre, balance it at the centre, then
 # track a circle (radius 0.10 m, period 10 s). Leaves in artifacts/demo/:
 #   plot.png     ball path vs reference, error over time, tilt commands
-#   camera.mp4   the overhead camera with the tracker's overlay (first seconds after engaging)
+#   camera.mp4   the overhead camera with the tracker's overlay, in real time (12 s from engaging)
 #   metrics.txt  drop, RMSE (whole run and after 5 s), settling time, peak tilt, smoothness
 # and prints the metrics. Ctrl-C stops everything.
 #

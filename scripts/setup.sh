@@ -97,7 +97,7 @@ fi
 # colcon never descends into a package's folder, so the nested interface packages are
 # named explicitly. Interface packages a ROS installation already has are not rebuilt.
 PACKAGE_PATHS=(. ball_tracker_msgs)
-for pkg in tf2_msgs controller_manager_msgs pal_statistics_msgs; do
+for pkg in tf2_msgs controller_manager_msgs pal_statistics_msgs control_msgs; do
   provided=0
   if [[ $MODE == system ]]; then
     IFS=: read -ra prefixes <<<"${AMENT_PREFIX_PATH:-}"
@@ -110,7 +110,7 @@ for pkg in tf2_msgs controller_manager_msgs pal_statistics_msgs; do
 done
 
 build_inputs=$(cd "$ROOT" && find "${PACKAGE_PATHS[@]}" -maxdepth 3 \
-    \( -name package.xml -o -name CMakeLists.txt -o -name '*.msg' -o -name '*.srv' -o -name setup.py -o -name setup.cfg \) \
+    \( -name package.xml -o -name CMakeLists.txt -o -name '*.msg' -o -name '*.srv' -o -name '*.action' -o -name setup.py -o -name setup.cfg \) \
     -not -path './.venv/*' -not -path './build/*' -not -path './install/*' | sort)
 want="$MODE ${PACKAGE_PATHS[*]} $(cd "$ROOT" && digest $build_inputs) $(cd "$ROOT" && { find config -type f 2>/dev/null || true; } | sort | digest -)"
 if ! stamp_ok build "$want" || [[ ! -f "$ROOT/install/setup.bash" ]]; then
@@ -123,7 +123,11 @@ if ! stamp_ok build "$want" || [[ ! -f "$ROOT/install/setup.bash" ]]; then
       export AMENT_PREFIX_PATH="$VENV"
       export CMAKE_PREFIX_PATH="$VENV"
     fi
-    colcon --log-base build/log build --merge-install --symlink-install \
+    # colcon through the venv's Python, in both modes: our executables get the interpreter
+    # that ran colcon. An installation's colcon (#!/usr/bin/python3) would give them the system
+    # Python, without the venv's MuJoCo, numpy and OpenCV (the system mode's test caught it).
+    "$VENV/bin/python" -c 'import sys; from colcon_core.command import main; sys.argv[0] = "colcon"; sys.exit(main())' \
+      --log-base build/log build --merge-install --symlink-install \
       --build-base build --install-base install \
       --paths "${PACKAGE_PATHS[@]}" \
       --event-handlers console_cohesion- summary+ status- \
@@ -135,6 +139,19 @@ fi
 
 # --- 4b. a `ros2` command (our ros2py) only where no real ROS 2 `ros2` exists ----------
 "$ROOT/ball_balance/cli/install_ros2_shim.sh" "$VENV" | sed 's/^/[setup] /'
+
+# --- 4c. kernel socket limits: whole camera frames over UDP ---------------------------
+# config/dds asks for 4 MiB socket buffers (docs/transport.md); the kernel silently caps
+# them at net.core.rmem_max / wmem_max, and with the usual 208 KiB a 1 MB frame from a
+# camera driver on another DDS (or another host) is lost whole over best effort.
+DDS_SOCKET_BUFFER_BYTES=4194304
+for limit in rmem_max wmem_max; do
+  value=$(cat "/proc/sys/net/core/$limit" 2>/dev/null || echo 0)
+  if ((value < DDS_SOCKET_BUFFER_BYTES)); then
+    say "warning: net.core.$limit is $value bytes; camera frames over UDP need $DDS_SOCKET_BUFFER_BYTES."
+    say "  sudo sysctl -w net.core.$limit=$DDS_SOCKET_BUFFER_BYTES   (and persist it in /etc/sysctl.d/, see docs/transport.md)"
+  fi
+done
 
 # --- 5. env.sh: everything a shell needs to run our nodes ------------------------------
 cat >"$ROOT/env.sh" <<EOF
@@ -148,5 +165,9 @@ source "$ROOT/install/local_setup.bash"
 ((_bb_nounset)) && set -u; unset _bb_nounset
 export MUJOCO_GL="\${MUJOCO_GL:-egl}"
 export PYOPENGL_PLATFORM="\${PYOPENGL_PLATFORM:-\$MUJOCO_GL}"
+# DDS settings for camera frames at full rate (docs/transport.md); your own files win
+export FASTRTPS_DEFAULT_PROFILES_FILE="\${FASTRTPS_DEFAULT_PROFILES_FILE:-$ROOT/config/dds/fastdds.xml}"
+export FASTDDS_DEFAULT_PROFILES_FILE="\${FASTDDS_DEFAULT_PROFILES_FILE:-\$FASTRTPS_DEFAULT_PROFILES_FILE}"
+export CYCLONEDDS_URI="\${CYCLONEDDS_URI:-file://$ROOT/config/dds/cyclonedds.xml}"
 EOF
 say "ready ($MODE mode): source env.sh, or use scripts/run_demo.sh and scripts/test.sh"

@@ -5,7 +5,7 @@
 # --trajectory: scaled_joint_trajectory_controller instead). Ctrl-C stops everything.
 #
 #   scripts/sim_arm.sh                              # standard domain, camera 30 Hz 640x480
-#   scripts/sim_arm.sh --domain slippery --seed 3   # an evaluation domain (DESIGN.md section 7)
+#   scripts/sim_arm.sh --domain slippery --seed 3   # an evaluation domain (docs/design.md section 7)
 #   scripts/sim_arm.sh --sim-config config/sim_truth_fed.yaml   # no camera, /ball_state from truth
 #   scripts/sim_arm.sh --param camera_rate_hz=60 --param camera_width=320 --param camera_height=240
 #   scripts/sim_arm.sh --trajectory                 # MPC-style: the trajectory controller active
@@ -64,7 +64,8 @@ trap stop_all INT TERM EXIT
 
 robot_state_publisher --ros-args -p "robot_description_file:=$URDF" &
 PIDS+=($!)
-ros2_control_node --ros-args --params-file "$CONTROLLERS" \
+# config/sim_manager.yaml: normal scheduling for a simulated arm (why: in that file)
+ros2_control_node --ros-args --params-file "$CONTROLLERS" --params-file "$ROOT/config/sim_manager.yaml" \
   -p "robot_description_file:=$URDF" \
   -p "activate_controllers:=$ACTIVE" -p "inactive_controllers:=$INACTIVE" &
 PIDS+=($!)

@@ -22,6 +22,12 @@ ROOT = Path(__file__).resolve().parents[1]
 INSTALL_BIN = ROOT / "install" / "lib" / "ball_balance"
 LOCK_DIR = Path("/tmp/ball_balance_ros_domains")
 DOMAIN_RANGE = range(30, 230)
+# The project's DDS settings (docs/transport.md) for every process a test starts and for the
+# test process itself (set before its first participant exists): tests run as users do.
+DDS_ENV = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(ROOT / "config" / "dds" / "fastdds.xml"),
+           "FASTDDS_DEFAULT_PROFILES_FILE": str(ROOT / "config" / "dds" / "fastdds.xml"),
+           "CYCLONEDDS_URI": f"file://{ROOT / 'config' / 'dds' / 'cyclonedds.xml'}"}
+os.environ.update(DDS_ENV)
 
 
 class DomainLease:
@@ -52,7 +58,7 @@ def ros_env(domain_id: int, **extra: str) -> dict:
     env = dict(os.environ)
     env.pop("ROS_LOCALHOST_ONLY", None)
     env.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
+               PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0", **DDS_ENV)
     env.update(extra)
     return env
 

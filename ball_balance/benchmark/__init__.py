@@ -1,4 +1,4 @@
-"""Closed-loop benchmark (DESIGN.md section 7): lock-stepped simulation, camera/tracker (or
+"""Closed-loop benchmark (docs/design.md section 7): lock-stepped simulation, camera/tracker (or
 the simulator's truth plus a noise model) and the control pipeline, episode by episode from
 a seed, so results do not depend on machine load. No ROS import.
 

@@ -1,27 +1,37 @@
 """One benchmark episode: SimWorld + (render + BallTracker | truth + noise + Kalman) + ControlPipeline,
-advanced in lock-step on simulated time.
+advanced in lock-step on simulated time. Everything an episode does is in its EpisodeSpec:
+controller, domain, reference, release (position and rolling speed), ball type, knob
+overrides and timed events (pushes, external forces, a hand over markers, exposure changes,
+camera outages), so a new case never needs a copy of the loop.
 
-Timeline (simulated seconds): physics at 1 ms; the camera captures at `camera_rate_hz`;
-a frame's tracker result becomes visible to the controller `vision_delay_s` after capture
-(the tracker's processing time in the live graph); the controller ticks at its own rate
-with the latest visible result, its age = tick time - capture time; joint commands reach
-the arm after the domain's latency (SimWorld applies it). At t = 0 the arm is at home and
-the ball is released at rest off-centre (radius 0.05-0.10 m, direction from the seed).
+Timeline (simulated seconds): physics at 1 ms; the camera captures at `camera_rate_hz`
+(a frame may be dropped, `frame_drop_prob`, and its stamp may be off the true capture time,
+`stamp_jitter_s`); a frame's tracker result becomes visible to the controller
+`vision_delay_s` after capture (the tracker's processing time in the live graph); the
+controller ticks at its own rate with the latest visible result, its age = tick time -
+frame stamp; joint commands reach the arm after the domain's latency (SimWorld applies it).
+At t = 0 the arm is at home and the ball is released off-centre (radius and rolling speed
+from `release_radius_m` and `release_speed_m_s`, directions from the seed). Events act at
+the first control tick at or after their time `t_s` (simulated seconds since the release).
 Metrics count from the controller's engagement (the ball rests on the level plate until
-then, while the tracker starts up).
+then, while the tracker starts up); after that, time the controller is not engaged counts
+as error against the reference the user asked for.
 
-Modes: "vision" renders every frame and runs the real tracker (ArUco + HSV + Kalman);
-"fast" feeds the tracker's Kalman filter with the true position plus Gaussian noise
-(SimWorld.detected_ball: the domain's detection_noise_m, at least `fast_noise_floor_m`),
-so sweeps are cheap; both produce BallState-equivalent observations. "truth" feeds the
-true state itself (diagnostics: separates control from estimation).
+Modes: "vision" renders every frame (with the camera model: exposure gain, sensor noise of
+at least `vision_noise_floor`, motion blur over `blur_exposure_s`, hands over markers)
+and runs the real tracker (ArUco + HSV + Kalman); "fast" feeds the tracker's Kalman
+filter with the true position plus Gaussian noise (SimWorld.detected_ball: the domain's
+detection_noise_m, at least `fast_noise_floor_m`), so sweeps are cheap; both produce
+BallState-equivalent observations.
+"truth" feeds the true state itself (diagnostics: separates control from estimation).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Dict, Optional
+from typing import Dict, Optional, Tuple
 
 import numpy as np
 
@@ -37,22 +47,82 @@ REFERENCES = {
     "circle": dict(reference_kind="circle", reference_radius_m=0.10, reference_period_s=10.0),
     "figure_eight": dict(reference_kind="figure_eight", reference_radius_m=0.10, reference_period_s=12.0),
 }
+BALLS = {"": None, "shell": True, "solid": False}   # EpisodeSpec.ball -> DomainKnobs.ball_shell
+
+
+# ---- events (all times in simulated seconds since the release) ---------------------------
+@dataclass(frozen=True)
+class Push:
+    """An impulse: the ball's velocity changes by (dvx, dvy) m/s, plate axes, spin kept rolling."""
+
+    t_s: float
+    dvx: float
+    dvy: float
+
+
+@dataclass(frozen=True)
+class Force:
+    """An external force (N, plate axes) on the ball's centre from t_s for duration_s."""
+
+    t_s: float
+    duration_s: float
+    fx_n: float
+    fy_n: float
+
+
+@dataclass(frozen=True)
+class Occlusion:
+    """A hand over the given markers (ids 0-3) from t_s for duration_s. Vision mode paints it
+    into the frames; fast mode reports that many fewer markers."""
+
+    t_s: float
+    duration_s: float
+    markers: Tuple[int, ...] = (0, 1)
+
+
+@dataclass(frozen=True)
+class Exposure:
+    """From t_s on, the camera's image gain is `gain` (vision mode), e.g. auto-exposure stepping."""
+
+    t_s: float
+    gain: float
+
+
+@dataclass(frozen=True)
+class CameraGap:
+    """No camera frame arrives from t_s for duration_s (a cable glitch, a driver restart)."""
+
+    t_s: float
+    duration_s: float
 
 
 @dataclass(frozen=True)
 class EpisodeSpec:
-    controller: str = "pid"                 # pid | mpc
-    domain: str = "standard"                # DOMAINS of ball_balance.sim.config
+    controller: str = "pid"                 # any controller the pipeline knows (pid, mpc, ...)
+    domain: str = "standard"                # DOMAINS (or DOMAIN_ALIASES) of ball_balance.sim.config
     reference: str = "stationary"           # key of REFERENCES
     seed: int = 0
     duration_s: float = 20.0
-    mode: str = "fast"                      # fast | vision
+    mode: str = "fast"                      # fast | vision | truth
     camera_rate_hz: float = 30.0
     vision_delay_s: float = 0.015
     fast_noise_floor_m: float = 0.0005      # pixel quantisation of the real tracker, roughly
+    vision_noise_floor: float = 2.0         # sensor noise of a real camera, grey levels (vision mode)
     release_radius_m: tuple = (0.05, 0.10)
+    release_speed_m_s: tuple = (0.0, 0.0)   # rolling speed at release, seeded direction
+    ball: str = ""                          # "" (the domain's), "shell" or "solid"
+    knobs: tuple = ()                       # DomainKnobs overrides ((name, value), ...)
+    events: tuple = ()                      # Push, Force, Occlusion, Exposure, CameraGap
+    protocol: str = "ours"                  # label of the protocol the spec follows (table rows)
     overrides: tuple = ()                   # extra controller parameters ((name, value), ...)
     record: bool = False                    # keep time series (for plots)
+
+
+def reference_protocol(spec: EpisodeSpec) -> EpisodeSpec:
+    """The reference system's protocol for the same cell: released 0-2 cm off centre at rest,
+    600 steps at 30 Hz (20 s); its RMSE (`rmse_release_m`) is over the steps before a drop."""
+    return dataclasses.replace(spec, release_radius_m=(0.0, 0.02), release_speed_m_s=(0.0, 0.0),
+                               duration_s=20.0, camera_rate_hz=30.0, protocol="reference")
 
 
 @dataclass
@@ -72,21 +142,32 @@ def _kinematics(values) -> PlateKinematics:
     return control_config.plate_kinematics(_CHAIN_CACHE["chain"], values)
 
 
+def controller_schema(controller: str):
+    """The parameter schema of a controller: control.config's `<NAME>_SCHEMA` (or
+    `<NAME>_NODE_SCHEMA`); PID and MPC have theirs, a controller without one gets the PID's."""
+    for name in (f"{controller.upper()}_SCHEMA", f"{controller.upper()}_NODE_SCHEMA"):
+        schema = getattr(control_config, name, None)
+        if schema is not None and (controller != "mpc" or name == "MPC_NODE_SCHEMA"):
+            return schema
+    return control_config.PID_SCHEMA
+
+
 def controller_values(controller: str, reference: str, overrides=()) -> dict:
-    """Validated controller parameters: schema defaults + config/<pid|mpc>.yaml + overrides."""
+    """Validated controller parameters: schema defaults + config/<controller>.yaml (its node's
+    ros__parameters) + the reference + overrides."""
     from pathlib import Path
 
     import yaml
 
-    schema = control_config.PID_SCHEMA if controller == "pid" else control_config.MPC_NODE_SCHEMA
-    node = "ball_balance_controller" if controller == "pid" else "ball_balance_mpc"
     path = Path(__file__).resolve().parents[2] / "config" / f"{controller}.yaml"
     values = {}
     if path.exists():
-        values = yaml.safe_load(path.read_text())[node]["ros__parameters"]
+        loaded = yaml.safe_load(path.read_text()) or {}
+        nodes = [v["ros__parameters"] for v in loaded.values() if isinstance(v, dict) and "ros__parameters" in v]
+        values = dict(nodes[0]) if nodes else {}
     values.update(REFERENCES[reference])
     values.update(dict(overrides))
-    return dict(validate(schema, values, allow_unknown=True))
+    return dict(validate(controller_schema(controller), values, allow_unknown=True))
 
 
 def tracker_values() -> dict:
@@ -101,8 +182,84 @@ def tracker_values() -> dict:
     return dict(yaml.safe_load(path.read_text())["ball_tracker"]["ros__parameters"])
 
 
+def episode_knobs(spec: EpisodeSpec):
+    """The domain's knobs for this seed with the spec's ball type and knob overrides applied."""
+    from ball_balance.sim.config import DomainKnobs, SimConfigError
+
+    knobs = DomainKnobs.sample(spec.domain, spec.seed)
+    if spec.ball not in BALLS:
+        raise SimConfigError(f"ball = {spec.ball!r} must be one of {sorted(BALLS)}")
+    if spec.ball:
+        knobs = dataclasses.replace(knobs, ball_shell=BALLS[spec.ball])
+    names = {f.name for f in dataclasses.fields(knobs)}
+    unknown = [name for name, _ in spec.knobs if name not in names]
+    if unknown:
+        raise SimConfigError(f"unknown knob(s) {unknown}: expected some of {sorted(names)}")
+    return dataclasses.replace(knobs, **dict(spec.knobs))
+
+
+def episode_events(spec: EpisodeSpec, knobs) -> list:
+    """The spec's events plus the domain's pushes (seeded directions) and hands over markers
+    (seeded markers), in time order."""
+    events = list(spec.events)
+    if knobs.occlusion_markers > 0:
+        rng = np.random.default_rng(spec.seed + 1299709)
+        t = knobs.occlusion_interval_s
+        while t < spec.duration_s:
+            markers = tuple(sorted(int(m) for m in rng.choice(4, knobs.occlusion_markers, replace=False)))
+            events.append(Occlusion(t, knobs.occlusion_duration_s, markers))
+            t += knobs.occlusion_interval_s
+    if knobs.push_speed_m_s > 0.0:
+        rng = np.random.default_rng(spec.seed + 104729)
+        t = knobs.push_interval_s
+        while t < spec.duration_s:
+            angle = rng.uniform(0.0, 2.0 * math.pi)
+            events.append(Push(t, knobs.push_speed_m_s * math.cos(angle), knobs.push_speed_m_s * math.sin(angle)))
+            t += knobs.push_interval_s
+    return sorted(events, key=lambda e: e.t_s)
+
+
+def _observation(x, y, vx, vy, valid, markers, age_s, position_std_m):
+    """BallObservation, with the tracker's position uncertainty where the type carries it."""
+    if "position_std_m" in _OBSERVATION_FIELDS:
+        return BallObservation(x, y, vx, vy, valid, markers, age_s, position_std_m=position_std_m)
+    return BallObservation(x, y, vx, vy, valid, markers, age_s)
+
+
+_OBSERVATION_FIELDS = {f.name for f in dataclasses.fields(BallObservation)}
+_STD_CACHE: Dict[tuple, float] = {}
+
+
+def fast_position_std_m(visible: Tuple[int, ...], camera, corner_noise_px: float) -> float:
+    """Fast mode's stand-in for the tracker's position_std_m: the ball-position error the
+    plate pose fitted to the `visible` markers' corners would cause (the tracker's own model,
+    ball_balance.vision.pose_quality, at the nominal overhead pose; the 1-2 marker fit with
+    its pivot prior), so the controllers judge a hand over markers as in vision mode."""
+    key = (visible, camera, corner_noise_px)
+    if key not in _STD_CACHE:
+        from ball_balance.plate_geometry import PlateGeometry
+        from ball_balance.sim.config import camera_intrinsics
+        from ball_balance.vision import pose_quality, tracker
+        from ball_balance.vision.plate import FULL_FIT_MIN_MARKERS
+
+        if not visible:
+            _STD_CACHE[key] = math.inf
+        else:
+            geometry = PlateGeometry()
+            fx, fy, cx, cy = camera_intrinsics(camera)
+            K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+            points = np.concatenate([np.array(geometry.marker_corners_m(m)) for m in visible])
+            prior = tracker.PRIOR_INFORMATION if len(visible) < FULL_FIT_MIN_MARKERS else None
+            covariance = pose_quality.pose_covariance(points, K, pose_quality.R_CP_OVERHEAD,
+                                                      np.array([0.0, 0.0, camera.height_above_plate_m]),
+                                                      corner_noise_px, prior)
+            _STD_CACHE[key] = pose_quality.ball_position_std_m(covariance, camera.height_above_plate_m)
+    return _STD_CACHE[key]
+
+
 def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
-    from ball_balance.sim.config import DomainKnobs, SimConfig, camera_intrinsics
+    from ball_balance.sim.camera import develop, hand_over_markers
+    from ball_balance.sim.config import SimConfig, camera_intrinsics
     from ball_balance.sim.world import SimWorld
     from ball_balance.vision.camera import CameraModel
     from ball_balance.vision.config import TrackerConfig
@@ -110,12 +267,17 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
     from ball_balance.vision.tracker import BallTracker
 
     values = controller_values(spec.controller, spec.reference, spec.overrides)
-    knobs = DomainKnobs.sample(spec.domain, spec.seed)
+    knobs = episode_knobs(spec)
+    events = episode_events(spec, knobs)
     world = SimWorld(SimConfig(), knobs, urdf_text=robot_description(), seed=spec.seed)
     rng = np.random.default_rng(spec.seed + 7919)
     radius = rng.uniform(*spec.release_radius_m)
     angle = rng.uniform(0, 2 * math.pi)
     world.reset(HOME_POSITIONS_RAD, (radius * math.cos(angle), radius * math.sin(angle)))
+    if spec.release_speed_m_s[1] > 0.0:
+        speed, heading = rng.uniform(*spec.release_speed_m_s), rng.uniform(0, 2 * math.pi)
+        world.push_ball(speed * math.cos(heading), speed * math.sin(heading))
+    camera_rng = np.random.default_rng(spec.seed + 15485863)   # drops, stamp jitter, sensor noise
 
     pipeline = ControlPipeline(control_config.pipeline_config(values, spec.controller), _kinematics(values),
                                control_config.reference(values))
@@ -125,6 +287,7 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
         camera = world.config.camera
         tracker = BallTracker(tracker_cfg, CameraModel.pinhole(camera.width_px, camera.height_px,
                                                                *camera_intrinsics(camera)))
+        world.history_s = knobs.blur_exposure_s
     kalman = None
     if spec.mode == "fast":
         noise = max(knobs.detection_noise_m, spec.fast_noise_floor_m)
@@ -132,49 +295,79 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
                             tracker_cfg.init_vel_std_m_s, tracker_cfg.gate_sigma, tracker_cfg.max_coast_frames,
                             tracker_cfg.max_dt_s)
         world.knobs = knobs if knobs.detection_noise_m >= spec.fast_noise_floor_m else \
-            _with_noise(knobs, spec.fast_noise_floor_m)
+            dataclasses.replace(knobs, detection_noise_m=spec.fast_noise_floor_m)
 
     control_dt = 1.0 / values["control_rate_hz"]
     frame_dt = 1.0 / spec.camera_rate_hz
     steps_per_tick = int(round(control_dt / world.physics_dt_s))
-    pending = []            # (visible_at_s, observation fields, capture_s)
-    latest = None           # (obs fields tuple, capture_s)
+    pending = []            # (visible_at_s, observation fields, stamp_s)
+    latest = None           # (obs fields tuple, stamp_s)
     next_frame_s = 0.0
     kg = values["rolling_factor"] * values["gravity_m_s2"]
-    rec = {k: [] for k in ("t", "x", "y", "rx", "ry", "ux", "uy", "age", "mode", "ex", "ey")}
+    rec = {k: [] for k in ("t", "x", "y", "rx", "ry", "ux", "uy", "age", "mode", "ex", "ey", "markers")}
     frames = []
     solve_times = []        # whole control tick (wall time)
     qp_times = []           # MPC solve alone
     u_cmd = (0.0, 0.0)
+    gain = knobs.exposure
+    pushes = []             # times of the pushes and forces (push recovery)
+    upcoming = list(events)
+    active = []             # Occlusion / CameraGap events in force
     n_ticks = int(round(spec.duration_s / control_dt))
     for tick in range(n_ticks):
         t = world.time_s
+        while upcoming and upcoming[0].t_s <= t + 1e-9:
+            event = upcoming.pop(0)
+            if isinstance(event, Push):
+                world.push_ball(event.dvx, event.dvy)
+                pushes.append(t)
+            elif isinstance(event, Force):
+                world.apply_force(event.fx_n, event.fy_n, event.duration_s)
+                pushes.append(t)
+            elif isinstance(event, Exposure):
+                gain = event.gain
+            elif isinstance(event, (Occlusion, CameraGap)):
+                active.append(event)
+            else:
+                raise TypeError(f"unknown episode event {event!r}")
+        active = [e for e in active if t < e.t_s + e.duration_s - 1e-9]
+        hidden = sorted({m for e in active if isinstance(e, Occlusion) for m in e.markers})
         # camera frames captured up to now
         while next_frame_s <= t + 1e-9:
+            next_frame_s += frame_dt
+            if any(isinstance(e, CameraGap) for e in active) or \
+                    (knobs.frame_drop_prob > 0.0 and camera_rng.random() < knobs.frame_drop_prob):
+                continue
+            stamp = t + (camera_rng.normal(0.0, knobs.stamp_jitter_s) if knobs.stamp_jitter_s > 0.0 else 0.0)
             if spec.mode == "vision":
-                image, truth = world.render()
-                tracker.set_plate_cmd(u_cmd[0], u_cmd[1], t)
-                r = tracker.process(image, t)
-                fields_ = (r.x, r.y, r.vx, r.vy, r.tracking_valid, r.markers_found)
+                noise = max(knobs.sensor_noise, spec.vision_noise_floor)
+                image = develop(world.render_exposure(knobs.blur_exposure_s), gain, noise, camera_rng)
+                if hidden:
+                    image = hand_over_markers(image, world, hidden)
+                tracker.set_plate_cmd(u_cmd[0], u_cmd[1], stamp)
+                r = tracker.process(image, stamp)
+                fields_ = (r.x, r.y, r.vx, r.vy, r.tracking_valid, r.markers_found,
+                           float(getattr(r, "position_std_m", 0.0)))
                 if video_every and len(frames) < 10000 and tick % video_every == 0:
                     frames.append((image, r))
             elif spec.mode == "truth":
                 tr = world.ball_truth()
-                fields_ = (tr.x, tr.y, tr.vx, tr.vy, True, 4)
+                fields_ = (tr.x, tr.y, tr.vx, tr.vy, True, 4 - len(hidden), 0.0)
             else:
                 zx, zy = world.detected_ball()
                 accel = (-kg * math.sin(u_cmd[0]), -kg * math.sin(u_cmd[1])) if tracker_cfg.use_plate_cmd else None
-                est = kalman.step(t, (zx, zy), accel)
-                fields_ = (est.x, est.y, est.vx, est.vy, est.valid, 4)
-            pending.append((t + spec.vision_delay_s, fields_, t))
-            next_frame_s += frame_dt
+                est = kalman.step(stamp, (zx, zy), accel)
+                visible = tuple(m for m in range(4) if m not in hidden)
+                std = fast_position_std_m(visible, world.config.camera, tracker_cfg.corner_noise_px)
+                fields_ = (est.x, est.y, est.vx, est.vy, est.valid, len(visible), std)
+            pending.append((t + spec.vision_delay_s, fields_, stamp))
         while pending and pending[0][0] <= t + 1e-9:
-            _, fields_, capture = pending.pop(0)
-            latest = (fields_, capture)
+            _, fields_, stamp = pending.pop(0)
+            latest = (fields_, stamp)
         obs = None
         if latest is not None:
-            (x, y, vx, vy, valid, markers), capture = latest
-            obs = BallObservation(x, y, vx, vy, valid, markers, t - capture)
+            (x, y, vx, vy, valid, markers, std), stamp = latest
+            obs = _observation(x, y, vx, vy, valid, markers, t - stamp, std)
         t0 = time.perf_counter()
         result = pipeline.step(t, obs, world.joint_positions())
         solve_times.append(time.perf_counter() - t0)
@@ -184,8 +377,10 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
         world.set_joint_targets(result.q_cmd)
         world.step(steps_per_tick)
         truth = world.ball_truth()
-        ref = result.ref.p if result.ref is not None else pipeline.reference.sample(0.0).p
-        rec["t"].append(t)
+        # the reference the user asked for at the truth's instant, on the clock of the last
+        # engagement (no latency look-ahead; it keeps running while the controller is not engaged)
+        ref = pipeline.reference.sample(truth.time_s - pipeline.t_engaged).p
+        rec["t"].append(truth.time_s)
         rec["x"].append(truth.x)
         rec["y"].append(truth.y)
         rec["rx"].append(ref[0])
@@ -196,19 +391,24 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
         rec["mode"].append(result.mode == Mode.ENGAGED)
         rec["ex"].append(obs.x if obs is not None else math.nan)
         rec["ey"].append(obs.y if obs is not None else math.nan)
+        rec["markers"].append(obs.markers_found if obs is not None else math.nan)
         if world.ball_dropped:
             break
     series = {k: np.asarray(v, dtype=float) for k, v in rec.items()}
+    from ball_balance.benchmark.metrics import episode_metrics, release_rmse
+
+    rmse_release = release_rmse(series, rate_hz=30.0)
     # count from the controller's engagement (until then the ball rests on the level plate
     # while the tracker starts up), as the live recorder does
     engaged = np.nonzero(series["mode"] > 0)[0]
     first = int(engaged[0]) if len(engaged) else 0
+    t_first = series["t"][first] if len(series["t"]) else 0.0
     series = {k: v[first:] for k, v in series.items()}
-    series["t"] = series["t"] - (series["t"][0] if len(series["t"]) else 0.0)
-    from ball_balance.benchmark.metrics import episode_metrics
-
+    series["t"] = series["t"] - t_first
     metrics = episode_metrics(series, dropped=world.ball_dropped, duration_s=spec.duration_s,
-                              actuation_latency_s=knobs.latency_s)
+                              actuation_latency_s=knobs.latency_s,
+                              push_times_s=[tp - t_first for tp in pushes if tp >= t_first])
+    metrics["rmse_release_m"] = rmse_release
     metrics["tick_p50_us"] = float(np.percentile(solve_times, 50) * 1e6)
     metrics["tick_p99_us"] = float(np.percentile(solve_times, 99) * 1e6)
     if qp_times:
@@ -218,9 +418,3 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
     metrics["qp_fallbacks"] = float(pipeline.mpc.failures if pipeline.mpc is not None else 0)
     world.close()
     return EpisodeResult(spec, metrics, series if spec.record else None, frames)
-
-
-def _with_noise(knobs, noise_m):
-    from dataclasses import replace
-
-    return replace(knobs, detection_noise_m=noise_m)

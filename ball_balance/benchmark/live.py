@@ -21,6 +21,8 @@ import numpy as np
 
 from ball_balance.benchmark.metrics import episode_metrics
 
+REFERENCE_FRESH_S = 0.1   # /ball_reference older than this: the controller is not engaged
+
 
 class LiveRecorder:
     def __init__(self, node, video_s: float = 0.0, video_start_s: float = 0.0, video_fps: float = 15.0,
@@ -108,13 +110,18 @@ class LiveRecorder:
             return out
 
         ref = hold(self.ref, 2, None)
-        engaged = np.all(np.isfinite(ref), axis=1)
-        if not np.any(engaged):
+        published = np.all(np.isfinite(ref), axis=1)
+        if not np.any(published):
             return None
         # from the controller's engagement on (before that the tracker starts up; the ball rests)
-        first = int(np.argmax(engaged))
+        first = int(np.argmax(published))
+        # engaged while /ball_reference keeps coming (the controllers publish it each engaged
+        # tick); in between, the last target stays the reference the error counts against
+        stamps = np.array([r[0] for r in self.ref])
+        last = np.searchsorted(stamps, t, side="right") - 1
+        engaged = published & (t - stamps[np.maximum(last, 0)] <= REFERENCE_FRESH_S)
         cmd = hold(self.cmd, 2)[first:]
-        ref = np.where(engaged[:, None], ref, 0.0)[first:]
+        ref = ref[first:]
         t = t[first:]
         return {"t": t - t[0], "x": truth[first:, 1], "y": truth[first:, 2], "rx": ref[:, 0], "ry": ref[:, 1],
                 "ux": cmd[:, 0], "uy": cmd[:, 1], "age": np.full(len(t), np.nan),
@@ -177,7 +184,10 @@ def plot_run(s, path: Path, title: str) -> None:
 
 
 def write_video(frames, path: Path, fps: float) -> bool:
-    """MP4 of the camera frames with the tracker's estimate and the target drawn on."""
+    """MP4 of the camera frames with the tracker's estimate and the target drawn on, in real
+    time: output frame k shows the newest camera frame taken at or before t_first + k / fps
+    (simulated time), so a 12 s window plays for 12 s however many frames the transport or the
+    recorder skipped; the overlay says how many camera frames the clip holds."""
     import cv2
 
     if not frames:
@@ -187,15 +197,22 @@ def write_video(frames, path: Path, fps: float) -> bool:
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
     if not writer.isOpened():
         return False
-    for t, image, est, ref in frames:
+    t_first, t_last = frames[0][0], frames[-1][0]
+    ticks = int(round((t_last - t_first) * fps)) + 1
+    held = 0
+    for k in range(ticks):
+        t_tick = t_first + k / fps
+        while held + 1 < len(frames) and frames[held + 1][0] <= t_tick + 1e-6:
+            held += 1
+        t, image, est, ref = frames[held]
         frame = image.copy()
-        text = f"t {t:5.1f} s"
+        text = f"t {t:5.1f} s (real time, {len(frames)} camera frames)"
         if est is not None:
             text += f"  ball ({1e3 * est[1]:+6.1f}, {1e3 * est[2]:+6.1f}) mm"
         if ref is not None:
             text += f"  target ({1e3 * ref[1]:+6.1f}, {1e3 * ref[2]:+6.1f}) mm"
         cv2.rectangle(frame, (0, 0), (w, 22), (0, 0, 0), -1)
-        cv2.putText(frame, text, (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
+        cv2.putText(frame, text, (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (255, 255, 255), 1, cv2.LINE_AA)
         writer.write(frame)
     writer.release()
     return True

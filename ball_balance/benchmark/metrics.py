@@ -1,4 +1,4 @@
-"""Episode metrics (DESIGN.md section 7; issue 6):
+"""Episode metrics (docs/design.md section 7; issue 6):
 
 - drop: 1 if the ball left the plate.
 - rmse_m: RMS distance between the true ball and the reference over the surviving steps.
@@ -8,20 +8,61 @@
 - smoothness_rad_s: RMS of the commanded tilt rate du/dt.
 - latency_s: mean camera-to-command latency = age of the state at the tick + the domain's
   actuation latency (in lock-step the age is the schedule's, not a machine measurement).
+- engaged_frac: share of the steps with the controller engaged (the rest counts as error
+  against the reference all the same).
+- push_recover_s / push_recover_max_s: per push (or force), time until the error is back
+  within 5 mm and stays there for RECOVER_HOLD_S (or until the next push); mean and worst.
+  inf when it never does; absent without pushes.
+- rmse_release_m (`release_rmse`): the reference system's figure, RMS error sampled at 30 Hz
+  from the release (not the engagement) over the steps before a drop.
 """
 from __future__ import annotations
 
 import math
-from typing import Dict
+from typing import Dict, List, Sequence
 
 import numpy as np
 
 SETTLE_TOL_M = 0.005
 STEADY_AFTER_S = 5.0
+RECOVER_HOLD_S = 0.5
+
+
+def release_rmse(s: Dict[str, np.ndarray], rate_hz: float = 30.0) -> float:
+    """RMS error of the steps sampled at `rate_hz` from the series' start (the release)."""
+    t = s["t"]
+    if not len(t):
+        return math.nan
+    step = np.floor((t - t[0]) * rate_hz + 1e-9)
+    first_of_step = np.concatenate([[True], np.diff(step) > 0])
+    err = np.hypot(s["x"] - s["rx"], s["y"] - s["ry"])[first_of_step]
+    return float(np.sqrt(np.mean(err ** 2)))
+
+
+def recovery_times(t: np.ndarray, err: np.ndarray, push_times_s: Sequence[float], dropped: bool) -> List[float]:
+    """Per push: seconds until err < SETTLE_TOL_M holds for RECOVER_HOLD_S (or to the next push)."""
+    out = []
+    pushes = sorted(push_times_s)
+    for i, tp in enumerate(pushes):
+        end = pushes[i + 1] if i + 1 < len(pushes) else math.inf
+        window = (t >= tp) & (t < end)
+        tw, ew = t[window], err[window]
+        recovered = math.inf
+        inside = ew < SETTLE_TOL_M
+        for k in np.nonzero(inside & np.concatenate([[True], ~inside[:-1]]))[0]:  # each entry into the band
+            stays = np.nonzero(~inside[k:])[0]
+            if not len(stays) and not dropped:   # inside until the next push or the end
+                recovered = float(tw[k] - tp)
+                break
+            if len(stays) and tw[k + stays[0]] - tw[k] >= RECOVER_HOLD_S:
+                recovered = float(tw[k] - tp)
+                break
+        out.append(recovered)
+    return out
 
 
 def episode_metrics(s: Dict[str, np.ndarray], dropped: bool, duration_s: float,
-                    actuation_latency_s: float = 0.0) -> Dict[str, float]:
+                    actuation_latency_s: float = 0.0, push_times_s: Sequence[float] = ()) -> Dict[str, float]:
     t = s["t"]
     err = np.hypot(s["x"] - s["rx"], s["y"] - s["ry"])
     steady = t >= STEADY_AFTER_S
@@ -37,7 +78,7 @@ def episode_metrics(s: Dict[str, np.ndarray], dropped: bool, duration_s: float,
     dt = np.diff(t)
     du = np.hypot(np.diff(s["ux"]), np.diff(s["uy"])) / np.where(dt > 0, dt, 1.0)
     ages = s["age"][np.isfinite(s["age"])]
-    return {
+    metrics = {
         "drop": float(dropped),
         "survived_s": float(t[-1] + (t[1] - t[0] if len(t) > 1 else 0.0)) if len(t) else 0.0,
         "rmse_m": float(np.sqrt(np.mean(err ** 2))) if len(err) else math.nan,
@@ -46,4 +87,11 @@ def episode_metrics(s: Dict[str, np.ndarray], dropped: bool, duration_s: float,
         "peak_tilt_rad": float(np.max(np.abs(np.concatenate([s["ux"], s["uy"]])))) if len(t) else 0.0,
         "smoothness_rad_s": float(np.sqrt(np.mean(du ** 2))) if len(du) else 0.0,
         "latency_s": float(np.mean(ages) + actuation_latency_s) if len(ages) else math.nan,
+        "engaged_frac": float(np.mean(s["mode"] > 0)) if len(t) and "mode" in s else math.nan,
     }
+    recoveries = recovery_times(t, err, push_times_s, dropped) if len(t) else []
+    if recoveries:
+        finite = [r for r in recoveries if math.isfinite(r)]
+        metrics["push_recover_s"] = float(np.mean(finite)) if len(finite) == len(recoveries) else math.inf
+        metrics["push_recover_max_s"] = float(max(recoveries))
+    return metrics

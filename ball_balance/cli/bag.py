@@ -1,214 +1,261 @@
-"""`ros2py bag record -o OUT TOPICS...`: MCAP in rosbag2's layout, readable by Foxglove,
-PlotJuggler and `ros2 bag`.
+"""`ros2py bag record -o OUT TOPICS...` and `ros2py bag info BAG`: MCAP bags as rosbag2 (Jazzy)
+writes them (the format: bag_format.py), readable by `ros2 bag`, rosbags, Foxglove and
+PlotJuggler. `ros2py bag play` is in bag_play.py.
 
-What rosbag2's MCAP storage writes, and so do we:
-- profile `ros2`; one schema per type, named `pkg/msg/Type`, encoding `ros2msg`, holding the
-  .msg text followed by every nested type's text after a line of 80 '=' and `MSG: pkg/Type`;
-- one channel per topic, message encoding `cdr`, metadata `offered_qos_profiles` (YAML) and
-  `topic_type_hash`;
-- messages as the publisher's CDR bytes (a raw subscription: no decode, no re-encode), with
-  log and publish time in nanoseconds since the epoch;
-- a metadata record `rosbag2` (`serialized_metadata`, `ROS_DISTRO`), and the bag folder
-  OUT/ holding OUT_0.mcap and a rosbag2 `metadata.yaml` (format version 8).
+Recording, as rosbag2 does it:
+- a topic is subscribed once a publisher is known (topics without one are skipped unless
+  --include-unpublished-topics), with a QoS that matches every publisher: reliable only if all
+  are, transient local only if all are. The graph is re-read twice a second; when the
+  publishers change so that another QoS is needed (a best-effort publisher joins a reliable
+  topic), the subscription is made anew;
+- every topic's channel carries the offered QoS profiles and the type hash of its publishers
+  (metadata.yaml: all profiles seen during the recording);
+- the subscriptions are raw (the publisher's CDR bytes, no decoding) with a keep-last depth of
+  DEPTH, emptied by a taker thread every TAKE_PERIOD_S that only queues the bytes; a writer
+  thread appends them to the file, so writing never delays taking messages out of DDS.
 """
 from __future__ import annotations
 
 import os
-import re
+import queue
 import signal
 import struct
 import sys
+import threading
 import time
 from typing import Dict, List, Optional
 
+from ball_balance.cli.bag_format import (
+    bag_metadata,
+    dump_yaml,
+    mcap_files,
+    message_definition,
+    qos_profile,
+    ros_distro_of,
+)
 from ball_balance.cli.errors import CliError
-from ball_balance.cli.messages import split_type_name
-from ball_balance.cli.run import prefixes
 from ball_balance.cli.session import Session, absolute_name, is_hidden
 
-PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
-              "int32", "uint32", "int64", "uint64", "string", "wstring"}
-SEPARATOR = "=" * 80
+# Keep-last depth of the recording subscriptions: 60 Hz images are taken out of DDS as they
+# arrive, so 100 covers more than a second of the writer or the interpreter falling behind.
+DEPTH = 100
+POLL_S = 0.5  # how often the graph is re-read for new topics and changed publishers
+TAKE_PERIOD_S = 0.005  # how often the subscriptions are emptied (500 Hz topics: 2-3 messages each time)
 
 
-# --- message definitions (schema text) --------------------------------------------------
-def msg_file_text(package: str, name: str) -> str:
-    for prefix in prefixes():
-        path = os.path.join(prefix, "share", package, "msg", f"{name}.msg")
-        if os.path.isfile(path):
-            with open(path, encoding="utf-8") as handle:
-                return handle.read()
-    raise CliError(f"cannot find the definition of {package}/msg/{name} (no {name}.msg in AMENT_PREFIX_PATH)")
+def offered_profiles(publishers) -> List[dict]:
+    """The publishers' QoS profiles as rosbag2 records them (one per publisher)."""
+    return [qos_profile(int(q.history), q.depth, int(q.reliability), int(q.durability), q.deadline.nanoseconds,
+                        q.lifespan.nanoseconds, int(q.liveliness), q.liveliness_lease_duration.nanoseconds)
+            for q in (p.qos_profile for p in publishers)]
 
 
-def nested_type_of(line: str, package: str) -> Optional[str]:
-    """'pkg/Type' for a .msg line declaring a field of a non-primitive type, else None."""
-    code = line.split("#", 1)[0].strip()
-    if not code or code == "---" or re.match(r"\S+\s+\w+\s*=", code):  # blank, separator, constant
-        return None
-    base = code.split()[0].split("[", 1)[0].split("<=", 1)[0]
-    if base in PRIMITIVES:
-        return None
-    if "/" in base:
-        parts = base.split("/")
-        return f"{parts[0]}/{parts[-1]}"
-    return "std_msgs/Header" if base == "Header" else f"{package}/{base}"
+def matching_policies(publishers) -> tuple:
+    """(reliability, durability) names of a subscription that matches every publisher."""
+    if not publishers:
+        return ("best_effort", "volatile")  # matches any publisher that appears later
+    reliable = all(p.qos_profile.reliability.name == "RELIABLE" for p in publishers)
+    latched = all(p.qos_profile.durability.name == "TRANSIENT_LOCAL" for p in publishers)
+    return ("reliable" if reliable else "best_effort", "transient_local" if latched else "volatile")
 
 
-def nested_types(text: str, package: str) -> List[str]:
-    """'pkg/Type' of every non-primitive field in a .msg text, in order of appearance."""
-    found = []
-    for line in text.splitlines():
-        full = nested_type_of(line, package)
-        if full and full not in found:
-            found.append(full)
-    return found
+class _Topic:
+    def __init__(self, name: str, type_name: str):
+        self.name, self.type_name = name, type_name
+        self.channel: Optional[int] = None
+        self.subscription = None
+        self.policies: Optional[tuple] = None
+        self.profiles: List[dict] = []
+        self.type_hash = ""
+        self.count = 0
+
+    def metadata(self) -> dict:
+        return {"name": self.name, "type": self.type_name, "serialization_format": "cdr",
+                "offered_qos_profiles": list(self.profiles), "type_description_hash": self.type_hash}
 
 
-def message_definition(type_name: str) -> str:
-    """The full ros2msg schema text of a message type, dependencies appended."""
-    package, _, name = split_type_name(type_name)
-    root = msg_file_text(package, name)
-    text, queue, seen = root, nested_types(root, package), set()
-    while queue:
-        dependency = queue.pop(0)
-        if dependency in seen:
-            continue
-        seen.add(dependency)
-        dep_package, dep_name = dependency.split("/")
-        dep_text = msg_file_text(dep_package, dep_name)
-        text += f"\n{SEPARATOR}\nMSG: {dependency}\n{dep_text}"
-        queue.extend(d for d in nested_types(dep_text, dep_package) if d not in seen)
-    return text
-
-
-# --- QoS as rosbag2 records it ----------------------------------------------------------
-_INFINITE = (9223372036, 854775807)
-
-
-def _duration(d) -> Dict[str, int]:
-    ns = d.nanoseconds
-    if ns <= 0 or ns >= 0x7FFFFFFFFFFFFFFF - 1:
-        sec, nsec = _INFINITE
-    else:
-        sec, nsec = divmod(ns, 1_000_000_000)
-    return {"sec": int(sec), "nsec": int(nsec)}
-
-
-def offered_qos_yaml(publishers) -> str:
-    import yaml
-
-    profiles = [{
-        "history": int(p.qos_profile.history), "depth": int(p.qos_profile.depth),
-        "reliability": int(p.qos_profile.reliability), "durability": int(p.qos_profile.durability),
-        "deadline": _duration(p.qos_profile.deadline), "lifespan": _duration(p.qos_profile.lifespan),
-        "liveliness": int(p.qos_profile.liveliness),
-        "liveliness_lease_duration": _duration(p.qos_profile.liveliness_lease_duration),
-        "avoid_ros_namespace_conventions": False,
-    } for p in publishers]
-    return yaml.safe_dump(profiles, sort_keys=False, width=10 ** 9) if profiles else ""
-
-
-# --- the recorder -------------------------------------------------------------------------
 class Recorder:
-    """Subscribes to topics as they appear and appends their messages to one MCAP file."""
+    """Subscribes to the selected topics as their publishers appear; one MCAP file."""
 
-    def __init__(self, session: Session, folder: str, topics: List[str], record_all: bool):
+    def __init__(self, session: Session, folder: str, topics: List[str], record_all: bool,
+                 include_unpublished: bool = False):
         from mcap.writer import CompressionType, Writer
 
         self.session, self.folder, self.record_all = session, folder, record_all
+        self.include_unpublished = include_unpublished
         self.wanted = [absolute_name(t) for t in topics]
         self.file_name = f"{os.path.basename(os.path.normpath(folder))}_0.mcap"
         os.makedirs(folder)
         self._stream = open(os.path.join(folder, self.file_name), "wb")
         self.writer = Writer(self._stream, compression=CompressionType.NONE)
         self.writer.start(profile="ros2", library="ros2py bag record (ball_balance)")
+        self._lock = threading.Lock()  # the MCAP writer and the topic table (writer thread, main thread)
         self.schemas: Dict[str, int] = {}
-        self.channels: Dict[str, int] = {}
-        self.topic_info: Dict[str, dict] = {}
-        self.counts: Dict[str, int] = {}
+        self.topics: Dict[str, _Topic] = {}
+        self.events: List[str] = []  # lines for the user: subscriptions made and re-matched
         self.first_ns: Optional[int] = None
         self.last_ns: Optional[int] = None
-        self._subscriptions = []
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._stop = threading.Event()
+        self._spinner = threading.Thread(target=self._take, name="bag-take", daemon=True)
+        self._writer_thread = threading.Thread(target=self._drain, name="bag-write", daemon=True)
+        self._spinner.start()
+        self._writer_thread.start()
 
-    def subscribe_new_topics(self) -> None:
-        for topic, types in self.session.node.get_topic_names_and_types():
-            if topic in self.channels or not types:
-                continue
-            if not (topic in self.wanted or (self.record_all and not is_hidden(topic))):
-                continue
-            self._subscribe(topic, types[0])
+    # ---- graph (main thread) -------------------------------------------------------------
+    def selected(self, topic: str) -> bool:
+        return topic in self.wanted or (self.record_all and not is_hidden(topic))
 
-    def _subscribe(self, topic: str, type_name: str) -> None:
+    def poll(self) -> None:
+        """Subscribe to new topics with publishers; re-match the QoS where publishers changed."""
+        node = self.session.node
+        for name, types in node.get_topic_names_and_types():
+            if not types or not self.selected(name):
+                continue
+            publishers = node.get_publishers_info_by_topic(name)
+            topic = self.topics.get(name)
+            if topic is None:
+                if not publishers and not self.include_unpublished:
+                    continue  # as rosbag2: wait for a publisher (its QoS and type hash)
+                topic = self.topics[name] = _Topic(name, types[0])
+            self._learn(topic, publishers)
+            if topic.channel is None and topic.type_hash:
+                self._register(topic)
+            wanted = matching_policies(publishers)
+            if topic.policies != wanted and (publishers or topic.subscription is None):
+                if topic.subscription is None:
+                    self.events.append(f"Subscribed to topic '{name}' ({'/'.join(wanted)})")
+                else:
+                    self.events.append(f"re-matched the QoS of {name}: {'/'.join(topic.policies)} -> "
+                                       f"{'/'.join(wanted)} (publishers changed)")
+                self._subscribe(topic, wanted)
+
+    def _learn(self, topic: _Topic, publishers) -> None:
+        with self._lock:
+            for profile in offered_profiles(publishers):
+                if profile not in topic.profiles:
+                    topic.profiles.append(profile)
+            if publishers and not topic.type_hash:
+                topic.type_hash = str(publishers[0].topic_type_hash)
+
+    def _register(self, topic: _Topic) -> None:
+        """The topic's schema and channel, with what its publishers offer (under the lock)."""
+        with self._lock:
+            if topic.channel is not None:
+                return
+            if topic.type_name not in self.schemas:
+                self.schemas[topic.type_name] = self.writer.register_schema(
+                    name=topic.type_name, encoding="ros2msg", data=message_definition(topic.type_name).encode())
+            topic.channel = self.writer.register_channel(
+                topic=topic.name, message_encoding="cdr", schema_id=self.schemas[topic.type_name],
+                metadata={"offered_qos_profiles": dump_yaml(topic.profiles) if topic.profiles else "",
+                          "topic_type_hash": topic.type_hash})
+
+    def _subscribe(self, topic: _Topic, policies: tuple) -> None:
+        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
         from ball_balance.cli.messages import get_interface
 
-        publishers = self.session.node.get_publishers_info_by_topic(topic)
-        if type_name not in self.schemas:
-            self.schemas[type_name] = self.writer.register_schema(
-                name=type_name, encoding="ros2msg", data=message_definition(type_name).encode())
-        type_hash = str(publishers[0].topic_type_hash) if publishers else ""
-        offered = offered_qos_yaml(publishers)
-        self.channels[topic] = self.writer.register_channel(
-            topic=topic, message_encoding="cdr", schema_id=self.schemas[type_name],
-            metadata={"offered_qos_profiles": offered, "topic_type_hash": type_hash})
-        self.topic_info[topic] = {"name": topic, "type": type_name, "serialization_format": "cdr",
-                                  "offered_qos_profiles": offered, "type_description_hash": type_hash}
-        self.counts[topic] = 0
-        channel = self.channels[topic]
-        self._subscriptions.append(self.session.node.create_subscription(
-            get_interface(type_name), topic, lambda data, t=topic, c=channel: self._write(t, c, data),
-            self.session.adapted_qos(topic, depth=100), raw=True))
+        node = self.session.node
+        if topic.subscription is not None:
+            node.destroy_subscription(topic.subscription)
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH,
+                         reliability=ReliabilityPolicy[policies[0].upper()],
+                         durability=DurabilityPolicy[policies[1].upper()])
+        # No callback: the taker thread takes the messages (on_message is never called).
+        topic.subscription = node.create_subscription(get_interface(topic.type_name), topic.name,
+                                                      lambda data: None, qos, raw=True)
+        topic.policies = policies
 
-    def _write(self, topic: str, channel: int, data: bytes) -> None:
-        now = time.time_ns()
-        self.writer.add_message(channel_id=channel, log_time=now, publish_time=now, data=data,
-                                sequence=self.counts[topic])
-        self.counts[topic] += 1
-        self.first_ns = self.first_ns or now
-        self.last_ns = now
+    # ---- threads ---------------------------------------------------------------------------
+    def _take(self) -> None:
+        """Taker thread: every TAKE_PERIOD_S, take every waiting message of every topic.
+
+        rclpy's executor costs tens of microseconds per wake-up and callback; at the simulated
+        graph's ~1500 messages/s that kept the recorder's DDS receive thread from the CPU on a
+        loaded machine, and camera frames were lost (244 of 249 kept where a plain subscriber
+        of the camera alone kept 292 of 292). Polling the subscriptions costs a C call per
+        message; the keep-last DEPTH queues absorb the period."""
+        put = self._queue.put
+        while not self._stop.is_set():
+            started = time.monotonic()
+            for topic in list(self.topics.values()):
+                subscription = topic.subscription
+                if subscription is None:
+                    continue
+                while True:
+                    try:
+                        with subscription.handle:
+                            taken = subscription.handle.take_message(subscription.msg_type, True)
+                    except Exception:  # noqa: BLE001 - destroyed meanwhile (re-match, shutdown)
+                        break
+                    if taken is None:
+                        break
+                    put((topic.name, taken[0], time.time_ns(), taken[1].get("source_timestamp", 0)))
+            self._stop.wait(max(0.0, TAKE_PERIOD_S - (time.monotonic() - started)))
+
+    def _drain(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            self._write(*item)
+
+    def _write(self, name: str, data: bytes, receive_ns: int, source_ns: int) -> None:
+        topic = self.topics[name]
+        if topic.channel is None:  # an unpublished topic's first message: its publisher is known now
+            self._learn(topic, self.session.node.get_publishers_info_by_topic(name))
+            self._register(topic)
+        with self._lock:
+            self.writer.add_message(channel_id=topic.channel, log_time=receive_ns,
+                                    publish_time=source_ns or receive_ns, data=data, sequence=topic.count)
+            topic.count += 1
+            self.first_ns = self.first_ns or receive_ns
+            self.last_ns = receive_ns
+
+    # ---- results ---------------------------------------------------------------------------
+    @property
+    def recorded(self) -> List[_Topic]:
+        return [t for t in self.topics.values() if t.channel is not None]
 
     @property
     def total(self) -> int:
-        return sum(self.counts.values())
+        return sum(t.count for t in self.topics.values())
 
     def bag_info(self) -> dict:
-        """rosbag2's BagMetadata (version 8: QoS policies as integers) for what was recorded."""
+        recorded = self.recorded
         start = self.first_ns or time.time_ns()
         duration = (self.last_ns - self.first_ns) if self.first_ns else 0
-        return {
-            "version": 8, "storage_identifier": "mcap",
-            "duration": {"nanoseconds": duration}, "starting_time": {"nanoseconds_since_epoch": start},
-            "message_count": self.total,
-            "topics_with_message_count": [{"topic_metadata": self.topic_info[t], "message_count": self.counts[t]}
-                                          for t in self.channels],
-            "compression_format": "", "compression_mode": "",
-            "relative_file_paths": [self.file_name],
-            "files": [{"path": self.file_name, "starting_time": {"nanoseconds_since_epoch": start},
-                       "duration": {"nanoseconds": duration}, "message_count": self.total}],
-            "custom_data": {}, "ros_distro": "jazzy",
-        }
+        return bag_metadata(self.file_name, [t.metadata() for t in recorded], [t.count for t in recorded],
+                            start, duration)
 
     def close(self) -> None:
-        """Finish the MCAP file (with rosbag2's 'rosbag2' metadata record) and metadata.yaml."""
-        import yaml
-
+        """Stop taking messages, write what is queued, finish the file and metadata.yaml."""
+        self._stop.set()
+        self._spinner.join(timeout=2.0)
+        for topic in self.topics.values():
+            if topic.subscription is not None:
+                try:
+                    self.session.node.destroy_subscription(topic.subscription)
+                except Exception:  # noqa: BLE001 - the context may already be shut down (Ctrl-C)
+                    pass
+        self._queue.put(None)
+        self._writer_thread.join()
         info = self.bag_info()
         # rosbag2's MCAP reader takes the metadata version (and so how to parse the channels'
-        # offered_qos_profiles) from this record; ros2 bag reads metadata.yaml in the folder.
-        self.writer.add_metadata("rosbag2", {
-            "serialized_metadata": yaml.safe_dump(info, sort_keys=False, width=10 ** 9),
-            "ROS_DISTRO": "jazzy"})
+        # offered_qos_profiles) from this record; `ros2 bag` reads metadata.yaml in the folder.
+        self.writer.add_metadata("rosbag2", {"serialized_metadata": dump_yaml(info)})
         self.writer.finish()
         self._stream.close()
         with open(os.path.join(self.folder, "metadata.yaml"), "w", encoding="utf-8") as handle:
-            yaml.safe_dump({"rosbag2_bagfile_information": info}, handle, sort_keys=False, width=10 ** 9)
+            handle.write(dump_yaml({"rosbag2_bagfile_information": info}))
 
 
 def progress_line(recorder: Recorder, elapsed_s: float, rates: Dict[str, float]) -> str:
-    per_topic = "  ".join(f"{t}: {recorder.counts[t]} ({rates.get(t, 0.0):.1f}/s)" for t in recorder.channels)
-    waiting = [t for t in recorder.wanted if t not in recorder.channels]
-    tail = f"  waiting for: {', '.join(waiting)}" if waiting else ""
-    return (f"[{elapsed_s:6.1f} s] {recorder.total} msgs in {len(recorder.channels)} topics  "
+    per_topic = "  ".join(f"{t.name}: {t.count} ({rates.get(t.name, 0.0):.1f}/s)" for t in recorder.recorded)
+    waiting = [t for t in recorder.wanted if t not in recorder.topics]
+    tail = f"  waiting for a publisher on: {', '.join(waiting)}" if waiting else ""
+    return (f"[{elapsed_s:6.1f} s] {recorder.total} msgs in {len(recorder.recorded)} topics  "
             f"{per_topic}{tail}")
 
 
@@ -225,41 +272,35 @@ def cmd_record(args) -> int:
     signal.signal(signal.SIGTERM, _stop_on_sigterm)
     tty = sys.stderr.isatty()
     with Session(args.spin_time) as session:
-        recorder = Recorder(session, folder, args.topics, args.all)
+        recorder = Recorder(session, folder, args.topics, args.all, args.include_unpublished_topics)
         print(f"Recording to '{folder}/{recorder.file_name}' (Ctrl-C to stop)", file=sys.stderr, flush=True)
         start = last_print = time.monotonic()
         last_counts: Dict[str, int] = {}
         try:
             while args.duration is None or time.monotonic() - start < args.duration:
-                recorder.subscribe_new_topics()
-                session.spin_for(0.2)
+                if not session.context.ok():
+                    break
+                recorder.poll()
+                while recorder.events:
+                    print(recorder.events.pop(0), file=sys.stderr, flush=True)
+                end = time.monotonic() + POLL_S
+                if args.duration is not None:
+                    end = min(end, start + args.duration)
+                time.sleep(max(0.0, end - time.monotonic()))
                 now = time.monotonic()
                 if now - last_print >= (1.0 if tty else 5.0):
-                    rates = {t: (n - last_counts.get(t, 0)) / (now - last_print) for t, n in recorder.counts.items()}
-                    last_counts, last_print = dict(recorder.counts), now
+                    counts = {t.name: t.count for t in recorder.recorded}
+                    rates = {t: (n - last_counts.get(t, 0)) / (now - last_print) for t, n in counts.items()}
+                    last_counts, last_print = counts, now
                     line = progress_line(recorder, now - start, rates)
                     print(f"\r\033[K{line}" if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
         except KeyboardInterrupt:
             pass
-        except Exception as error:  # rclpy shuts the context down on Ctrl-C: end like Ctrl-C
-            if type(error).__name__ != "ExternalShutdownException":
-                raise
         finally:
             recorder.close()
-    print(("\n" if tty else "") + f"Recorded {recorder.total} messages on {len(recorder.channels)} topics "
+    print(("\n" if tty else "") + f"Recorded {recorder.total} messages on {len(recorder.recorded)} topics "
           f"to '{folder}'", file=sys.stderr, flush=True)
     return 0
-
-
-def _mcap_files(path: str) -> List[str]:
-    if os.path.isdir(path):
-        files = sorted(os.path.join(path, f) for f in os.listdir(path) if f.endswith(".mcap"))
-        if not files:
-            raise CliError(f"no .mcap file in bag folder '{path}'")
-        return files
-    if not os.path.isfile(path):
-        raise CliError(f"bag '{path}' does not exist")
-    return [path]
 
 
 def _stamp(ns: int) -> str:
@@ -272,7 +313,7 @@ def cmd_info(args) -> int:
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
 
-    files = _mcap_files(args.bag_path)
+    files = mcap_files(args.bag_path)
     topics: Dict[str, list] = {}  # topic -> [type, count, encoding]
     start, end, total, distro = None, None, 0, ""
     for path in files:
@@ -283,8 +324,7 @@ def cmd_info(args) -> int:
                 if summary is None or summary.statistics is None:
                     raise CliError(f"'{path}' has no summary section (recording interrupted?)")
                 stats = summary.statistics
-                for record in reader.iter_metadata():
-                    distro = distro or record.metadata.get("ROS_DISTRO", "")
+                distro = distro or ros_distro_of(reader.iter_metadata())
         except (McapError, struct.error, ValueError, EOFError) as error:
             raise CliError(f"'{path}' is not a readable MCAP file: {error}") from None
         if stats.message_count:

@@ -46,7 +46,7 @@ class ControllerManager:
         raise CliError(f"controller '{controller}' is not loaded in {self.name}")
 
     def switch(self, activate=(), deactivate=(), strict: bool = True, asap: bool = False,
-               timeout_s: float = 5.0) -> None:
+               timeout_s: float = 5.0):
         from builtin_interfaces.msg import Duration
 
         strictness = 2 if strict else 1  # SwitchController.Request.STRICT / BEST_EFFORT
@@ -57,6 +57,7 @@ class ControllerManager:
         if not response.ok:
             detail = f": {response.message}" if response.message else ", check controller_manager logs"
             raise CliError(f"Error switching controllers{detail}")
+        return response
 
     def expect_ok(self, service: str, srv_name: str, controller: str, what: str) -> None:
         if not self.call(service, srv_name, name=controller).ok:
@@ -81,13 +82,18 @@ def cmd_list_controllers(args) -> int:
     for c in controllers:
         color = _color(colors.get(c.state, ""))
         print(f"{color}{c.name:<{w_name}}{end} {c.type:<{w_type}}  {color}{c.state:<{w_state}}{end}")
+        if args.verbose:
+            print(f"\tupdate_rate: {c.update_rate} Hz")
+            print(f"\tis_async: {bool(c.is_async)}")
+        exported = args.reference_interfaces or args.exported_interfaces
         sections = [
             (args.claimed_interfaces, "claimed interfaces", c.claimed_interfaces),
             (args.required_command_interfaces, "required command interfaces", c.required_command_interfaces),
             (args.required_state_interfaces, "required state interfaces", c.required_state_interfaces),
             (args.chained_interfaces, "chained to interfaces",
-             [ref for conn in c.chain_connections for ref in conn.reference_interfaces]),
-            (args.reference_interfaces, "exported reference interfaces", c.reference_interfaces),
+             [f"{ref:20s}" for conn in c.chain_connections for ref in conn.reference_interfaces]),
+            (exported, "exported reference interfaces", c.reference_interfaces),
+            (exported, "exported state interfaces", c.exported_state_interfaces),
         ]
         for wanted, title, items in sections:
             if wanted or args.verbose:
@@ -105,6 +111,11 @@ def _interface_flags(interface, claimed: bool = True) -> str:
     return available + (f" {_color(_BLUE)}[claimed]{_color(_END)}" if interface.is_claimed else " [unclaimed]")
 
 
+def _data_type(interface, verbose: bool) -> str:
+    """' [double]' with -v, as ros2controlcli prints a hardware interface's data type."""
+    return f" [{interface.data_type}]" if verbose else ""
+
+
 def cmd_list_hardware_components(args) -> int:
     with Session(args.spin_time) as session:
         components = list(_manager(args, session).call("list_hardware_components", "ListHardwareComponents").component)
@@ -115,13 +126,15 @@ def cmd_list_hardware_components(args) -> int:
         print(f"Hardware Component {index}\n\tname: {color}{component.name}{end}\n\ttype: {component.type}")
         print(f"\tplugin name: {component.plugin_name or component.class_type}")
         print(f"\tstate: id={component.state.id} label={color}{component.state.label}{end}")
+        print(f"\tread/write rate: {component.rw_rate} Hz")
+        print(f"\tis_async: {bool(component.is_async)}")
         print("\tcommand interfaces")
         for interface in component.command_interfaces:
-            print(f"\t\t{interface.name} {_interface_flags(interface)}")
+            print(f"\t\t{interface.name}{_data_type(interface, args.verbose)} {_interface_flags(interface)}")
         if args.verbose:
             print("\tstate interfaces")
             for interface in component.state_interfaces:
-                print(f"\t\t{interface.name} {_interface_flags(interface, claimed=False)}")
+                print(f"\t\t{interface.name}{_data_type(interface, True)} {_interface_flags(interface, claimed=False)}")
     return 0
 
 
@@ -130,19 +143,45 @@ def cmd_list_hardware_interfaces(args) -> int:
         response = _manager(args, session).call("list_hardware_interfaces", "ListHardwareInterfaces")
     print("command interfaces")
     for interface in sorted(response.command_interfaces, key=lambda i: i.name):
-        print(f"\t{interface.name} {_interface_flags(interface)}")
+        print(f"\t{interface.name}{_data_type(interface, args.verbose)} {_interface_flags(interface)}")
     print("state interfaces")
     for interface in sorted(response.state_interfaces, key=lambda i: i.name):
-        print(f"\t{interface.name}")
+        print(f"\t{interface.name}{_data_type(interface, args.verbose)}")
     return 0
+
+
+def switch_outcome(before: dict, after: dict, activate, deactivate):
+    """(done, skipped) parts of a switch request, from the controllers' states before and after.
+
+    A controller both deactivated and activated (a restart) is active before and after."""
+    restart = set(activate) & set(deactivate)
+    done, skipped = [], []
+    for name in deactivate:
+        ok = before.get(name) == "active" and (after.get(name) != "active" or name in restart)
+        (done if ok else skipped).append(f"deactivate {name}")
+    for name in activate:
+        ok = after.get(name) == "active" and (before.get(name) != "active" or name in restart)
+        (done if ok else skipped).append(f"activate {name}")
+    return done, skipped
 
 
 def cmd_switch_controllers(args) -> int:
     if not args.activate and not args.deactivate:
         raise CliError("nothing to switch: give --activate and/or --deactivate")
     with Session(args.spin_time) as session:
-        _manager(args, session).switch(args.activate, args.deactivate, strict=not args.best_effort,
-                                       asap=args.activate_asap, timeout_s=args.switch_timeout)
+        manager = _manager(args, session)
+        before = {c.name: c.state for c in manager.controllers()}
+        response = manager.switch(args.activate, args.deactivate, strict=not args.best_effort,
+                                  asap=args.activate_asap, timeout_s=args.switch_timeout)
+        after = {c.name: c.state for c in manager.controllers()}
+    # a best-effort switch "succeeds" even when it skipped every part: say what happened
+    done, skipped = switch_outcome(before, after, args.activate, args.deactivate)
+    reason = response.message if response.message and response.message != "Switch successful" else ""
+    if not done:
+        raise CliError(f"switch changed nothing ({', '.join(skipped)}: not done)"
+                       + (f": {reason}" if reason else ""))
+    if skipped:
+        print(f"{', '.join(skipped)}: skipped" + (f" ({reason})" if reason else ""), file=sys.stderr)
     print("Successfully switched controllers")
     return 0
 

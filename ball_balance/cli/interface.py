@@ -4,7 +4,7 @@ from __future__ import annotations
 import os
 from typing import List
 
-from ball_balance.cli.bag import msg_file_text, nested_type_of
+from ball_balance.cli.bag_format import msg_file_text, nested_type_of
 from ball_balance.cli.errors import CliError
 from ball_balance.cli.messages import split_type_name
 from ball_balance.cli.run import prefixes

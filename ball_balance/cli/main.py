@@ -1,8 +1,9 @@
 """`ros2py`: the ros2 command-line verbs we need, for machines without ROS 2's `ros2`.
 
     ros2py topic list|echo|hz|info|pub     ros2py node list     ros2py service list
-    ros2py param get|set|dump|list|load    ros2py bag record    ros2py run PKG EXE
+    ros2py param get|set|dump|list|load    ros2py bag record|play|info    ros2py run PKG EXE
     ros2py tf echo TARGET SOURCE           ros2py interface show TYPE
+    ros2py action list|info|send_goal
     ros2py control list_controllers|list_hardware_components|list_hardware_interfaces|
                    switch_controllers|load_controller|set_controller_state|unload_controller
 
@@ -20,6 +21,9 @@ from typing import List, Optional
 PROG = "ros2py"
 QOS_RELIABILITY = ["reliable", "best_effort", "system_default"]
 QOS_DURABILITY = ["volatile", "transient_local", "system_default"]
+# listing waits until the graph is unchanged for 1.5 s (session.SETTLE_S); on a busy machine
+# the last participant was seen 2.2 s after start, so the bound is above 2.2 + 1.5 s
+LIST_SPIN_TIME_S = 5.0
 WAIT_FOR_NODE_S = 5.0  # discovering a node or topic can take 2-3 s on a loaded machine
 
 
@@ -46,7 +50,7 @@ def _list_options(p, noun: str) -> None:
     p.add_argument("-t", "--show-types", action="store_true", help=f"additionally show the {noun} type")
     p.add_argument("-c", f"--count-{noun}s", action="store_true", help=f"only show the number of {noun}s")
     p.add_argument(f"--include-hidden-{noun}s", action="store_true", help=f"consider hidden {noun}s as well")
-    _spin_time(p)
+    _spin_time(p, LIST_SPIN_TIME_S)
 
 
 def _topic_parsers(sub) -> None:
@@ -99,7 +103,7 @@ def _simple_parsers(sub) -> None:
     p = _verb(node, "list", "graph:cmd_node_list", "output a list of available nodes")
     p.add_argument("-a", "--all", action="store_true", help="also show hidden nodes")
     p.add_argument("-c", "--count-nodes", action="store_true", help="only show the number of nodes")
-    _spin_time(p)
+    _spin_time(p, LIST_SPIN_TIME_S)
 
     service = sub.add_parser("service", help="list services").add_subparsers(dest="verb", required=True)
     _list_options(_verb(service, "list", "graph:cmd_service_list", "output a list of available services"),
@@ -127,15 +131,30 @@ def _simple_parsers(sub) -> None:
     p.add_argument("parameter_file")
     _spin_time(p, WAIT_FOR_NODE_S)
 
-    bag = sub.add_parser("bag", help="record MCAP bags, summarize them").add_subparsers(dest="verb", required=True)
+    bag = sub.add_parser("bag", help="record, play and summarize MCAP bags").add_subparsers(
+        dest="verb", required=True)
     p = _verb(bag, "record", "bag:cmd_record", "record topics into an MCAP bag (rosbag2 layout)")
     p.add_argument("topics", nargs="*", help="topics to record")
     p.add_argument("-o", "--output", help="output bag folder (default: rosbag2_<date>)")
     p.add_argument("-a", "--all", action="store_true", help="record every topic")
+    p.add_argument("--include-unpublished-topics", action="store_true",
+                   help="also subscribe to selected topics that have no publisher yet")
     p.add_argument("--duration", type=float, default=None, help="ros2py extension: stop after this many seconds")
     _spin_time(p)
     p = _verb(bag, "info", "bag:cmd_info", "print a summary of an MCAP bag (folder or .mcap file)")
     p.add_argument("bag_path")
+    p = _verb(bag, "play", "bag_play:cmd_play", "publish the messages of an MCAP bag (folder or .mcap file)")
+    p.add_argument("bag_path")
+    p.add_argument("-r", "--rate", type=float, default=1.0, help="rate at which to play back (default: 1)")
+    p.add_argument("-l", "--loop", action="store_true", help="play again from the start when done")
+    p.add_argument("--topics", nargs="+", default=None, help="play only these topics")
+    p.add_argument("--clock", type=float, nargs="?", const=40.0, default=0.0, metavar="HZ",
+                   help="publish /clock with the bag's time at HZ (default when given: 40)")
+    p.add_argument("-d", "--delay", type=float, default=0.0,
+                   help="seconds to wait before playing (lets subscribers be discovered)")
+    p.add_argument("--playback-duration", type=float, default=None,
+                   help="play only the first this many seconds of the bag")
+    _spin_time(p)
 
     interface = sub.add_parser("interface", help="show interface definitions").add_subparsers(
         dest="verb", required=True)
@@ -169,13 +188,16 @@ def _control_parsers(sub) -> None:
         return p
 
     p = verb("list_controllers", "cmd_list_controllers", "output the loaded controllers, their type and state")
-    p.add_argument("--verbose", "-v", action="store_true", help="also list interfaces of each controller")
+    p.add_argument("--verbose", "-v", action="store_true",
+                   help="also print update rate, is_async and the interfaces of each controller")
     for flag in ("--claimed-interfaces", "--required-state-interfaces", "--required-command-interfaces",
-                 "--chained-interfaces", "--reference-interfaces"):
+                 "--chained-interfaces", "--exported-interfaces"):
         p.add_argument(flag, action="store_true")
+    p.add_argument("--reference-interfaces", action="store_true", help="deprecated: --exported-interfaces")
     p = verb("list_hardware_components", "cmd_list_hardware_components", "output the hardware components")
-    p.add_argument("--verbose", "-v", action="store_true", help="also list state interfaces")
-    verb("list_hardware_interfaces", "cmd_list_hardware_interfaces", "output the command and state interfaces")
+    p.add_argument("--verbose", "-v", action="store_true", help="also list state interfaces and data types")
+    p = verb("list_hardware_interfaces", "cmd_list_hardware_interfaces", "output the command and state interfaces")
+    p.add_argument("--verbose", "-v", action="store_true", help="also print each interface's data type")
     p = verb("switch_controllers", "cmd_switch_controllers", "activate and deactivate controllers at once")
     p.add_argument("--activate", nargs="*", default=[], help="controllers to activate")
     p.add_argument("--deactivate", nargs="*", default=[], help="controllers to deactivate")
@@ -201,12 +223,34 @@ def _control_parsers(sub) -> None:
     p.add_argument("state", choices=["unconfigured", "inactive", "active"])
 
 
+def _action_parsers(sub) -> None:
+    action = sub.add_parser("action", help="list actions, send goals").add_subparsers(dest="verb", required=True)
+    p = _verb(action, "list", "action:cmd_list", "output a list of action names")
+    p.add_argument("-t", "--show-types", action="store_true", help="additionally show the action type")
+    p.add_argument("-c", "--count-actions", action="store_true", help="only show the number of actions")
+    _spin_time(p, LIST_SPIN_TIME_S)
+    p = _verb(action, "info", "action:cmd_info", "print information about an action")
+    p.add_argument("action_name", help="e.g. /scaled_joint_trajectory_controller/follow_joint_trajectory")
+    p.add_argument("-t", "--show-types", action="store_true", help="additionally show the action type")
+    p.add_argument("-c", "--count", action="store_true", help="only show the number of clients and servers")
+    _spin_time(p, LIST_SPIN_TIME_S)
+    p = _verb(action, "send_goal", "action:cmd_send_goal", "send an action goal")
+    p.add_argument("action_name")
+    p.add_argument("action_type", help="e.g. control_msgs/action/FollowJointTrajectory")
+    p.add_argument("goal", help="goal values in YAML, e.g. \"{trajectory: {joint_names: [...], points: [...]}}\"")
+    p.add_argument("-f", "--feedback", action="store_true", help="echo feedback messages for the goal")
+    p.add_argument("--server-timeout", type=float, default=10.0,
+                   help="ros2py extension: seconds to wait for the server (default: %(default)s)")
+    _spin_time(p, WAIT_FOR_NODE_S)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     _topic_parsers(sub)
     _simple_parsers(sub)
     _control_parsers(sub)
+    _action_parsers(sub)
     return parser
 
 

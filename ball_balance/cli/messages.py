@@ -117,17 +117,12 @@ def get_field(msg: Any, path: str) -> Any:
 # --- dict -> message -------------------------------------------------------------------
 def parse_yaml_values(text: str, what: str = "message values") -> Any:
     """YAML text -> Python value; a CliError with the parser's first line when malformed."""
-    import yaml
+    from ball_balance.ros.params_files import ParamsFileError, load_yaml_text
 
     try:
-        return yaml.safe_load(text) if text.strip() else {}
-    except yaml.YAMLError as error:
-        problem = getattr(error, "problem", None) or str(error).splitlines()[0]
-        mark = getattr(error, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        context = getattr(error, "context", None)
-        raise CliError(f"{what} are not valid YAML: {problem}{where}"
-                       + (f" ({context})" if context else "")) from None
+        return load_yaml_text(text, what)
+    except ParamsFileError as error:
+        raise CliError(str(error)) from None
 
 
 def set_message_fields(msg: Any, values: Any, path: str = "", now_ns: Optional[int] = None) -> Any:

@@ -109,6 +109,14 @@ def cmd_set(args) -> int:
     data = parse_yaml_values(args.value, what=f"the value for '{args.parameter_name}'")
     with _open(args) as session:
         (result,) = set_values(session, node, {args.parameter_name: data})
+        if not result.successful and "undeclared" in result.reason:
+            # rclpy's reason lists no name ("undeclared parameter(s): []"): say which, and what is close
+            from controller_manager_py.parameters import closest_name
+
+            close = closest_name(args.parameter_name, list_names(session, node))
+            hint = f"did you mean {close}? " if close else ""
+            raise CliError(f"Setting parameter failed: '{args.parameter_name}' is not declared by {node} "
+                           f"({hint}`ros2py param list {node}` shows its parameters)")
     if not result.successful:
         raise CliError(f"Setting parameter failed: {result.reason or 'refused by the node'}")
     print("Set parameter successful")

@@ -5,6 +5,7 @@ import os
 from typing import List, Optional
 
 from ball_balance.cli.errors import CliError
+from ball_balance.ros.params_files import ParamsFileError, check_params_files
 
 
 def prefixes() -> List[str]:
@@ -34,35 +35,14 @@ def find_executable(package: str, executable: str) -> str:
     return path
 
 
-def check_params_files(argv: List[str]) -> None:
-    """Refuse a missing or malformed `--params-file` with one line before the node starts
-    (rcl would log its own error line and the node another)."""
-    from ball_balance.cli.messages import parse_yaml_values
-
-    in_ros_args = False
-    for i, arg in enumerate(argv):
-        if arg == "--ros-args":
-            in_ros_args = True
-        elif arg == "--":
-            in_ros_args = False
-        elif in_ros_args and arg == "--params-file" and i + 1 < len(argv):
-            path = argv[i + 1]
-            try:
-                with open(path, encoding="utf-8") as handle:
-                    text = handle.read()
-            except OSError as error:
-                raise CliError(f"cannot read parameter file '{path}': {error.strerror}") from None
-            data = parse_yaml_values(text, what=f"the parameters in '{path}'")
-            if not isinstance(data, dict):
-                raise CliError(f"parameter file '{path}' must map node names to "
-                               "{ros__parameters: {...}}")
-
-
 def cmd_run(args) -> int:
     path = find_executable(args.package_name, args.executable_name)
     argv = list(args.argv)
     if argv[:1] == ["--"]:
         argv = argv[1:]
-    check_params_files(argv)
+    try:  # one line naming the file, before rcl would log its own
+        check_params_files(argv)
+    except ParamsFileError as error:
+        raise CliError(str(error)) from None
     os.execv(path, [path, *argv])
     return 0  # not reached

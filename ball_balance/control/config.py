@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
+from ball_balance.control.estimation import EstimatorConfig
 from ball_balance.control.kinematics import Chain, PlateKinematics, ShaperConfig
 from ball_balance.control.mpc import MpcConfig
 from ball_balance.control.pid import PidGains
@@ -16,6 +17,7 @@ from ball_balance.control.pipeline import PipelineConfig
 from ball_balance.control.references import KINDS, Delayed, Reference, make_reference
 from ball_balance.control.safety import SafetyConfig
 from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL
+from ball_balance.policy.params import POLICY_PARAMS
 from ball_balance.robot import HOME_POSITIONS_RAD
 from controller_manager_py.parameters import Param
 
@@ -76,12 +78,50 @@ COMMON_SCHEMA = [
           "when estimate_actuation_delay)", "s", 0.0, 0.5, read_only=True),
     Param("estimate_actuation_delay", True, "refine actuation_delay_s online: commanded vs measured tilt "
           "(FK of /joint_states)", read_only=True),
+    Param("adapt_plant_gain", EstimatorConfig.adapt_gain, "estimate the plant gain k*g online from the ball "
+          "positions and the plate tilt reached (unknown gravity, ball type, friction); rolling_factor * "
+          "gravity_m_s2 is the starting value", read_only=True),
+    Param("adapt_disturbance", EstimatorConfig.adapt_offset, "estimate a constant disturbance acceleration "
+          "online (plate not level, tilt offset) and cancel it", read_only=True),
+    Param("adapt_window_s", EstimatorConfig.window_s, "ball-state window of the plant estimate's least-squares "
+          "fit", "s", 0.3, 10.0, read_only=True),
+    Param("adapt_time_constant_s", EstimatorConfig.tau_s, "time constant with which fits move the plant "
+          "estimate", "s", 0.05, 60.0, read_only=True),
+    Param("adapt_gain_min_ratio", EstimatorConfig.gain_min_ratio, "lower bound of the estimated k*g, times "
+          "rolling_factor * gravity_m_s2", "", 0.05, 1.0, read_only=True),
+    Param("adapt_gain_max_ratio", EstimatorConfig.gain_max_ratio, "upper bound of the estimated k*g, times "
+          "rolling_factor * gravity_m_s2", "", 1.0, 10.0, read_only=True),
+    Param("adapt_max_disturbance_m_s2", EstimatorConfig.offset_max_m_s2, "bound on the estimated disturbance "
+          "per axis", "m/s^2", 0.0, 5.0, read_only=True),
     Param("max_prediction_s", 0.5, "never extrapolate the state further than this", "s", 0.0, 1.0,
           read_only=True),
-    Param("min_markers", 3, "markers needed in a frame to act", "", 0, 4, read_only=True),
+    Param("min_markers", 3, "markers needed in a frame to act when the tracker does not publish /plate_pose "
+          "(its covariance, when published, decides instead: max_position_std_m)", "", 0, 4, read_only=True),
+    Param("max_position_std_m", 0.005, "act only while the ball position's 1-sigma error caused by the plate "
+          "pose (from /plate_pose's covariance) is within this, whatever the marker count", "m", 1e-4, 0.1,
+          read_only=True),
+    Param("brake_on_loss_s", 0.6, "when the ball state becomes unusable (lost, hidden, invalid), brake the "
+          "ball's motion predicted from the last good state for at most this long, then level; 0: hold the "
+          "last tilt until grace_s ends, as before", "s", 0.0, 5.0, read_only=True),
+    Param("brake_time_constant_s", 0.2, "braking decelerates the predicted velocity v with x'' = -v / this",
+          "s", 0.05, 5.0, read_only=True),
     Param("stale_after_s", 0.25, "a ball state older than this is stale", "s", 0.01, 5.0, read_only=True),
     Param("grace_s", 0.3, "hold the last tilt this long after a loss before returning home", "s", 0.0, 10.0,
           read_only=True),
+    Param("recover_s", 0.1, "a state must stay healthy this long before holding turns back to engaged "
+          "(hysteresis)", "s", 0.0, 5.0, read_only=True),
+    Param("future_tolerance_s", 0.2, "a ball state stamped further than this ahead of our clock is refused "
+          "(under use_sim_time this node's clock trails /clock by up to ~0.15 s on a busy machine)",
+          "s", 0.0, 1.0, read_only=True),
+    Param("max_ball_speed_m_s", 2.0, "a ball state faster than this is refused", "m/s", 0.1, 20.0, read_only=True),
+    Param("max_ball_jump_m", 0.03, "a ball state further than this from where the ball was heading is refused "
+          "(until 3 in a row agree: a re-acquisition)", "m", 0.001, 1.0, read_only=True),
+    Param("peer_timeout_s", 1.0, "no /joint_states (or, under use_sim_time, no /clock progress) for this long: "
+          "stop commanding until they return", "s", 0.05, 60.0, read_only=True),
+    Param("control_trigger", "timer", "'timer': a control step every control_rate_hz tick on the newest state; "
+          "'ball_state': one step per new ball state as it arrives (no wait for a tick; best when the camera "
+          "rate equals control_rate_hz), the timer then steps only while states are missing",
+          choices=("ball_state", "timer"), read_only=True),
     Param("home_tolerance_rad", 0.01, "max joint error to count as at home", "rad", 1e-4, 0.5, read_only=True),
     Param("home_positions_rad", list(HOME_POSITIONS_RAD), "home joint positions (plate level)", "rad",
           check=_six, read_only=True),
@@ -94,8 +134,16 @@ COMMON_SCHEMA = [
           read_only=True),
 ]
 
-PID_SCHEMA = COMMON_SCHEMA + REFERENCE_SCHEMA + PID_GAINS_SCHEMA
+PID_ADAPT_SCHEMA = [
+    Param("adapt_pid_feedback", False, "with adapt_plant_gain: scale the PID's feedback by the configured over "
+          "the estimated k*g (false: the estimate sets only the feed-forward and the disturbance tilt)",
+          read_only=True),
+]
+
+PID_SCHEMA = COMMON_SCHEMA + REFERENCE_SCHEMA + PID_GAINS_SCHEMA + PID_ADAPT_SCHEMA
 MPC_NODE_SCHEMA = COMMON_SCHEMA + REFERENCE_SCHEMA + MPC_SCHEMA
+# the learned policy: a correction on top of the PID, so the PID's parameters plus the model's
+POLICY_SCHEMA = PID_SCHEMA + POLICY_PARAMS
 RUNTIME_PARAMETERS = {p.name for p in PID_GAINS_SCHEMA + REFERENCE_SCHEMA}
 
 
@@ -123,11 +171,25 @@ def pipeline_config(values: Mapping[str, Any], controller: str) -> PipelineConfi
         latency_compensation=values["latency_compensation"], actuation_delay_s=values["actuation_delay_s"],
         estimate_delay=values["estimate_actuation_delay"],
         max_prediction_s=values["max_prediction_s"],
+        max_tilt_rad=values["max_tilt_cmd_rad"], brake_on_loss_s=values["brake_on_loss_s"],
+        brake_time_constant_s=values["brake_time_constant_s"],
         pid=pid_gains(values) if controller == "pid" else PidGains(),
         mpc=mpc,
         safety=SafetyConfig(min_markers=values["min_markers"], stale_after_s=values["stale_after_s"],
+                            max_position_std_m=values["max_position_std_m"], recover_s=values["recover_s"],
+                            max_late_s=values["max_prediction_s"],
                             grace_s=values["grace_s"], home_tolerance_rad=values["home_tolerance_rad"],
-                            plate_half_side_m=PLATE_SIDE_M / 2.0))
+                            plate_half_side_m=PLATE_SIDE_M / 2.0),
+        estimator=estimator_config(values),
+        law_params=dict(values))
+
+
+def estimator_config(values: Mapping[str, Any]) -> EstimatorConfig:
+    return EstimatorConfig(adapt_gain=values["adapt_plant_gain"], adapt_offset=values["adapt_disturbance"],
+                           window_s=values["adapt_window_s"], tau_s=values["adapt_time_constant_s"],
+                           gain_min_ratio=values["adapt_gain_min_ratio"],
+                           gain_max_ratio=values["adapt_gain_max_ratio"],
+                           offset_max_m_s2=values["adapt_max_disturbance_m_s2"])
 
 
 def shaper_config(values: Mapping[str, Any]) -> ShaperConfig:

@@ -1,6 +1,6 @@
 """Plate kinematics: forward kinematics from the robot description, the rotational Jacobian
 J_r of the wrist joints, the (u_x, u_y) -> world-rotation wiring and least-squares IK
-(DESIGN.md section 6, steps 3-5). No ROS import.
+(docs/design.md section 6, steps 3-5). No ROS import.
 
 Chain: the URDF joints from `base_link` to `plate_center`, each joint transform being
 T_origin(xyz, rpy) * Rot(axis, q) as in URDF (rpy = fixed-axis roll, pitch, yaw:
@@ -8,7 +8,7 @@ R = Rz(yaw) Ry(pitch) Rx(roll)). The joints come from ball_balance.robot.UrdfKin
 URDF reader the robot_state_publisher uses too, so FK(joint_states) equals TF
 base_link -> plate_center.
 
-Wiring (DESIGN.md section 5): u_x is the tilt about the plate y axis and u_y the tilt about
+Wiring (docs/design.md section 5): u_x is the tilt about the plate y axis and u_y the tilt about
 the plate x axis, signed so that positive u drives the ball toward negative x / y under
 x'' = -k g u. A right-handed rotation by +a about plate +y lowers the +x edge and rolls the
 ball toward +x, so the plate-frame rotation vector for (u_x, u_y) is
@@ -131,7 +131,7 @@ class PlateKinematics:
 
     `home_q` (6,) defines the level plate (zero tilt). Two IK modes:
 
-    - "wrist" (DESIGN.md section 6): only the `wrist` joints move, least squares on J_r; the
+    - "wrist" (docs/design.md section 6): only the `wrist` joints move, least squares on J_r; the
       others stay at home. The plate then pivots about the wrist axes, which lie 0.11 m
       below the plate centre on the UR5e: tilting accelerates the plate sideways, and the
       ball feels x'' = -k g u + k h u'' (h = 0.11 m), a right-half-plane zero at

@@ -1,4 +1,4 @@
-"""Per-axis linear MPC on the discrete double integrator (DESIGN.md section 6, step 2).
+"""Per-axis linear MPC on the discrete double integrator (docs/design.md section 6, step 2).
 
 Model per plate axis, state x = [p, v] ([m], [m/s]), input u (tilt [rad]), zero-order hold
 over dt:
@@ -100,15 +100,24 @@ class PlateMpc:
         self._solver.warm_start(x=self._plan, y=np.zeros(4 * self.n))
 
     def solve(self, x0: np.ndarray, v0: np.ndarray, ref_p: np.ndarray, ref_v: np.ndarray,
-              ref_a: np.ndarray, u_prev: np.ndarray):
+              ref_a: np.ndarray, u_prev: np.ndarray, gain_ratio: float = 1.0, offset_rad=(0.0, 0.0)):
         """One MPC tick.
 
         x0, v0: (2,) current (latency-compensated) ball position [m] and velocity [m/s].
         ref_p, ref_v, ref_a: (N, 2) previewed reference at steps 1..N.
         u_prev: (2,) previous command [rad]. Returns (u_x, u_y) [rad].
+        gain_ratio s = k_g (estimated) / k_g (model) and offset_rad o = d / k_g (model), from an
+        estimate of the plant x'' = -k_g u + d (control/estimation.py): the QP plans in the
+        model's tilt v = s u - o, which the plant turns into the model's acceleration, so only
+        the bounds change (|u| <= u_max becomes -s u_max - o <= v <= s u_max - o, the rate limit
+        s du_max) and the factored problem is kept.
         """
         t_start = time.perf_counter()
         cfg, n = self.cfg, self.n
+        s_gain = float(gain_ratio)
+        offset = np.asarray(offset_rad, dtype=float)
+        u_prev = np.asarray(u_prev, dtype=float)
+        v_prev = s_gain * u_prev - offset
         # both axes at once: columns are axes. c = S_x x0 - r  (2N x 2), r stacked [p_k, v_k]
         X0 = np.array([x0, v0], dtype=float)                      # (2, 2): rows p, v
         R = np.empty((2 * n, 2))
@@ -116,14 +125,21 @@ class PlateMpc:
         R[1::2] = ref_v
         C = self._S_x @ X0 - R
         U_ff = -ref_a / cfg.k_g                                    # (N, 2)
-        Q = self._F @ C - 2.0 * cfg.r_u * U_ff - np.outer(self._e1_term, u_prev)
+        Q = self._F @ C - 2.0 * cfg.r_u * U_ff - np.outer(self._e1_term, v_prev)
         self._q[:n], self._q[n:] = Q[:, 0], Q[:, 1]
-        # bounds: constant but for the first rate row of each axis (|u_0 - u_prev| <= du)
+        # bounds: scaled tilt and rate limits, shifted by the offset on the tilt rows; the
+        # first rate row of each axis is |v_0 - v_prev| <= s du
         lower, upper = self._l, self._u
         for axis in range(2):
+            tilt_rows = slice(axis * 2 * n, axis * 2 * n + n)
+            rate_rows = slice(axis * 2 * n + n, (axis + 1) * 2 * n)
+            lower[tilt_rows] = s_gain * self._l0[tilt_rows] - offset[axis]
+            upper[tilt_rows] = s_gain * self._u0[tilt_rows] - offset[axis]
+            lower[rate_rows] = s_gain * self._l0[rate_rows]
+            upper[rate_rows] = s_gain * self._u0[rate_rows]
             row = axis * 2 * n + n
-            lower[row] = self._l0[row] + u_prev[axis]
-            upper[row] = self._u0[row] + u_prev[axis]
+            lower[row] += v_prev[axis]
+            upper[row] += v_prev[axis]
         self._solver.update(q=self._q, l=lower, u=upper)
         # OSQP warm-starts from its previous primal/dual solution (warm_starting=True)
         shifted = np.concatenate([self._plan[1:n], self._plan[n - 1:n], self._plan[n + 1:], self._plan[-1:]])
@@ -135,7 +151,7 @@ class PlateMpc:
             self.failures += 1
             self._plan = shifted
         du = cfg.du_max_rad_s * cfg.dt_s
-        u = np.array([self._plan[0], self._plan[n]])
+        u = (np.array([self._plan[0], self._plan[n]]) + offset) / s_gain
         # the first move must respect both limits whatever the solver returned
         u = np.clip(u, u_prev - du, u_prev + du)
         u = np.clip(u, -cfg.u_max_rad, cfg.u_max_rad)

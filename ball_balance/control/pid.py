@@ -1,4 +1,4 @@
-"""Per-axis PID on the plate-frame ball error (DESIGN.md section 6, step 2).
+"""Per-axis PID on the plate-frame ball error (docs/design.md section 6, step 2).
 
 Sign: the plant is x'' = -k g u, so a ball on the +x side of its reference needs u_x > 0
 (positive gains push it back). With e = x - r and the derivative taken from the measured
@@ -7,10 +7,15 @@ Sign: the plant is x'' = -k g u, so a ball on the +x side of its reference needs
     u = kp e + ki integral(e) + kd (v - v_ref) + u_ff,    u_ff = -a_ref / (k g)
 
 clipped to +-u_max. Anti-windup: conditional integration (the integral does not grow while
-the output is saturated in the direction of the error) plus back-calculation (the integral
-bleeds off by (u_sat - u_raw) / (ki * t_aw) while saturated), and a hard clamp |ki I| <= i_limit.
-A deadband around zero error stops the integral from hunting on tracker noise, and the
-integral only runs inside an error zone (|e| < i_zone_m): large moves are left to P and D.
+the output is saturated in the direction of the error) plus back-calculation (while
+saturated, the part of the integral that pushes into the limit bleeds off at
+(u_raw - u_sat) / (ki * t_aw)), and a hard clamp |ki I| <= i_limit. Back-calculation only
+unwinds: it moves the integral toward zero and stops there, never charging it against the
+error (a saturation caused by P and D on a big error would otherwise drive the integral to
+its opposite clamp within ~0.1 s, leaving the ball 10-15 mm off target for seconds). A
+deadband around zero error stops the integral from hunting on tracker noise, and the
+integral only changes inside an error zone (|e| < i_zone_m): outside it, large moves are
+left to P and D and the integral is held, by integration and back-calculation alike.
 """
 from __future__ import annotations
 
@@ -43,28 +48,36 @@ class AxisPid:
         self.integral = 0.0
         self.saturated = False
 
-    def step(self, error_m: float, vel_error_m_s: float, acc_ref_m_s2: float, dt_s: float) -> float:
-        """One update. error_m = x - r, vel_error_m_s = v - v_ref. Returns u [rad], clipped."""
+    def step(self, error_m: float, vel_error_m_s: float, acc_ref_m_s2: float, dt_s: float,
+             gain_scale: float = 1.0, u_bias_rad: float = 0.0) -> float:
+        """One update. error_m = x - r, vel_error_m_s = v - v_ref. Returns u [rad], clipped.
+
+        gain_scale = k_g (configured) / k_g (estimated) keeps the loop's acceleration per metre
+        of error when the plant gain is not the configured one; u_bias_rad = d / k_g cancels an
+        estimated constant disturbance (control/estimation.py). Both 1 and 0 without an estimate.
+        """
         g = self.gains
         e = 0.0 if abs(error_m) < g.deadband_m else error_m - math.copysign(g.deadband_m, error_m)
-        u_ff = -acc_ref_m_s2 / self.k_g
-        u_pd = g.kp * e + g.kd * vel_error_m_s + u_ff
+        u_ff = -acc_ref_m_s2 / self.k_g * gain_scale
+        u_pd = gain_scale * (g.kp * e + g.kd * vel_error_m_s) + u_ff + u_bias_rad
         # Integrate unless the output is saturated and the error would push it further.
         candidate = self.integral + (e * dt_s if abs(e) < g.i_zone_m else 0.0)
-        u_raw = u_pd + g.ki * candidate
+        u_raw = u_pd + gain_scale * g.ki * candidate
         pushing_out = (u_raw > g.u_max_rad and e > 0) or (u_raw < -g.u_max_rad and e < 0)
         if not pushing_out:
             self.integral = candidate
         if g.ki > 0:
             i_max = g.i_limit_rad / g.ki
             self.integral = min(max(self.integral, -i_max), i_max)
-        u_raw = u_pd + g.ki * self.integral
+        u_raw = u_pd + gain_scale * g.ki * self.integral
         u = min(max(u_raw, -g.u_max_rad), g.u_max_rad)
         self.saturated = u != u_raw
-        if self.saturated and g.ki > 0 and g.antiwindup_time_s > 0:
-            # back-calculation: drive the integral toward the value that would just saturate
-            self.integral += (u - u_raw) / (g.ki * g.antiwindup_time_s) * dt_s
-            self.integral = min(max(self.integral, -i_max), i_max)
+        if self.saturated and g.ki > 0 and g.antiwindup_time_s > 0 and abs(e) < g.i_zone_m:
+            # back-calculation: unwind only the integral that pushes into the limit, to zero at most
+            into_limit = math.copysign(1.0, u_raw - u)
+            if self.integral * into_limit > 0:
+                bleed = abs(u_raw - u) / (gain_scale * g.ki * g.antiwindup_time_s) * dt_s
+                self.integral = into_limit * max(0.0, abs(self.integral) - bleed)
         return u
 
 
@@ -82,7 +95,8 @@ class PlatePid:
         for axis in self.axes:
             axis.reset()
 
-    def step(self, pos_m, vel_m_s, ref, dt_s: float):
+    def step(self, pos_m, vel_m_s, ref, dt_s: float, gain_scale: float = 1.0, u_bias_rad=(0.0, 0.0)):
         """pos/vel: measured (predicted) ball state, ref: RefSample. Returns (u_x, u_y) [rad]."""
-        return tuple(axis.step(pos_m[i] - ref.p[i], vel_m_s[i] - ref.v[i], ref.a[i], dt_s)
+        return tuple(axis.step(pos_m[i] - ref.p[i], vel_m_s[i] - ref.v[i], ref.a[i], dt_s, gain_scale,
+                               float(u_bias_rad[i]))
                      for i, axis in enumerate(self.axes))

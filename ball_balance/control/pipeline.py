@@ -1,19 +1,29 @@
 """One control tick, shared by both nodes and the closed-loop benchmark (no ROS):
 
-    safety -> latency prediction -> reference -> PID | MPC -> wiring + IK -> shaping -> guard
+    safety -> latency prediction -> reference -> tilt law -> wiring + IK -> shaping -> guard
 
 `ControlPipeline.step(now_s, obs, q_measured)` returns a `TickResult` with the 6 joint
 positions to command, the tilt pair, the mode and what was used to get there. The caller
 owns time: ROS time in the nodes, simulated time in the benchmark (lock-stepped).
+
+The tilt law is pluggable: anything with the `TiltLaw` shape (`reset()`, and
+`tilt(ctx) -> (u_x, u_y)` for one tick's `TiltContext`) registered under a name in
+`TILT_LAWS` and chosen by `PipelineConfig.controller`. "pid" and "mpc" are built in; a
+registry entry may also be a "module:attribute" string, imported the first time that law
+is built, so a law living elsewhere ("policy": `ball_balance.policy.tilt_law:make_tilt_law`)
+costs nothing until used. A factory takes the `PipelineConfig` (its `law_params` holds the
+node's validated parameter values, for a law's own parameters) and returns the law.
 """
 from __future__ import annotations
 
+import importlib
 import math
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Any, Callable, Dict, Mapping, Optional, Protocol, Tuple, Union
 
 import numpy as np
 
+from ball_balance.control.estimation import EstimatorConfig, PlantEstimator
 from ball_balance.control.kinematics import PlateKinematics
 from ball_balance.control.mpc import MpcConfig, PlateMpc, preview
 from ball_balance.control.pid import PidGains, PlatePid
@@ -24,7 +34,7 @@ from ball_balance.control.safety import BallObservation, Mode, SafetyConfig, Saf
 
 @dataclass(frozen=True)
 class PipelineConfig:
-    controller: str = "pid"                 # "pid" | "mpc"
+    controller: str = "pid"                 # a key of TILT_LAWS: "pid" | "mpc" | "policy"
     k_g: float = 0.6 * 9.81                 # rolling factor * g [m/s^2 per rad]
     control_period_s: float = 0.02
     latency_compensation: bool = True
@@ -32,9 +42,108 @@ class PipelineConfig:
     estimate_delay: bool = True             # refine actuation_delay_s online from the measured joints
     max_prediction_s: float = 0.3           # never extrapolate further than this
     reference_resume_s: float = 2.0         # re-engaging within this of a loss continues the reference
+    max_tilt_rad: float = 0.15              # per-axis tilt limit of the pipeline's own commands (braking)
+    brake_on_loss_s: float = 0.6            # after losing the ball, brake its dead-reckoned motion this long (0: hold)
+    brake_time_constant_s: float = 0.2      # braking decelerates the predicted velocity with this time constant
     pid: PidGains = field(default_factory=PidGains)
     mpc: MpcConfig = field(default_factory=MpcConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
+    estimator: EstimatorConfig = field(default_factory=EstimatorConfig)  # online k_g and disturbance
+    law_params: Mapping[str, Any] = field(default_factory=dict)  # validated node parameters, for a law's own
+
+
+@dataclass(frozen=True)
+class TiltContext:
+    """What a tilt law gets for one tick (plate frame, SI units)."""
+
+    now_s: float                    # controller time
+    t_ref_s: float                  # reference time (since engagement, + the delay looked ahead)
+    pos_m: np.ndarray               # (2,) ball position after latency compensation
+    vel_m_s: np.ndarray             # (2,) ball velocity after latency compensation
+    ref: RefSample                  # reference at t_ref_s (p, v, a)
+    reference: Reference            # the whole reference (preview: reference.sample(t))
+    u_prev: np.ndarray              # (2,) tilt commanded at the previous tick [rad]
+    dt_s: float                     # control period
+    k_g: float                      # plant gain in use: x'' = -k_g u + accel_offset [m/s^2 per rad]
+    accel_offset_m_s2: np.ndarray   # (2,) constant disturbance acceleration in use
+    obs: Optional[BallObservation] = None   # the raw observation behind pos/vel
+
+
+class TiltLaw(Protocol):
+    """A control law from the ball state to the plate tilt."""
+
+    def reset(self) -> None:
+        """Forget internal state (integrators, plans): called on every fresh engagement."""
+
+    def tilt(self, ctx: TiltContext) -> Tuple[float, float]:
+        """(u_x, u_y) [rad] for this tick; non-finite values are ignored by the pipeline."""
+
+
+class PidLaw:
+    """The per-axis PID (control/pid.py) as a tilt law."""
+
+    def __init__(self, cfg: PipelineConfig):
+        self.pid = PlatePid(cfg.pid, cfg.k_g)
+        self.k_g = cfg.k_g   # the k_g the gains were tuned for
+        self.scale_feedback = bool(cfg.law_params.get("adapt_pid_feedback", False))
+
+    def reset(self) -> None:
+        self.pid.reset()
+
+    def tilt(self, ctx: TiltContext) -> Tuple[float, float]:
+        if not self.scale_feedback:
+            # the estimate sets the feed-forward (-a_ref / k_g) and cancels the disturbance; the
+            # feedback keeps its tuned tilt per metre (scaled up on a weak plant, the PID's
+            # derivative noise shook the plate hard enough to make the ball hop at half gravity)
+            ref = RefSample(ctx.ref.p, ctx.ref.v, np.asarray(ctx.ref.a) * (self.k_g / ctx.k_g))
+            return self.pid.step(ctx.pos_m, ctx.vel_m_s, ref, ctx.dt_s, u_bias_rad=ctx.accel_offset_m_s2 / ctx.k_g)
+        # the gains were tuned for the configured k_g: keep the loop's acceleration per metre
+        return self.pid.step(ctx.pos_m, ctx.vel_m_s, ctx.ref, ctx.dt_s, gain_scale=self.k_g / ctx.k_g,
+                             u_bias_rad=ctx.accel_offset_m_s2 / ctx.k_g)
+
+
+class MpcLaw:
+    """The two-axis MPC (control/mpc.py) as a tilt law, previewing the reference."""
+
+    def __init__(self, cfg: PipelineConfig):
+        self.mpc = PlateMpc(cfg.mpc)
+
+    def reset(self) -> None:
+        self.mpc.reset()
+
+    def tilt(self, ctx: TiltContext) -> Tuple[float, float]:
+        c = self.mpc.cfg
+        p, v, a = preview(ctx.reference, ctx.t_ref_s, c.dt_s, c.horizon)
+        return self.mpc.solve(ctx.pos_m, ctx.vel_m_s, p, v, a, ctx.u_prev, gain_ratio=ctx.k_g / c.k_g,
+                              offset_rad=ctx.accel_offset_m_s2 / c.k_g)
+
+
+LawFactory = Callable[[PipelineConfig], TiltLaw]
+TILT_LAWS: Dict[str, Union[LawFactory, str]] = {
+    "pid": PidLaw,
+    "mpc": MpcLaw,
+    "policy": "ball_balance.policy.tilt_law:make_tilt_law",
+}
+CONTROLLERS = tuple(TILT_LAWS)
+
+
+def register_tilt_law(name: str, factory: Union[LawFactory, str]) -> None:
+    """Make `PipelineConfig(controller=name)` build its law with `factory` (or "module:attr")."""
+    TILT_LAWS[name] = factory
+
+
+def make_tilt_law(cfg: PipelineConfig) -> TiltLaw:
+    """The tilt law `cfg.controller` names; ValueError names the known ones."""
+    factory = TILT_LAWS.get(cfg.controller)
+    if factory is None:
+        raise ValueError(f"unknown controller '{cfg.controller}': expected one of {sorted(TILT_LAWS)}")
+    if isinstance(factory, str):
+        module, _, attr = factory.partition(":")
+        try:
+            factory = getattr(importlib.import_module(module), attr)
+        except (ImportError, AttributeError) as error:
+            raise ValueError(f"controller '{cfg.controller}' is not available ({factory}: {error})") from None
+    return factory(cfg)
 
 
 @dataclass
@@ -51,10 +160,13 @@ class ControlPipeline:
     def __init__(self, cfg: PipelineConfig, kinematics: PlateKinematics, reference: Reference):
         self.cfg, self.kin, self.reference = cfg, kinematics, reference
         self.safety = SafetySupervisor(cfg.safety)
-        self.pid = PlatePid(cfg.pid, cfg.k_g)
-        self.mpc = PlateMpc(cfg.mpc) if cfg.controller == "mpc" else None
+        self.law = make_tilt_law(cfg)
         self.history = TiltHistory()
         self.delay = DelayEstimator(cfg.actuation_delay_s, cfg.control_period_s)
+        self.plant = PlantEstimator(cfg.estimator, cfg.k_g)
+        self._last_stamp = -math.inf
+        self._last_good = None            # (stamp, pos, vel) of the last state controlled on
+        self._t_lost: Optional[float] = None   # first tick without a usable state after control
         self.q_cmd: Optional[np.ndarray] = None
         self.u = np.zeros(2)
         self.t_engaged = 0.0
@@ -64,14 +176,22 @@ class ControlPipeline:
     def set_reference(self, reference: Reference) -> None:
         self.reference = reference
 
+    @property
+    def mpc(self) -> Optional[PlateMpc]:
+        """The MPC behind the tilt law (its solve times, fallbacks), None for other laws."""
+        return getattr(self.law, "mpc", None)
+
+    @property
+    def pid(self) -> Optional[PlatePid]:
+        return getattr(self.law, "pid", None)
+
     def set_pid_gains(self, gains: PidGains) -> None:
-        self.pid.set_gains(gains)
+        if self.pid is not None:
+            self.pid.set_gains(gains)
 
     def reset_controllers(self) -> None:
-        self.pid.reset()
-        if self.mpc is not None:
-            self.mpc.reset()
-        self.history.clear()
+        self.law.reset()
+        self.plant.reset()   # (the tilt history stays: it is what the plate did, braking predicts with it)
 
     @property
     def actuation_delay_s(self) -> float:
@@ -96,13 +216,27 @@ class ControlPipeline:
         if mode in (Mode.ENGAGED, Mode.HOLDING):
             self.t_last_active = now_s
         ref = predicted = None
-        if mode == Mode.ENGAGED or (mode == Mode.HOLDING and self._only_late(obs)):
+        braking = False
+        if mode == Mode.ENGAGED or (mode == Mode.HOLDING and self.safety.usable_except_age(obs)):
             # a late but otherwise good state: keep controlling on its prediction (capped at
-            # max_prediction_s); anything worse: hold the last tilt until the grace period ends
+            # max_prediction_s)
             ref, predicted = self._control(now_s, obs)
-        elif mode != Mode.HOLDING:
+            self._t_lost = None
+        elif mode in (Mode.HOLDING, Mode.RETURNING):
+            # the ball is lost: brake its predicted motion for a bounded time, then level (a
+            # ball rolling on a circle would roll off a plate that goes level at once)
+            if self._t_lost is None:
+                self._t_lost = now_s
+            brake = self._brake(now_s)
+            braking = brake is not None
+            if braking:
+                self.u, predicted = brake
+            elif mode == Mode.RETURNING or self.cfg.brake_on_loss_s > 0:
+                self.u = np.zeros(2)
+            # (braking off: HOLDING holds the last tilt until the grace period ends)
+        else:
             self.u = np.zeros(2)
-        if mode in (Mode.ENGAGED, Mode.HOLDING):
+        if mode in (Mode.ENGAGED, Mode.HOLDING) or braking:
             q_target = self.kin.ik(self.q_cmd, self.kin.desired_rotation(*self.u))
         else:
             q_target = self.kin.home_q
@@ -116,33 +250,50 @@ class ControlPipeline:
         # What the plate was told, after shaping (step limit, tilt limit): the prediction's input
         tilt_cmd = self.kin.tilt_of(q_new) if mode != Mode.HOMING else (0.0, 0.0)
         self.history.record(now_s, *tilt_cmd)
-        if self.cfg.estimate_delay and q_measured is not None and np.all(np.isfinite(q_measured)):
-            self.delay.add(tilt_cmd, self.kin.tilt_of(q_measured))
+        if q_measured is not None and np.all(np.isfinite(q_measured)):
+            tilt_measured = self.kin.tilt_of(q_measured)
+            if self.cfg.estimate_delay:
+                self.delay.add(tilt_cmd, tilt_measured)
+            self.plant.add_tilt(now_s, tilt_measured)   # the tilt the ball really felt
+        else:
+            self.plant.add_tilt(now_s + self.actuation_delay_s, tilt_cmd)
         return TickResult(q_new.copy(), (float(self.u[0]), float(self.u[1])), mode, ref, predicted, refused)
 
-    def _only_late(self, obs: Optional[BallObservation]) -> bool:
-        """The state is usable except for its age (so prediction can bridge the gap)."""
-        if obs is None or not obs.tracking_valid or obs.markers_found < self.cfg.safety.min_markers:
-            return False
-        return all(math.isfinite(v) for v in (obs.x, obs.y, obs.vx, obs.vy, obs.age_s))
+    def _brake(self, now_s: float):
+        """(tilt, predicted state) that decelerates the last good state's motion, dead-reckoned
+        over the tilts since then; None once brake_on_loss_s has passed since the loss."""
+        cfg = self.cfg
+        if self._last_good is None or self._t_lost is None or now_s - self._t_lost >= cfg.brake_on_loss_s:
+            return None
+        stamp, pos, vel = self._last_good
+        k_g, offset = self.plant.k_g, self.plant.offset
+        delay = self.actuation_delay_s
+        pos, vel = predict(pos, vel, stamp, now_s + delay, self.history, k_g, delay, offset)
+        # x'' = -k_g u + d = -v / tau
+        u = (vel / cfg.brake_time_constant_s + offset) / k_g
+        u = np.clip(u, -cfg.max_tilt_rad, cfg.max_tilt_rad)
+        return u, np.concatenate([pos, vel])
 
     def _control(self, now_s: float, obs: BallObservation):
         cfg = self.cfg
         pos = np.array([obs.x, obs.y])
         vel = np.array([obs.vx, obs.vy])
         delay = self.actuation_delay_s
+        stamp = now_s - obs.age_s
+        if stamp > self._last_stamp:   # a new ball state: one more sample for the plant estimate
+            self._last_stamp = stamp
+            self.plant.add_state(stamp, pos)
+        self._last_good = (stamp, pos.copy(), vel.copy())
+        k_g, offset = self.plant.k_g, self.plant.offset.copy()
         if cfg.latency_compensation:
-            stamp = now_s - obs.age_s
             horizon = min(now_s + delay, stamp + cfg.max_prediction_s)
-            pos, vel = predict(pos, vel, stamp, horizon, self.history, cfg.k_g, delay)
+            pos, vel = predict(pos, vel, stamp, horizon, self.history, k_g, delay, offset)
         t_ref = now_s - self.t_engaged + (delay if cfg.latency_compensation else 0.0)
         ref = self.reference.sample(t_ref)
-        if self.mpc is not None:
-            p, v, a = preview(self.reference, t_ref, cfg.mpc.dt_s, cfg.mpc.horizon)
-            u = self.mpc.solve(pos, vel, p, v, a, self.u)
-        else:
-            u = self.pid.step(pos, vel, ref, cfg.control_period_s)
-        u = np.asarray(u, dtype=float)
+        ctx = TiltContext(now_s=now_s, t_ref_s=t_ref, pos_m=pos, vel_m_s=vel, ref=ref, reference=self.reference,
+                          u_prev=self.u.copy(), dt_s=cfg.control_period_s, k_g=k_g,
+                          accel_offset_m_s2=offset, obs=obs)
+        u = np.asarray(self.law.tilt(ctx), dtype=float)
         if np.all(np.isfinite(u)):
             self.u = u
         return ref, np.concatenate([pos, vel])

@@ -3,7 +3,8 @@
 The tracker stamps each state with the camera capture time. Between that instant and the
 moment a new command reaches the plate, the plate keeps the tilts that were commanded
 earlier; `TiltHistory` remembers them, and `predict` integrates the plant
-x'' = -k g u(t - actuation_delay) exactly over piecewise-constant tilt segments.
+x'' = -k g u(t - actuation_delay) + d exactly over piecewise-constant tilt segments (k g and
+the constant disturbance d: nominal, or the online estimate of control/estimation.py).
 """
 from __future__ import annotations
 
@@ -40,7 +41,7 @@ class TiltHistory:
 
 
 def predict(pos_m: np.ndarray, vel_m_s: np.ndarray, t_from_s: float, t_to_s: float,
-            history: TiltHistory, k_g: float, actuation_delay_s: float = 0.0):
+            history: TiltHistory, k_g: float, actuation_delay_s: float = 0.0, accel_offset_m_s2=None):
     """State (pos, vel) [m, m/s], shape (2,), propagated from t_from_s to t_to_s.
 
     The plate tilt acting at time t is the command issued at t - actuation_delay_s.
@@ -54,10 +55,11 @@ def predict(pos_m: np.ndarray, vel_m_s: np.ndarray, t_from_s: float, t_to_s: flo
     cuts = [t + actuation_delay_s for t in history.breakpoints(t_from_s - actuation_delay_s,
                                                                  t_to_s - actuation_delay_s)]
     times = [t_from_s, *cuts, t_to_s]
+    offset = 0.0 if accel_offset_m_s2 is None else np.asarray(accel_offset_m_s2, dtype=float)
     for t0, t1 in zip(times[:-1], times[1:], strict=False):
         h = t1 - t0
-        # a = -k g u, constant over the segment
-        a = -k_g * np.asarray(history.at(t0 - actuation_delay_s + 1e-12))
+        # a = -k g u + d, constant over the segment
+        a = -k_g * np.asarray(history.at(t0 - actuation_delay_s + 1e-12)) + offset
         p += v * h + 0.5 * a * h * h
         v += a * h
     return p, v

@@ -1,4 +1,4 @@
-"""Safety supervisor: when the controller may act (DESIGN.md section 6, Safety).
+"""Safety supervisor: when the controller may act (docs/design.md section 6, Safety).
 
 States (`Mode`):
   HOMING     start-up: drive the arm to home, never tilt for the ball.
@@ -8,10 +8,21 @@ States (`Mode`):
              only late is still used through its prediction; anything else holds the last tilt.
   RETURNING  unhealthy beyond the grace period: go back to home smoothly, then READY.
 
-A ball state is healthy when tracking_valid, markers_found >= min_markers, all numbers are
-finite, the ball is on the plate, and its age is within stale_after_s. Leaving ENGAGED/
-HOLDING for RETURNING asks the caller to reset its integrators (`reset_requested`).
-Smoothness itself comes from the command shaper (per-joint step clip + low-pass).
+A ball state is healthy when tracking_valid, its plate pose is good enough, all numbers are
+finite, the ball is on the plate, and its age is within stale_after_s. "Good enough": when
+the tracker says how uncertain the ball's position is because of the plate pose
+(`position_std_m` > 0, from /plate_pose), that figure must be within max_position_std_m,
+whatever the marker count (a hand over one or two markers leaves a usable pose); when it
+does not say (0.0, a tracker without /plate_pose), markers_found >= min_markers.
+
+Hysteresis: HOLDING returns to ENGAGED only after the state has been healthy for
+`recover_s` without a break, so a state that is fresh one tick and stale the next (a
+stalling tracker under load) does not flip the mode at the tick rate. A state that is only
+late (otherwise healthy, at most `max_late_s` old: the pipeline predicts it forward) keeps
+HOLDING controlling; the grace period runs from the moment the state stops being usable
+(invalid, poor pose, or older than max_late_s) and is not restarted by a brief recovery. Leaving ENGAGED/HOLDING for
+RETURNING asks the caller to reset its integrators (`reset_requested`). Smoothness itself
+comes from the command shaper (per-joint step clip + low-pass).
 """
 from __future__ import annotations
 
@@ -31,9 +42,12 @@ class Mode(enum.Enum):
 
 @dataclass(frozen=True)
 class SafetyConfig:
-    min_markers: int = 3          # markers needed in a frame to trust the plate pose
+    min_markers: int = 3          # markers needed in a frame to trust the plate pose (std unknown)
+    max_position_std_m: float = 0.005  # ball position 1-sigma from the plate pose (std known)
     stale_after_s: float = 0.25   # a state older than this is stale
     grace_s: float = 0.3          # how long to hold the last tilt before returning home
+    recover_s: float = 0.1        # healthy this long without a break to leave HOLDING
+    max_late_s: float = 0.5       # a late but otherwise healthy state is acted on (predicted) up to this age
     home_tolerance_rad: float = 0.01  # max |q - q_home| to count as "at home"
     plate_half_side_m: float = 0.2285
 
@@ -49,6 +63,9 @@ class BallObservation:
     tracking_valid: bool
     markers_found: int
     age_s: float
+    # 1-sigma error of (x, y) caused by the plate pose [m]; 0.0 = not known (markers rule),
+    # inf = no usable pose
+    position_std_m: float = 0.0
 
 
 class SafetySupervisor:
@@ -56,8 +73,26 @@ class SafetySupervisor:
         self.cfg = cfg
         self.mode = Mode.HOMING
         self._unhealthy_since: Optional[float] = None
+        self._healthy_since: Optional[float] = None   # in HOLDING: start of the current healthy run
         self.reset_requested = False   # set on a transition that must clear integrators
         self.reason = "start-up"       # why the current mode was entered (for logs)
+
+    def pose_problem(self, obs: BallObservation) -> str:
+        """Why the plate pose behind `obs` is not good enough to act on ("" when it is)."""
+        std = obs.position_std_m
+        if std != 0.0:   # known (or inf / NaN: no usable pose)
+            if not std <= self.cfg.max_position_std_m:
+                return f"position std {std * 1e3:.1f} mm > {self.cfg.max_position_std_m * 1e3:.1f} mm"
+            return ""
+        if obs.markers_found < self.cfg.min_markers:
+            return f"markers {obs.markers_found} < {self.cfg.min_markers}"
+        return ""
+
+    def usable_except_age(self, obs: Optional[BallObservation]) -> bool:
+        """The state would be healthy if it were not late (prediction can bridge the gap)."""
+        if obs is None or not obs.tracking_valid or self.pose_problem(obs):
+            return False
+        return all(math.isfinite(v) for v in (obs.x, obs.y, obs.vx, obs.vy, obs.age_s))
 
     def healthy(self, obs: Optional[BallObservation]) -> tuple[bool, str]:
         if obs is None:
@@ -66,8 +101,9 @@ class SafetySupervisor:
             return False, "non-finite ball state"
         if not obs.tracking_valid:
             return False, "tracking not valid"
-        if obs.markers_found < self.cfg.min_markers:
-            return False, f"markers {obs.markers_found} < {self.cfg.min_markers}"
+        pose = self.pose_problem(obs)
+        if pose:
+            return False, pose
         if obs.age_s > self.cfg.stale_after_s:
             return False, f"state stale ({obs.age_s:.2f} s old)"
         if max(abs(obs.x), abs(obs.y)) > self.cfg.plate_half_side_m:
@@ -88,14 +124,22 @@ class SafetySupervisor:
                 self.reset_requested = True
         elif mode == Mode.ENGAGED:
             if not ok:
-                self._unhealthy_since = now_s
+                self._unhealthy_since, self._healthy_since = now_s, None
                 self._go(Mode.HOLDING, why)
         elif mode == Mode.HOLDING:
             if ok:
-                self._go(Mode.ENGAGED, "recovered")
-            elif now_s - self._unhealthy_since > self.cfg.grace_s:
-                self._go(Mode.RETURNING, why)
-                self.reset_requested = True
+                if self._healthy_since is None:
+                    self._healthy_since = now_s
+                if now_s - self._healthy_since >= self.cfg.recover_s:
+                    self._go(Mode.ENGAGED, f"recovered (healthy for {now_s - self._healthy_since:.2f} s)")
+            else:
+                self._healthy_since = None
+                self.reason = why
+                if self.usable_except_age(obs) and obs.age_s <= self.cfg.max_late_s:
+                    self._unhealthy_since = now_s   # late, still acted on: the grace period waits
+                elif now_s - self._unhealthy_since > self.cfg.grace_s:
+                    self._go(Mode.RETURNING, why)
+                    self.reset_requested = True
         return self.mode
 
     def _go(self, mode: Mode, reason: str) -> None:

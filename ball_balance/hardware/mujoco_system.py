@@ -15,18 +15,33 @@ A thin adapter around ball_balance.sim.SimWorld (the physics) and CameraThread (
   `write()` hands the position commands to the servos (non-finite or out-of-limit commands
   are refused, counted and logged throttled; the last good target is kept).
 - topics (when the manager has a node): /camera/image_raw (bgr8) and /camera/camera_info
-  (reliable keep-last 2, which sensor-data subscribers also match: over best effort most
-  fragmented frames are lost here; image_reliable=false gives sensor-data QoS; stamp =
-  capture time, rendered in the camera thread), /sim/ball_truth
+  (sensor-data QoS, best effort keep-last 1, as docs/design.md specifies; whole frames need the
+  DDS settings of config/dds, docs/transport.md; image_reliable=true publishes reliable;
+  stamp = capture time; rendered and published by a child process, camera_process=true, or
+  a thread of the manager), /sim/ball_truth
   (BallState, plate frame), /sim/ball_dropped (Bool, transient local), /clock; with
   truth_fed=true also /ball_state from the truth plus detection noise (no tracker needed).
-  Service /sim/reset_ball (std_srvs/Trigger): ball back to rest at the plate centre.
+  Services and topics to drive the simulation (as mujoco_ros2_control users have them,
+  with std_srvs / geometry_msgs types; see docs/simulation.md):
+  /sim/reset_ball (std_srvs/Trigger): ball back to rest at the plate centre;
+  /sim/reset_world (std_srvs/Trigger): arm at home at rest, ball at (ball_x, ball_y) at
+  rest (time keeps running: the clock never goes backwards);
+  /sim/set_pause (std_srvs/SetBool): data=true stops physics and the simulated clock;
+  /sim/step_simulation (std_srvs/Trigger): while paused, advance `step_simulation_steps`
+  physics steps;
+  /sim/ball_wrench (geometry_msgs/WrenchStamped, topic): force [N] and torque [N m] on the
+  ball's centre, axes of header.frame_id (plate_center, default, or base_link/world), for
+  `wrench_duration` s from receipt (a timed external wrench; keep publishing for longer);
+  /sim/push_ball (geometry_msgs/Vector3Stamped, topic): an impulse, the ball's velocity
+  changes by the vector [m/s] (plate axes), spin kept consistent with rolling.
+  Requests are taken by the real-time loop at its next read().
 
 Hardware parameters (`<hardware><param name=...>` in the URDF; see SCHEMA), optionally from
 a YAML file given as `sim_config` (URDF params win).
 """
 from __future__ import annotations
 
+import collections
 import math
 import time as _time
 from typing import Dict, Mapping, Optional
@@ -58,11 +73,15 @@ SCHEMA = (
     Param("camera_antialias_samples", 0, "MSAA samples (0, 1, 2, 4, 8): 4 costs ~2.5x render time",
           choices=(0, 1, 2, 4, 8)),
     Param("camera_frame_id", "camera_optical_frame", "frame_id of the image messages"),
-    Param("image_reliable", True, "publish images reliable (serves best-effort subscribers too; reliable "
-          "subscribers get every frame) instead of sensor-data QoS"),
+    Param("camera_process", True, "render and publish the camera in a child process (never holds the "
+          "manager's interpreter lock); false: a thread of the manager"),
+    Param("image_reliable", False, "publish images reliable (keep-last 2) instead of sensor-data QoS "
+          "(best effort, keep-last 1)"),
     Param("truth_rate_hz", 100.0, "/sim/ball_truth rate (sim time)", "Hz", 0.1, 1000.0),
     Param("truth_fed", False, "also publish /ball_state from the truth plus detection noise"),
-    Param("domain", "standard", "evaluation domain (DESIGN.md section 7)"),
+    Param("latency_trace", False, "publish /sim/latency_trace (frame captured, frame rendered, new joint "
+          "target written; benchmarks/latency_budget_bench.py)"),
+    Param("domain", "standard", "evaluation domain (docs/design.md section 7)"),
     Param("seed", 0, "seed of the domain's random knobs and of the detection noise", min=0),
     Param("ball_mass_kg", "", _KNOB), Param("ball_friction", "", _KNOB), Param("gravity_scale", "", _KNOB),
     Param("detection_noise_m", "", _KNOB), Param("latency_s", "", _KNOB), Param("light_scale", "", _KNOB),
@@ -71,6 +90,8 @@ SCHEMA = (
     Param("ball_y", 0.0, "initial ball position, plate frame", "m", -0.2, 0.2),
     Param("sim_config", "", "YAML file with any of these parameters (URDF params win)"),
     Param("robot_description_file", "", "URDF the world is built from; empty = config/ur5e_ball_balance.urdf"),
+    Param("step_simulation_steps", 1, "physics steps per /sim/step_simulation call (while paused)", "", 1, 100000),
+    Param("wrench_duration", 0.1, "how long one /sim/ball_wrench message acts", "s", 0.0, 10.0),
 )
 _KNOB_NAMES = ("ball_mass_kg", "ball_friction", "gravity_scale", "detection_noise_m", "latency_s",
                "light_scale", "exposure")
@@ -197,7 +218,9 @@ class MujocoSystem(SystemInterface):
                 return CallbackReturn.ERROR
             self.world.speed_scaling = factor
         self._target = np.array(robot.HOME_POSITIONS_RAD)
-        self._reset_requested = False
+        self._requests = collections.deque()   # callables from other threads, run in read()
+        self.paused = False
+        self._steps_requested = 0
         self._copy_states()
         return CallbackReturn.SUCCESS
 
@@ -211,10 +234,21 @@ class MujocoSystem(SystemInterface):
         if node is not None:
             from ball_balance.hardware.sim_ros import SimRosIo
 
-            self.ros = SimRosIo(node, self.world, self.params, self._request_reset)
+            self.ros = SimRosIo(node, self.world, self.params, self)
             if not self.provides_clock:
                 self.ros.stamp_offset_s = _time.time() - self.world.time_s
-        if self.params["camera_enabled"]:
+        if self.params["camera_enabled"] and self.params["camera_process"]:
+            from ball_balance.hardware.camera_process import CameraProcess, PublishSettings
+
+            publish = None
+            if self.ros is not None:
+                publish = PublishSettings(self.params["camera_frame_id"], self.params["image_reliable"],
+                                          self.ros.stamp_offset_s, self.params["latency_trace"],
+                                          node.context.get_domain_id())
+            self.camera = CameraProcess(self.world.model, self.world.config.camera, self.world.knobs.exposure,
+                                        publish, self._on_camera_error)
+            self.camera.start()
+        elif self.params["camera_enabled"]:
             from ball_balance.sim.camera import CameraThread
 
             self.camera = CameraThread(self.world.model, self.world.config.camera, self.world.knobs.exposure,
@@ -222,6 +256,9 @@ class MujocoSystem(SystemInterface):
             self.camera.start()
         self._next_frame_s = self.world.time_s
         self._next_truth_s = self.world.time_s
+        # the domain's pushes (`pushes`): every push_interval_s, a seeded direction
+        self._next_push_s = self.world.knobs.push_interval_s if self.world.knobs.push_speed_m_s > 0 else math.inf
+        self._push_rng = np.random.default_rng(self.params["seed"] + 104729)
         self._next_clock_s = self.world.time_s
         self._wall_anchor = None
         if not self.introspection:  # once, also after cleanup + configure
@@ -263,21 +300,35 @@ class MujocoSystem(SystemInterface):
     def read(self, time: float, period: float) -> return_type:
         """Real-time loop (inactive and active): advance physics, copy states, publish at their rates."""
         world, camera, ros = self.world, self.camera, self.ros  # locals: shutdown may clear them
-        if self._reset_requested:
-            self._reset_requested = False
-            world.place_ball(0.0, 0.0)
+        while self._requests:
+            try:
+                self._requests.popleft()()
+            except CommandError as error:   # validated by sim_ros already; never stop the loop
+                self.get_logger().warning(f"{self.get_name()}: simulation request refused: {error}")
+        if self.paused:
+            steps, self._steps_requested = self._steps_requested, 0
+            self._wall_anchor = None   # realtime pacing restarts from here when resumed
+        else:
+            steps = self._steps_for(period)
         try:
-            world.step(self._steps_for(period))
+            world.step(steps)
         except SimulationError as error:
             self.get_logger().error(f"{self.get_name()}: {error}")
             self._copy_states()
             return return_type.ERROR
-        self._copy_states()
         t = world.time_s
+        if t >= self._next_push_s:
+            self._next_push_s += world.knobs.push_interval_s
+            angle = self._push_rng.uniform(0.0, 2.0 * math.pi)
+            speed = world.knobs.push_speed_m_s
+            world.push_ball(speed * math.cos(angle), speed * math.sin(angle))
+        self._copy_states()
         if t >= self._next_frame_s:  # a camera frame (rendered, and/or a truth-fed detection)
             self._next_frame_s = max(self._next_frame_s + 1.0 / self.params["camera_rate_hz"], t)
             if camera is not None:
                 camera.submit(world.snapshot())
+                if ros is not None:
+                    ros.trace("capture", t)
             if ros is not None and self.params["truth_fed"]:
                 ros.publish_detection(t, *world.detected_ball())
         if ros is not None:
@@ -345,16 +396,59 @@ class MujocoSystem(SystemInterface):
                 self.get_logger().warning(f"{self.get_name()}: refused joint command ({self.commands_refused} so "
                                           f"far): {error}")
             return return_type.OK
+        if self.ros is not None and self.ros.trace_pub is not None and not np.array_equal(target, self._target):
+            self.ros.trace("command", time)
         self._target = target
         return return_type.OK
 
     # ---- other threads ----------------------------------------------------------------------
-    def _request_reset(self) -> None:
-        self._reset_requested = True
+    # Simulation requests (any thread; applied by the loop at its next read()).
+    def request_reset_ball(self) -> None:
+        """Ball back to rest at the plate centre."""
+        self._requests.append(lambda: self.world.place_ball(0.0, 0.0))
+
+    def request_reset_world(self) -> None:
+        """Arm at home at rest (servo targets too), ball at rest at (ball_x, ball_y)."""
+        def reset():
+            world = self.world
+            world.set_joint_positions(robot.HOME_POSITIONS_RAD)
+            world.place_ball(self.params["ball_x"], self.params["ball_y"])
+            world.clear_forces()
+            self._target = world.joint_positions()
+            self._copy_states()
+        self._requests.append(reset)
+
+    def request_pause(self, paused: bool) -> None:
+        """Stop (true) or resume (false) physics and the simulated clock."""
+        def pause():
+            self.paused = bool(paused)
+            self._steps_requested = 0
+        self._requests.append(pause)
+
+    def request_steps(self, steps: int) -> None:
+        """While paused: advance `steps` physics steps at the next read()."""
+        def step():
+            self._steps_requested += int(steps)
+        self._requests.append(step)
+
+    def request_push(self, dv_m_s, in_plate_axes: bool = True) -> None:
+        """An impulse on the ball: velocity change (m/s; plate or world axes, its part along
+        the plate taken), spin kept consistent with rolling."""
+        def push():
+            dv = np.asarray(dv_m_s, dtype=float)
+            if not in_plate_axes:
+                dv = self.world.plate_pose()[1].T @ dv
+            self.world.push_ball(float(dv[0]), float(dv[1]))
+        self._requests.append(push)
+
+    def request_wrench(self, force_n, torque_n_m, duration_s: float, in_plate_axes: bool = True) -> None:
+        """A force and torque on the ball's centre for `duration_s` (plate or world axes)."""
+        self._requests.append(lambda: self.world.apply_wrench(force_n, torque_n_m, duration_s, in_plate_axes))
 
     def _on_frame(self, image, snapshot) -> None:
         ros = self.ros
         if ros is not None:
+            ros.trace("rendered", snapshot.time_s)
             ros.publish_image(image, snapshot.time_s)
 
     def _on_camera_error(self, error: BaseException) -> None:

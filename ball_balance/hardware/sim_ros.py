@@ -1,22 +1,26 @@
-"""The simulated arm's ROS side: publishers and the reset service on the manager's node.
+"""The simulated arm's ROS side: publishers, services and disturbance topics on the manager's node.
 
 Used by MujocoSystem (ball_balance/hardware/mujoco_system.py); built once in on_configure.
 Publishing is called from the real-time loop (truth, clock, detections: small messages at
-their own rates) and from the camera thread (images).
+their own rates) and from the camera thread (images; with camera_process=true the camera's
+child process publishes them, ball_balance/hardware/camera_process.py). Services and disturbance topics
+(executor thread) hand requests to the system (`controls`), whose loop applies them.
 """
 from __future__ import annotations
 
-from typing import Callable, Mapping
+import math
+from typing import Mapping
 
 import numpy as np
 from ball_tracker_msgs.msg import BallState
 from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
-from std_msgs.msg import Bool
-from std_srvs.srv import Trigger
+from std_msgs.msg import Bool, Header
+from std_srvs.srv import SetBool, Trigger
 
 from ball_balance.plate_geometry import PLATE_FRAME
 from ball_balance.robot import BASE_FRAME
@@ -25,10 +29,24 @@ from ball_balance.sim.config import camera_intrinsics
 from ball_balance.tf.ros import StaticTransformBroadcaster, transform_to_msg
 from ball_balance.tf.transform import Transform
 
-# A reliable publisher also serves sensor-data (best-effort) subscribers; reliable ones then get
-# every frame (over best effort Fast DDS loses most fragmented 640x480 frames here).
+# Images: sensor-data QoS (docs/design.md section 4), keep-last 1 (a best-effort frame is never resent, older
+# ones are of no use); whole frames at full rate need config/dds (docs/transport.md).
+# image_reliable=true: reliable keep-last 2 (also serves best-effort subscribers).
+IMAGE_SENSOR_DATA = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
 IMAGE_RELIABLE = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def camera_info_msg(camera, frame_id: str) -> CameraInfo:
+    """The camera's CameraInfo (pinhole, no distortion) for a CameraConfig."""
+    fx, fy, cx, cy = camera_intrinsics(camera)
+    info = CameraInfo(width=camera.width_px, height=camera.height_px, distortion_model="plumb_bob")
+    info.header.frame_id = frame_id
+    info.d = [0.0] * 5
+    info.k = [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]
+    info.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    info.p = [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]
+    return info
 
 
 def stamp(time_s: float) -> Time:
@@ -37,25 +55,41 @@ def stamp(time_s: float) -> Time:
 
 
 class SimRosIo:
-    def __init__(self, node, world, params: Mapping[str, object], on_reset: Callable[[], None]):
+    def __init__(self, node, world, params: Mapping[str, object], controls):
         self.node, self.world, self.params = node, world, params
         self.logger = node.get_logger()
-        image_qos = IMAGE_RELIABLE if params["image_reliable"] else qos_profile_sensor_data
-        self.image_pub = node.create_publisher(Image, "/camera/image_raw", image_qos)
-        self.info_pub = node.create_publisher(CameraInfo, "/camera/camera_info", image_qos)
+        image_qos = IMAGE_RELIABLE if params["image_reliable"] else IMAGE_SENSOR_DATA
+        # camera_process=true: the camera's child process publishes the images itself
+        in_thread = params["camera_enabled"] and not params["camera_process"]
+        self.image_pub = node.create_publisher(Image, "/camera/image_raw", image_qos) if in_thread else None
+        self.info_pub = node.create_publisher(CameraInfo, "/camera/camera_info", image_qos) if in_thread else None
         self.truth_pub = node.create_publisher(BallState, "/sim/ball_truth", qos_profile_sensor_data)
         self.dropped_pub = node.create_publisher(Bool, "/sim/ball_dropped", LATCHED)
         self.clock_pub = node.create_publisher(Clock, "/clock", QoSProfile(depth=1))
         self.detection_pub = (node.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
                               if params["truth_fed"] else None)
-        self._on_reset = on_reset
+        # latency_trace: (event, sim time) as Header(frame_id=event, stamp); the DDS sample's
+        # source timestamp is the wall-clock time of the event
+        self.trace_pub = (node.create_publisher(Header, "/sim/latency_trace", QoSProfile(depth=100))
+                          if params["latency_trace"] else None)
+        self.controls = controls
         self._closed = False
         # stamps = sim time + this offset: 0 with sim_time (the component owns /clock), else
         # the wall-clock time at start, so stamps compare with wall-clock nodes
         self.stamp_offset_s = 0.0
-        self.reset_srv = node.create_service(Trigger, "/sim/reset_ball", self._handle_reset)
+        self.services = [
+            node.create_service(Trigger, "/sim/reset_ball", self._handle_reset),
+            node.create_service(Trigger, "/sim/reset_world", self._handle_reset_world),
+            node.create_service(SetBool, "/sim/set_pause", self._handle_pause),
+            node.create_service(Trigger, "/sim/step_simulation", self._handle_step),
+        ]
+        self.subscriptions = [
+            node.create_subscription(WrenchStamped, "/sim/ball_wrench", self._on_wrench, 10),
+            node.create_subscription(Vector3Stamped, "/sim/push_ball", self._on_push, 10),
+        ]
+        self.paused = False
         self._dropped = None
-        self._camera_info = self._make_camera_info()
+        self._camera_info = camera_info_msg(self.world.config.camera, self.params["camera_frame_id"])
         self.static_tf = StaticTransformBroadcaster(node)
         self.static_tf.send_transform(self._camera_transform())
         self._clock = Clock()
@@ -68,17 +102,6 @@ class SimRosIo:
         transform = Transform.from_values(tuple(c_W), tuple(Rotation.from_matrix(R_W_optical).as_quat()))
         return transform_to_msg(transform, BASE_FRAME, self.params["camera_frame_id"], None)
 
-    def _make_camera_info(self) -> CameraInfo:
-        camera = self.world.config.camera
-        fx, fy, cx, cy = camera_intrinsics(camera)
-        info = CameraInfo(width=camera.width_px, height=camera.height_px, distortion_model="plumb_bob")
-        info.header.frame_id = self.params["camera_frame_id"]
-        info.d = [0.0] * 5
-        info.k = [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]
-        info.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
-        info.p = [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]
-        return info
-
     def _publish(self, publisher, msg) -> None:
         """Publish; after close() or the context's shutdown (Ctrl-C, SIGTERM) quietly do nothing."""
         try:
@@ -86,6 +109,12 @@ class SimRosIo:
         except Exception:  # noqa: BLE001 - rclpy raises RCLError/InvalidHandle types at shutdown
             if self.node.context.ok() and not self._closed:
                 raise
+
+    def trace(self, event: str, time_s: float) -> None:
+        """latency_trace: "capture" (frame snapshot taken, loop), "rendered" (camera thread),
+        "command" (a new joint target written, loop); stamp = the frame's or the write's time."""
+        if self.trace_pub is not None:
+            self._publish(self.trace_pub, Header(stamp=stamp(time_s + self.stamp_offset_s), frame_id=event))
 
     # ---- camera thread ------------------------------------------------------------------
     def publish_image(self, image_bgr, time_s: float) -> None:
@@ -129,14 +158,72 @@ class SimRosIo:
 
     # ---- executor thread ----------------------------------------------------------------
     def _handle_reset(self, request, response):
-        self._on_reset()
+        self.controls.request_reset_ball()
         response.success, response.message = True, "ball reset to the plate centre"
         return response
+
+    def _handle_reset_world(self, request, response):
+        self.controls.request_reset_world()
+        response.success = True
+        response.message = (f"arm at home, ball at rest at ({self.params['ball_x']:+.3f}, "
+                            f"{self.params['ball_y']:+.3f}) m; the clock keeps running")
+        return response
+
+    def _handle_pause(self, request, response):
+        self.paused = bool(request.data)
+        self.controls.request_pause(self.paused)
+        response.success = True
+        response.message = "simulation paused" if self.paused else "simulation running"
+        return response
+
+    def _handle_step(self, request, response):
+        steps = self.params["step_simulation_steps"]
+        if not self.paused:
+            response.success, response.message = False, "not paused: call /sim/set_pause with data: true first"
+            return response
+        self.controls.request_steps(steps)
+        response.success = True
+        response.message = (f"advancing {steps} physics step(s) of {self.world.physics_dt_s * 1e3:g} ms "
+                            f"from t={self.world.time_s:.6f} s")
+        return response
+
+    def _plate_axes(self, frame_id: str, what: str):
+        """True for the plate's axes, False for the world's; None (logged) for another frame."""
+        if frame_id in ("", PLATE_FRAME):
+            return True
+        if frame_id in (BASE_FRAME, "world"):
+            return False
+        self.logger.warning(f"{what}: frame_id '{frame_id}' not supported (use '{PLATE_FRAME}' or "
+                            f"'{BASE_FRAME}'); ignored")
+        return None
+
+    def _on_wrench(self, msg: WrenchStamped) -> None:
+        f, t = msg.wrench.force, msg.wrench.torque
+        values = (f.x, f.y, f.z, t.x, t.y, t.z)
+        if not all(math.isfinite(v) for v in values):
+            self.logger.warning(f"/sim/ball_wrench: non-finite wrench {values}; ignored")
+            return
+        axes = self._plate_axes(msg.header.frame_id, "/sim/ball_wrench")
+        if axes is not None:
+            self.controls.request_wrench(values[:3], values[3:], self.params["wrench_duration"], axes)
+
+    def _on_push(self, msg: Vector3Stamped) -> None:
+        v = msg.vector
+        values = (v.x, v.y, v.z)
+        if not all(math.isfinite(x) for x in values):
+            self.logger.warning(f"/sim/push_ball: non-finite velocity {values}; ignored")
+            return
+        axes = self._plate_axes(msg.header.frame_id, "/sim/push_ball")
+        if axes is not None:
+            self.controls.request_push(values, axes)
 
     def close(self) -> None:
         self._closed = True
         for entity in (self.image_pub, self.info_pub, self.truth_pub, self.dropped_pub, self.clock_pub,
-                       self.detection_pub):
+                       self.detection_pub, self.trace_pub):
             if entity is not None:
                 self.node.destroy_publisher(entity)
-        self.node.destroy_service(self.reset_srv)
+        for service in self.services:
+            self.node.destroy_service(service)
+        for subscription in self.subscriptions:
+            self.node.destroy_subscription(subscription)

@@ -1,15 +1,20 @@
-"""`ball_tracker` node: camera frames -> /ball_state (DESIGN.md section 4; issue #5).
+"""`ball_tracker` node: camera frames -> /ball_state (docs/design.md section 4; issue #5).
 
 A thin rclpy adapter around `ball_balance.vision.tracker.BallTracker`.
 
 Inputs
   source=topic:  `image_topic` (default /camera/image_raw) sensor_msgs/Image, bgr8 or rgb8.
-                 QoS keep last 1 (a frame that waited behind another is stale), reliability
-                 per `image_qos`: `auto` (default) subscribes reliable when every publisher
-                 on the topic is reliable, else best effort (sensor data), and re-checks once
-                 a second. Reliable matters: a 640x480 image is fragmented by Fast DDS, and
-                 best effort was measured here to lose most frames (notes/ros-from-pypi.md;
-                 our integration test saw about 1 in 9 arrive). Publish images reliable.
+                 QoS keep last `image_queue_depth` (1), reliability per `image_qos`: `auto` (default) subscribes
+                 reliable when every publisher on the topic is reliable, else best effort
+                 (sensor data), and re-checks once a second. Whole frames at full rate over
+                 best effort need the DDS settings of config/dds (docs/transport.md).
+                 The callback only hands the frame to the tracking thread through a
+                 keep-last-1 slot: a frame still waiting when a newer one arrives is skipped
+                 and counted (`stale_frames`), so the tracker never works on an old frame
+                 while a newer one waits, and never queues under load. Frames that never
+                 reached the callback (replaced in the DDS queue while the node was busy,
+                 or lost in transport) show as gaps in the publisher's sequence numbers
+                 (`skipped_frames`).
   source=camera / file: cv2.VideoCapture in a capture thread (`camera_device`, `video_file`).
   `camera_info_topic` (sensor data QoS): intrinsics when no `calibration_file` is given.
   /plate_cmd geometry_msgs/Vector3Stamped (x = u_x, y = u_y, rad): known acceleration for the
@@ -19,26 +24,38 @@ Outputs
                  frame (also when nothing is found; the flags say so), stamped with the frame's
                  capture time, frame_id plate_center. A frame that cannot be decoded (wrong
                  encoding, size 0, truncated data) is dropped, counted and reported throttled.
+  /plate_pose    geometry_msgs/PoseWithCovarianceStamped, sensor data QoS, one per frame with
+                 the identical stamp: plate_center in the camera frame (frame_id = the
+                 image's), covariance 6x6 [x y z rx ry rz] (m^2, rad^2) from the marker fit;
+                 every variance +inf when the frame gave no usable pose
+                 (ball_balance/vision/pose_quality.py; its ball_position_std_m() reduces
+                 the covariance to the ball-position error it causes).
   ~/debug_image  sensor_msgs/Image bgr8 overlay, only with `publish_debug_image`.
   ~/statistics/{full,names,values} (pal_statistics_msgs, the controller manager's
                  StatisticsRegistry): per-stage times (ms) and counters; names latched
                  (transient local), full/values sent per frame only while someone subscribes.
+A camera that stops (no frame for `camera_timeout_s`, a dead driver) is reported once with a
+warning, and its return with an info line.
 Start-up errors (a bad parameter, a missing calibration file, a camera or file that cannot be
 opened) print one line and exit non-zero.
 """
 from __future__ import annotations
 
 import math
+import sys
 import threading
+import time
 from typing import Optional
 
 import cv2
 import numpy as np
 import rclpy
 from ball_tracker_msgs.msg import BallState
-from geometry_msgs.msg import Vector3Stamped
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseWithCovarianceStamped, Vector3Stamped
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image
 
 from ball_balance.plate_geometry import PLATE_FRAME
@@ -46,7 +63,9 @@ from ball_balance.ros.images import decode_image, encode_image
 from ball_balance.ros.node_main import StartupError, main_for
 from ball_balance.vision.camera import CalibrationError, CameraModel, load_calibration
 from ball_balance.vision.config import SOURCE_SCHEMA, TRACKER_SCHEMA, TrackerConfig
+from ball_balance.vision.handover import LatestSlot
 from ball_balance.vision.overlay import draw_overlay
+from ball_balance.vision.pose_quality import UNUSABLE_COVARIANCE
 from ball_balance.vision.sources import CaptureSource, SourceError
 from ball_balance.vision.tracker import STAGES, BallTracker, TrackerResult
 from controller_manager_py.parameters import Param, declare_parameters
@@ -58,6 +77,11 @@ NODE_SCHEMA = (
     Param("plate_cmd_topic", "/plate_cmd", "commanded tilts (x = u_x, y = u_y, rad) from the controller"),
     Param("publish_debug_image", False, "publish an overlay image on ~/debug_image"),
     Param("publish_statistics", True, "publish per-stage timing on ~/statistics/{names,values}"),
+    Param("image_queue_depth", 1,
+          "DDS queue of the image subscription: 1 keeps only the newest frame; more lets every "
+          "delivered frame reach the node (each costs ~1 ms to take) and be counted", "frames", 1, 100),
+    Param("camera_timeout_s", 1.0, "warn when no frame arrives for this long (camera stopped or died)",
+          "s", 0.05, 3600.0),
     Param("opencv_threads", 1, "OpenCV worker threads (1: ~1.4 ms per 640x480 frame, leaves cores to others)",
           "", 1, 64),
 )
@@ -65,6 +89,7 @@ SCHEMA = SOURCE_SCHEMA + TRACKER_SCHEMA + NODE_SCHEMA
 
 BAD_FRAME_WARN_PERIOD_S = 5.0
 IMAGE_QOS_CHECK_PERIOD_S = 1.0
+CAMERA_FRAME_ID = "camera"          # frame_id of /plate_pose when the image carries none
 
 
 class BallTrackerNode(Node):
@@ -73,6 +98,9 @@ class BallTrackerNode(Node):
         self.params = p = declare_parameters(self, SCHEMA)
         config = TrackerConfig.from_values(p)
         cv2.setNumThreads(p["opencv_threads"])
+        # two Python threads share the interpreter lock (executor: frames in; tracking thread);
+        # a 1 ms switch interval (default 5 ms) bounds how long a new frame waits for it
+        sys.setswitchinterval(0.001)
         self.calibration: Optional[CameraModel] = None
         if p["calibration_file"]:
             try:
@@ -81,12 +109,26 @@ class BallTrackerNode(Node):
                 raise StartupError(f"parameter 'calibration_file': {error}") from None
         self.tracker = BallTracker(config, self.calibration, p["undistort"])
         self._camera_for_size: Optional[tuple] = None
+        self._last_camera_info: Optional[tuple] = None
         self._lock = threading.Lock()           # tracker state: capture thread vs callbacks
         self.bad_frames = 0
         self.bad_plate_cmd = 0
         self._last_warned = {}                  # kind of bad frame -> time of its last warning
 
         self.state_pub = self.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
+        self.pose_pub = self.create_publisher(PoseWithCovarianceStamped, "/plate_pose", qos_profile_sensor_data)
+        self.stale_frames = 0                   # replaced in the hand-over slot, never tracked
+        self.out_of_order_frames = 0            # stamped before the last tracked frame
+        self.skipped_frames = 0                 # gaps in the publisher's sequence numbers
+        self._last_sequence: Optional[int] = None
+        self._last_stamp_ns = -1
+        # s, last tracked frame (statistics): DDS write -> DDS receipt (transport), -> callback
+        # (take), -> tracking thread (queue), decode, publish; node clock - stamp at receipt
+        # and after publishing (age_at_*: a camera on another clock shows its offset too)
+        self._frame_times = {"transport": 0.0, "take": 0.0, "queue": 0.0, "decode": 0.0, "publish": 0.0,
+                             "age_at_receipt": 0.0, "age_at_publish": 0.0}
+        self._last_frame_mono: Optional[float] = None  # monotonic receipt time of the last frame
+        self._camera_silent = False
         self.debug_pub = (self.create_publisher(Image, "~/debug_image", qos_profile_sensor_data)
                           if p["publish_debug_image"] else None)
         self._last_result: Optional[TrackerResult] = None
@@ -99,7 +141,11 @@ class BallTrackerNode(Node):
                                      qos_profile_sensor_data)
 
         self.source: Optional[CaptureSource] = None
+        self._stop = threading.Event()
         if p["source"] == "topic":
+            self._slot: LatestSlot = LatestSlot()
+            self._thread = threading.Thread(target=self._tracking_loop, name="tracking", daemon=True)
+            self._thread.start()
             self.image_sub = None
             self.image_reliability: Optional[ReliabilityPolicy] = None
             if p["image_qos"] == "auto":
@@ -122,11 +168,11 @@ class BallTrackerNode(Node):
             except SourceError as error:
                 param = "camera_device" if p["source"] == "camera" else "video_file"
                 raise StartupError(f"parameter '{param}': {error}") from None
-            self._stop = threading.Event()
             self._thread = threading.Thread(target=self._capture_loop, name="capture", daemon=True)
             self._thread.start()
             where = f"{p['source']} {p['camera_device'] if p['source'] == 'camera' else p['video_file']}"
-        self.get_logger().info(f"tracking the ball from {where} -> /ball_state")
+        self.create_timer(min(0.5, p["camera_timeout_s"] / 2.0), self.watch_camera)
+        self.get_logger().info(f"tracking the ball from {where} -> /ball_state, /plate_pose")
 
     # -- inputs ----------------------------------------------------------------------------------
     def match_image_qos(self) -> None:
@@ -142,26 +188,64 @@ class BallTrackerNode(Node):
             return
         if self.image_sub is not None:
             self.destroy_subscription(self.image_sub)
-        qos = QoSProfile(reliability=reliability, history=HistoryPolicy.KEEP_LAST, depth=1)
+        qos = QoSProfile(reliability=reliability, history=HistoryPolicy.KEEP_LAST,
+                         depth=self.params["image_queue_depth"])
         self.image_sub = self.create_subscription(Image, self.params["image_topic"], self.on_image, qos)
         self.image_reliability = reliability
         self.get_logger().info(f"subscribed to {self.params['image_topic']} ({reliability.name.lower()})")
 
-    def on_image(self, msg: Image) -> None:
-        """A camera frame from the topic: decode (or drop with a reason), track, publish."""
+    def on_image(self, msg: Image, info: dict) -> None:
+        """A camera frame from the topic (executor thread): hand it to the tracking thread."""
+        self._last_frame_mono = time.monotonic()
+        sequence = info.get("publication_sequence_number")
+        if sequence is not None:
+            if self._last_sequence is not None and sequence > self._last_sequence + 1:
+                self.skipped_frames += sequence - self._last_sequence - 1
+            self._last_sequence = sequence
+        self._slot.put((msg, self._last_frame_mono, self.get_clock().now().nanoseconds, time.time_ns(),
+                        info.get("source_timestamp"), info.get("received_timestamp")))
+
+    def _tracking_loop(self) -> None:
+        """Tracking thread (source=topic): always the newest frame; decode, track, publish."""
+        while not self._stop.is_set():
+            item = self._slot.take(timeout_s=0.5)
+            if item is None:
+                continue
+            try:
+                self._track_message(*item)
+            except Exception as error:  # noqa: BLE001 - one bad frame must not end tracking
+                self.get_logger().error(f"frame not tracked: {type(error).__name__}: {error}",
+                                        throttle_duration_sec=5.0)
+
+    def _track_message(self, msg: Image, received_mono: float, received_ns: int, callback_wall_ns: int,
+                       written_wall_ns: Optional[int], delivered_wall_ns: Optional[int]) -> None:
+        times = self._frame_times
+        start = time.monotonic()
+        times["queue"] = start - received_mono
+        if written_wall_ns and delivered_wall_ns:          # the DDS sample's own wall-clock times
+            times["transport"] = (delivered_wall_ns - written_wall_ns) * 1e-9
+            times["take"] = (callback_wall_ns - delivered_wall_ns) * 1e-9
+        self.stale_frames = self._slot.replaced
+        stamp = msg.header.stamp
+        stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        if stamp_ns == 0:                                     # unstamped: use the receipt time
+            stamp_ns = received_ns
+            sec, nanosec = divmod(received_ns, 1_000_000_000)
+            stamp = Time(sec=sec, nanosec=nanosec)
+        elif stamp_ns <= self._last_stamp_ns:
+            self.out_of_order_frames += 1                     # older than what was tracked
+            return
+        times["age_at_receipt"] = (received_ns - stamp_ns) * 1e-9
         image, problem = decode_image(msg)
         if problem:
             self._bad_frame(f"{problem}: frame dropped")
             return
-        stamp = msg.header.stamp
-        if stamp.sec == 0 and stamp.nanosec == 0:            # unstamped: use the receipt time
-            stamp = self.get_clock().now().to_msg()
-        self.track(image, stamp.sec + stamp.nanosec * 1e-9, stamp)
+        times["decode"] = time.monotonic() - start
+        self._last_stamp_ns = stamp_ns
+        self.track(image, stamp_ns * 1e-9, stamp, msg.header.frame_id or CAMERA_FRAME_ID)
 
     def _capture_loop(self) -> None:
         """source=camera/file: read, track and publish until shutdown (not the executor thread)."""
-        from builtin_interfaces.msg import Time
-
         while not self._stop.is_set() and rclpy.ok():
             frame, stamp_s = self.source.read()
             if frame is None:
@@ -172,9 +256,14 @@ class BallTrackerNode(Node):
                 self._stop.wait(0.05)
                 continue
             sec = math.floor(stamp_s)
-            self.track(frame, stamp_s, Time(sec=int(sec), nanosec=int((stamp_s - sec) * 1e9)))
+            self._last_frame_mono = time.monotonic()
+            self.track(frame, stamp_s, Time(sec=int(sec), nanosec=int((stamp_s - sec) * 1e9)), CAMERA_FRAME_ID)
 
     def on_camera_info(self, msg: CameraInfo) -> None:
+        raw = (msg.width, msg.height, tuple(msg.k), tuple(msg.d), msg.distortion_model)
+        if raw == self._last_camera_info:
+            return          # the same intrinsics with every frame: nothing to do (cheap check)
+        self._last_camera_info = raw
         model = CameraModel.from_camera_info(msg.width, msg.height, msg.k, msg.d, msg.distortion_model)
         if model is None:
             return
@@ -196,16 +285,37 @@ class BallTrackerNode(Node):
         self.tracker.set_plate_cmd(u_x, u_y, now_s)
 
     # -- the work --------------------------------------------------------------------------------
-    def track(self, image: np.ndarray, stamp_s: float, stamp_msg) -> None:
+    def track(self, image: np.ndarray, stamp_s: float, stamp_msg, camera_frame: str) -> None:
         with self._lock:
             self._camera_for(image.shape)
             result = self.tracker.process(image, stamp_s, self.get_clock().now().nanoseconds * 1e-9)
+        start = time.monotonic()
+        # the pose first: a controller that pairs them steps as soon as the state arrives
+        self.pose_pub.publish(plate_pose(result, stamp_msg, camera_frame))
         self.state_pub.publish(ball_state(result, stamp_msg))
+        now = self.get_clock().now().nanoseconds
+        self._frame_times["publish"] = time.monotonic() - start
+        self._frame_times["age_at_publish"] = now * 1e-9 - stamp_s
         if self.debug_pub is not None and self.debug_pub.get_subscription_count() > 0:
-            self.debug_pub.publish(encode_image(draw_overlay(image, self.tracker.plate, result), stamp_msg, "camera"))
+            overlay = draw_overlay(image, self.tracker.plate, result)
+            self.debug_pub.publish(encode_image(overlay, stamp_msg, camera_frame))
         if self.statistics is not None:
             self._last_result = result
             self.statistics.publish()  # values are read only when someone subscribes
+
+    def watch_camera(self) -> None:
+        """Say once when frames stop coming (a dead camera driver), and when they are back."""
+        last = self._last_frame_mono
+        if last is None:
+            return
+        silent_s = time.monotonic() - last
+        if silent_s > self.params["camera_timeout_s"] and not self._camera_silent:
+            self._camera_silent = True
+            self.get_logger().warn(f"no camera frame for {silent_s:.1f} s: the camera stopped or its driver died; "
+                                   "/ball_state paused")
+        elif silent_s <= self.params["camera_timeout_s"] and self._camera_silent:
+            self._camera_silent = False
+            self.get_logger().info("camera frames are back")
 
     def _camera_for(self, shape) -> None:
         """Give the tracker intrinsics matching the frame size (scaled if calibrated at another)."""
@@ -238,12 +348,22 @@ class BallTrackerNode(Node):
             "tracking_valid": lambda: self._last_result.tracking_valid,
             "gated": lambda: k.gated_count, "track_resets": lambda: k.reset_count,
             "bad_plate_cmd": lambda: self.bad_plate_cmd}
-        return [(f"{stage}_ms", stage_ms(stage)) for stage in STAGES] + list(counters.items())
+        def frame_ms(what):
+            return lambda: 1e3 * self._frame_times[what]
+
+        counters.update({"stamp_s": lambda: self._last_result.stamp_s,    # the frame these values are of
+                         "stale_frames": lambda: self.stale_frames, "skipped_frames": lambda: self.skipped_frames,
+                         "out_of_order_frames": lambda: self.out_of_order_frames,
+                         "position_std_mm": lambda: 1e3 * self._last_result.position_std_m})
+        frame = [(f"{what}_ms", frame_ms(what)) for what in self._frame_times]
+        return [(f"{stage}_ms", stage_ms(stage)) for stage in STAGES] + frame + list(counters.items())
 
     def destroy_node(self):
+        self._stop.set()
+        if self.source is None:
+            self._slot.close()
+        self._thread.join(timeout=2.0)
         if self.source is not None:
-            self._stop.set()
-            self._thread.join(timeout=2.0)
             self.source.close()
         return super().destroy_node()
 
@@ -254,6 +374,22 @@ def ball_state(result: TrackerResult, stamp_msg) -> BallState:
                     pixel_u=result.pixel_u, pixel_v=result.pixel_v)
     msg.header.stamp = stamp_msg
     msg.header.frame_id = PLATE_FRAME
+    return msg
+
+
+def plate_pose(result: TrackerResult, stamp_msg, camera_frame: str) -> PoseWithCovarianceStamped:
+    """plate_center in the camera frame with the fit's covariance (UNUSABLE without a pose)."""
+    msg = PoseWithCovarianceStamped()
+    msg.header.stamp = stamp_msg
+    msg.header.frame_id = camera_frame
+    if result.plate_pose is None:
+        msg.pose.covariance = UNUSABLE_COVARIANCE
+        return msg
+    R_CP, t_CP = result.plate_pose
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    p.x, p.y, p.z = (float(v) for v in t_CP)
+    q.x, q.y, q.z, q.w = (float(v) for v in Rotation.from_matrix(R_CP).as_quat())
+    msg.pose.covariance = [float(v) for v in result.pose_covariance.ravel()]
     return msg
 
 

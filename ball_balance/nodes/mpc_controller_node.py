@@ -1,10 +1,10 @@
-"""`ball_balance_mpc`: MPC balance controller (DESIGN.md section 4).
+"""`ball_balance_mpc`: MPC balance controller (docs/design.md section 4).
 
 /ball_state -> a single-point trajectory_msgs/JointTrajectory on
 /scaled_joint_trajectory_controller/joint_trajectory (JOINT_NAMES, positions, reached
 `trajectory_point_time_s` after receipt), plus /plate_cmd and /ball_reference (see
-balance_node_base). The QP (OSQP, see ball_balance/control/mpc.py) is solved every tick;
-solve-time statistics are logged every 10 s. config/mpc.yaml holds the defaults we run.
+balance_node_base). The QP (OSQP, see ball_balance/control/mpc.py) is solved every control
+step; step-time statistics are logged every 10 s. config/mpc.yaml holds the defaults we run.
 """
 import time
 
@@ -37,9 +37,9 @@ class MpcControllerNode(BalanceControllerNode):
         self._tick_times_s = []
         self.create_timer(10.0, self.log_timing)
 
-    def on_tick(self) -> None:
+    def control_step(self, steady: float) -> None:
         t0 = time.perf_counter()
-        super().on_tick()
+        super().control_step(steady)
         if self.pipeline.safety.mode.value == "engaged":
             self._tick_times_s.append(time.perf_counter() - t0)
 

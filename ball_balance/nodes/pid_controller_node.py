@@ -1,4 +1,4 @@
-"""`ball_balance_controller`: PID balance controller (DESIGN.md section 4).
+"""`ball_balance_controller`: PID balance controller (docs/design.md section 4).
 
 /ball_state -> 6 joint positions on /forward_position_controller/commands
 (std_msgs/Float64MultiArray, JOINT_NAMES order), plus /plate_cmd and /ball_reference (see

@@ -1,4 +1,4 @@
-"""`ball_balance_visualizer`: RViz markers of the balancing scene (DESIGN.md section 4).
+"""`ball_balance_visualizer`: RViz markers of the balancing scene (docs/design.md section 4).
 
 Subscribes /ball_state (sensor-data QoS) and /ball_reference (geometry_msgs/PointStamped)
 and publishes visualization_msgs/MarkerArray on /ball_balance_visualization, all in
@@ -10,17 +10,25 @@ and publishes visualization_msgs/MarkerArray on /ball_balance_visualization, all
                   reference_kind is set, else the recent /ball_reference targets
   ns "target"     the current target (small SPHERE)
   ns "trail"      the last `trail_length` ball positions (LINE_STRIP)
+
+Stamps: the markers are drawn in the moving `plate_center` frame, so RViz must look up
+base_link -> plate_center at their stamp. A marker stamped "now" is ahead of the newest /tf
+(robot_state_publisher stamps /tf with the joint states' time, which lags), and RViz then
+waits or reports extrapolation. The markers carry the newest /tf stamp instead, or the ball
+state's capture stamp when that is older (the scene as the camera saw it); never a time TF
+cannot resolve. Before any /tf arrives the stamp is zero ("the latest transform").
 """
 from __future__ import annotations
 
 from collections import deque
 
 from ball_tracker_msgs.msg import BallState
-from builtin_interfaces.msg import Duration
+from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Point, PointStamped
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from std_msgs.msg import ColorRGBA
+from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ball_balance.control import config as control_config
@@ -38,6 +46,22 @@ SCHEMA = [
 ] + [p for p in control_config.REFERENCE_SCHEMA if p.name != "reference_kind"]
 
 Z_TOP = PLATE_THICKNESS_M / 2.0
+# A ball state older than this (relative to the newest /tf) no longer sets the stamp: the
+# tracker stopped, and TF buffers keep only the last few seconds.
+BALL_STAMP_MAX_LAG_NS = 1_000_000_000
+
+
+def _ns(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def marker_stamp_ns(newest_tf_ns: int, ball_stamp_ns: int = 0) -> int:
+    """The stamp TF can resolve (see the module docstring); 0 means "latest transform"."""
+    if newest_tf_ns <= 0:
+        return 0
+    if newest_tf_ns - BALL_STAMP_MAX_LAG_NS <= ball_stamp_ns < newest_tf_ns:
+        return ball_stamp_ns
+    return newest_tf_ns
 
 
 def _color(r, g, b, a=1.0) -> ColorRGBA:
@@ -59,8 +83,10 @@ class VisualizerNode(Node):
         self.target = None
         self.trail = deque(maxlen=self.params["trail_length"])
         self.targets = deque(maxlen=400)
+        self.newest_tf_ns = 0
         self.create_subscription(BallState, "/ball_state", self.on_ball_state, qos_profile_sensor_data)
         self.create_subscription(PointStamped, "/ball_reference", self.on_reference, 10)
+        self.create_subscription(TFMessage, "/tf", self.on_tf, 10)
         self.pub = self.create_publisher(MarkerArray, "/ball_balance_visualization", 10)
         self.create_timer(1.0 / self.params["rate_hz"], self.on_timer)
 
@@ -68,6 +94,10 @@ class VisualizerNode(Node):
         if all(v == v and abs(v) < 1.0 for v in (msg.x, msg.y, msg.vx, msg.vy)):  # finite, sane
             self.ball = msg
             self.trail.append((msg.x, msg.y))
+
+    def on_tf(self, msg: TFMessage) -> None:
+        for transform in msg.transforms:
+            self.newest_tf_ns = max(self.newest_tf_ns, _ns(transform.header.stamp))
 
     def on_reference(self, msg: PointStamped) -> None:
         self.target = (msg.point.x, msg.point.y)
@@ -90,7 +120,9 @@ class VisualizerNode(Node):
                 raise
 
     def publish_markers(self) -> None:
-        stamp = self.get_clock().now().to_msg()
+        ball_ns = _ns(self.ball.header.stamp) if self.ball is not None else 0
+        sec, nanosec = divmod(marker_stamp_ns(self.newest_tf_ns, ball_ns), 1_000_000_000)
+        stamp = Time(sec=sec, nanosec=nanosec)
         markers = []
         plate = self._marker("plate", Marker.CUBE, stamp)
         plate.scale.x = plate.scale.y = PLATE_SIDE_M

@@ -1,6 +1,7 @@
 """sensor_msgs/Image <-> numpy BGR arrays (bgr8 and rgb8), one implementation for every node."""
 from __future__ import annotations
 
+from array import array
 from typing import Optional, Tuple
 
 import numpy as np
@@ -26,10 +27,12 @@ def decode_image(msg: Image) -> Tuple[Optional[np.ndarray], Optional[str]]:
 
 
 def encode_image(image_bgr: np.ndarray, stamp_msg, frame_id: str) -> Image:
-    """H x W x 3 uint8 BGR array -> sensor_msgs/Image bgr8."""
+    """H x W x 3 uint8 BGR array -> sensor_msgs/Image bgr8 (one copy of the pixels)."""
     height, width = image_bgr.shape[:2]
     msg = Image(height=height, width=width, encoding="bgr8", is_bigendian=0, step=3 * width)
-    msg.data = np.ascontiguousarray(image_bgr).tobytes()
+    data = array("B")
+    data.frombytes(np.ascontiguousarray(image_bgr))   # the field's own type: assigned as is
+    msg.data = data
     msg.header.stamp = stamp_msg
     msg.header.frame_id = frame_id
     return msg

@@ -2,6 +2,8 @@
 
 A node that cannot start (a malformed parameter file, a bad parameter value, a missing
 resource) prints one line naming the problem and exits non-zero, instead of a traceback.
+Values given for parameters the node does not declare are reported once it is built
+(controller_manager_py.parameters.report_unknown_parameters).
 """
 from __future__ import annotations
 
@@ -9,7 +11,7 @@ import os
 import sys
 from typing import Any, Callable, Optional, Sequence
 
-from controller_manager_py.parameters import ParameterError
+from controller_manager_py.parameters import ParameterError, report_unknown_parameters
 
 
 class StartupError(RuntimeError):
@@ -22,13 +24,12 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
     import rclpy
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 
-    from ball_balance.cli.errors import CliError
-    from ball_balance.cli.run import check_params_files
+    from ball_balance.ros.params_files import ParamsFileError, check_params_files
 
     name = os.path.basename(sys.argv[0]) or getattr(make_node, "__name__", "node")
     try:  # before rcl, which would log its own error line for a malformed file
         check_params_files(list(sys.argv[1:] if args is None else args))
-    except CliError as error:
+    except ParamsFileError as error:
         print(f"{name}: cannot start: {error}", file=sys.stderr)
         return 2
     try:
@@ -39,6 +40,7 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
     node = None
     try:
         node = make_node()
+        report_unknown_parameters(node)  # a typo in a parameter file: one line, not silence
         executor = MultiThreadedExecutor() if multithreaded else SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()
@@ -53,6 +55,9 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
         if rclpy.ok():
             raise
     finally:
+        # A second Ctrl-C (or the TERM a launcher sends after the terminal's INT) must not
+        # interrupt the shutdown half-way with a traceback: the first one already stops it.
+        _ignore_stop_signals()
         if node is not None:
             try:
                 node.destroy_node()
@@ -61,6 +66,16 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
         if rclpy.ok():
             rclpy.try_shutdown()
     return 0
+
+
+def _ignore_stop_signals() -> None:
+    import signal
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            signal.signal(sig, signal.SIG_IGN)
+        except ValueError:  # not the main thread (run_node called from a test helper)
+            pass
 
 
 def main_for(make_node, multithreaded: bool = False) -> Callable[[], None]:

@@ -1,15 +1,17 @@
 """Simulation settings (physics, servos, camera) and domain knobs, as validated dataclasses.
 
 `SimConfig` is what the world is built with; `DomainKnobs` are the evaluation knobs of
-DESIGN.md section 7 (ball mass, friction, gravity, detection noise, latency, lighting),
-drawn reproducibly from a seed by `DomainKnobs.sample(domain, seed)`. No ROS import.
+docs/design.md section 7 (ball mass and type, friction, gravity, detection noise, latency,
+lighting, camera impairments, pushes), drawn reproducibly from a seed by
+`DomainKnobs.sample(domain, seed)`; DOMAIN_DESCRIPTIONS says what each domain changes.
+No ROS import.
 """
 from __future__ import annotations
 
 import math
 import random
 from dataclasses import dataclass, field, fields, replace
-from typing import Tuple
+from typing import Optional, Tuple
 
 from ball_balance.plate_geometry import BALL_MASS_KG, BALL_RADIUS_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
 
@@ -79,47 +81,99 @@ class SimConfig:
 
 @dataclass(frozen=True)
 class DomainKnobs:
-    """One evaluation domain's physical and sensing values (DESIGN.md section 7)."""
+    """One evaluation domain's physical, sensing and disturbance values (docs/design.md section 7).
+
+    Physics: ball mass, sliding friction, gravity, ball type (`ball_shell`: None keeps the
+    SimConfig's ball, True a thin shell rolling at 3/5 g sin(tilt), False a solid ball at 5/7).
+    Sensing: truth-fed detection noise, camera-to-command latency, lighting, and the camera
+    model of vision mode (exposure gain, sensor noise, motion blur, dropped frames, stamp
+    jitter). Disturbances: a push of `push_speed_m_s` in a seeded direction every
+    `push_interval_s`, a hand over `occlusion_markers` seeded markers for
+    `occlusion_duration_s` every `occlusion_interval_s` (the benchmark episode turns these
+    into Push and Occlusion events; the hosted simulation applies the pushes).
+    """
 
     ball_mass_kg: float = BALL_MASS_KG
     ball_friction: float = 0.4          # ball-plate sliding friction coefficient
-    gravity_scale: float = 1.0
+    gravity_scale: float = 1.0          # x 9.81 m/s^2 (0.5 = "0.5 g")
+    ball_shell: Optional[bool] = None   # None: SimConfig.ball_shell decides
     detection_noise_m: float = 0.0      # std of the truth-fed detection noise, plate frame
     latency_s: float = 0.0              # camera-to-command latency, added to joint commands
     light_scale: float = 1.0            # directional light intensity factor
     exposure: float = 1.0               # image gain after rendering
+    sensor_noise: float = 0.0           # std of the camera's per-pixel noise, 8-bit grey levels
+    blur_exposure_s: float = 0.0        # shutter time: frames average the motion over it (0: sharp)
+    frame_drop_prob: float = 0.0        # probability that a camera frame never arrives
+    stamp_jitter_s: float = 0.0         # std of the frame stamp's error against the true capture time
+    push_speed_m_s: float = 0.0         # ball speed change per push (0: no pushes)
+    push_interval_s: float = 0.0        # time between pushes, the first at this time
+    occlusion_markers: int = 0          # a hand over this many markers (benchmark episodes) ...
+    occlusion_interval_s: float = 0.0   # ... every this long (the first at this time) ...
+    occlusion_duration_s: float = 0.0   # ... for this long
 
     def __post_init__(self):
         _check_range("ball_mass_kg", self.ball_mass_kg, 1e-4, 1.0)
         _check_range("ball_friction", self.ball_friction, 0.001, 5.0)
         _check_range("gravity_scale", self.gravity_scale, 0.0, 5.0)
+        if self.ball_shell not in (None, True, False):
+            raise SimConfigError(f"ball_shell = {self.ball_shell!r} must be None, true or false")
         _check_range("detection_noise_m", self.detection_noise_m, 0.0, 0.1)
         _check_range("latency_s", self.latency_s, 0.0, 1.0)
         _check_range("light_scale", self.light_scale, 0.0, 5.0)
         _check_range("exposure", self.exposure, 0.05, 5.0)
+        _check_range("sensor_noise", self.sensor_noise, 0.0, 64.0)
+        _check_range("blur_exposure_s", self.blur_exposure_s, 0.0, 0.1)
+        _check_range("frame_drop_prob", self.frame_drop_prob, 0.0, 0.9)
+        _check_range("stamp_jitter_s", self.stamp_jitter_s, 0.0, 0.05)
+        _check_range("push_speed_m_s", self.push_speed_m_s, 0.0, 2.0)
+        _check_range("push_interval_s", self.push_interval_s, 0.0, 600.0)
+        if self.push_speed_m_s > 0.0 and self.push_interval_s <= 0.0:
+            raise SimConfigError("push_interval_s must be > 0 when push_speed_m_s > 0")
+        if self.occlusion_markers not in (0, 1, 2, 3, 4) or isinstance(self.occlusion_markers, bool):
+            raise SimConfigError(f"occlusion_markers = {self.occlusion_markers!r} must be an integer 0-4")
+        _check_range("occlusion_interval_s", self.occlusion_interval_s, 0.0, 600.0)
+        _check_range("occlusion_duration_s", self.occlusion_duration_s, 0.0, 600.0)
+        if self.occlusion_markers and not 0.0 < self.occlusion_duration_s <= self.occlusion_interval_s:
+            raise SimConfigError("occlusion needs 0 < occlusion_duration_s <= occlusion_interval_s")
 
     @staticmethod
     def sample(domain: str, seed: int) -> DomainKnobs:
-        """The knobs of `domain` (see DOMAINS), random parts drawn from `seed` (reproducible)."""
-        if domain not in DOMAINS:
-            raise SimConfigError(f"unknown domain '{domain}': expected one of {sorted(DOMAINS)}")
-        rng = random.Random(f"{domain}/{seed}")
+        """The knobs of `domain` (see DOMAINS and DOMAIN_ALIASES), random parts drawn from
+        `seed` (reproducible): a (low, high) tuple is drawn uniformly, a list is a choice."""
+        name = DOMAIN_ALIASES.get(domain, domain)
+        if name not in DOMAINS:
+            known = sorted(DOMAINS) + sorted(DOMAIN_ALIASES)
+            raise SimConfigError(f"unknown domain '{domain}': expected one of {known}")
+        rng = random.Random(f"{name}/{seed}")
         values = {}
-        for name, spec in DOMAINS[domain].items():
-            values[name] = rng.uniform(*spec) if isinstance(spec, tuple) else spec
+        for knob, spec in DOMAINS[name].items():
+            if isinstance(spec, tuple):
+                values[knob] = rng.uniform(*spec)
+            elif isinstance(spec, list):
+                values[knob] = rng.choice(spec)
+            else:
+                values[knob] = spec
         return replace(DomainKnobs(), **values)
 
     def as_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
-# domain -> {knob: value or (low, high) drawn uniformly}
+# domain -> {knob: value, (low, high) drawn uniformly, or [choices]}
 _FULL_DR = {
     "ball_mass_kg": (0.0022, 0.0050), "ball_friction": (0.05, 1.2), "gravity_scale": (0.5, 1.5),
     "detection_noise_m": (0.0, 0.003), "latency_s": (0.03, 0.15), "light_scale": (0.6, 1.4),
     "exposure": (0.7, 1.3),
 }
+# every range of full_dr widened, plus the ball type and the camera's impairments
+_EXTREME_DR = {
+    "ball_mass_kg": (0.0015, 0.0080), "ball_friction": (0.02, 2.0), "gravity_scale": (0.4, 1.7),
+    "ball_shell": [True, False], "detection_noise_m": (0.0, 0.005), "latency_s": (0.02, 0.20),
+    "light_scale": (0.4, 1.6), "exposure": (0.5, 1.5), "sensor_noise": (0.0, 6.0),
+    "blur_exposure_s": (0.0, 0.008), "frame_drop_prob": (0.0, 0.1), "stamp_jitter_s": (0.0, 0.003),
+}
 DOMAINS = {
+    # docs/design.md section 7, the reference system's set
     "standard": {},
     "slippery": {"ball_friction": 0.05},
     "sticky": {"ball_friction": 1.2},
@@ -129,6 +183,38 @@ DOMAINS = {
     "noisy_vision": {"detection_noise_m": 0.003},
     "high_latency": {"latency_s": (0.03, 0.15)},
     "full_dr": _FULL_DR,
+    # the reference system's harsher settings (its 0.5 g and 1.5 g are low_gravity and
+    # high_gravity above, also reachable as gravity_0.5g and gravity_1.5g)
+    "noise_5mm": {"detection_noise_m": 0.005},
+    "latency_200ms": {"latency_s": 0.2},
+    "extreme_dr": _EXTREME_DR,
+    # ours: model mismatch and disturbances
+    "solid_ball": {"ball_shell": False},
+    "pushes": {"push_speed_m_s": 0.15, "push_interval_s": 4.0},
+    "hand_1": {"occlusion_markers": 1, "occlusion_interval_s": 3.0, "occlusion_duration_s": 1.0},
+    "hand_2": {"occlusion_markers": 2, "occlusion_interval_s": 3.0, "occlusion_duration_s": 1.0},
+    "hand_3": {"occlusion_markers": 3, "occlusion_interval_s": 3.0, "occlusion_duration_s": 1.0},
+}
+DOMAIN_ALIASES = {"gravity_0.5g": "low_gravity", "gravity_1.5g": "high_gravity"}
+DOMAIN_DESCRIPTIONS = {
+    "standard": "nominal: 2.7 g thin-shell ball, friction 0.4, 1 g, no detection noise or added latency",
+    "slippery": "ball-plate friction 0.05",
+    "sticky": "ball-plate friction 1.2",
+    "heavy_ball": "ball mass 5 g",
+    "low_gravity": "gravity x 0.5 (the reference system's harsher 0.5 g; alias gravity_0.5g)",
+    "high_gravity": "gravity x 1.5 (the reference system's 1.5 g; alias gravity_1.5g)",
+    "noisy_vision": "detection noise 3 mm (truth-fed mode)",
+    "high_latency": "camera-to-command latency 30-150 ms",
+    "full_dr": "all of the above randomised per episode",
+    "noise_5mm": "detection noise 5 mm (harsher)",
+    "latency_200ms": "camera-to-command latency 200 ms (harsher)",
+    "extreme_dr": "every full_dr range widened, plus solid or hollow ball, sensor noise, motion blur, "
+                  "dropped frames and stamp jitter",
+    "solid_ball": "solid ball (rolls at 5/7 g sin(tilt)) while the controllers assume a shell (3/5)",
+    "pushes": "the ball pushed at 0.15 m/s in a seeded direction every 4 s",
+    "hand_1": "a hand over 1 marker (seeded) for 1 s every 3 s (benchmark episodes)",
+    "hand_2": "a hand over 2 markers (seeded) for 1 s every 3 s (benchmark episodes)",
+    "hand_3": "a hand over 3 markers (seeded) for 1 s every 3 s (benchmark episodes)",
 }
 
 

@@ -29,6 +29,10 @@ BALL_BODY = "ball"
 CAMERA_NAME = "overhead_camera"
 PLATE_TOP_GEOM = "plate_top"
 COLLISION_GROUP = 3  # not drawn by mujoco.Renderer's default scene options
+# Contact bits (MuJoCo collides a pair when contype & conaffinity of either side overlap):
+# the ball touches the plate and the floor; the plate never touches the floor (a fully
+# folded arm would otherwise be pushed by the floor past its joint limits).
+PLATE_BIT, FLOOR_BIT = 1, 2
 ARMATURE_KG_M2 = (0.2, 0.2, 0.1, 0.02, 0.02, 0.02)  # reflected rotor inertia per joint
 TEXTURE_PX_PER_M = 2400.0  # marker side = 96 px = 6 ArUco cells of 16 px
 
@@ -112,7 +116,7 @@ def _add_arm_dynamics(spec: mujoco.MjSpec, urdf_text: str) -> None:
             continue  # a URDF <visual>
         geom.group = COLLISION_GROUP
         if geom.parent.name == PLATE_FRAME and geom.type == mujoco.mjtGeom.mjGEOM_BOX:
-            geom.name, geom.contype, geom.conaffinity = "plate", 1, 1
+            geom.name, geom.contype, geom.conaffinity = "plate", PLATE_BIT, PLATE_BIT
         else:
             geom.contype, geom.conaffinity = 0, 0
     for body in spec.bodies:
@@ -133,7 +137,7 @@ def _add_floor_and_lights(spec: mujoco.MjSpec, home: np.ndarray, knobs: DomainKn
     floor_mat = spec.add_material(name="floor", rgba=[0.16, 0.17, 0.19, 1.0])
     floor_mat.reflectance = 0.0
     spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3.0, 3.0, 0.05],
-                            material="floor", contype=1, conaffinity=1)
+                            material="floor", contype=FLOOR_BIT, conaffinity=FLOOR_BIT)
     above = home[:3, 3] + np.array([0.0, 0.0, 1.5])
     diffuse = [0.75 * knobs.light_scale] * 3
     spec.worldbody.add_light(name="overhead", pos=above.tolist(), dir=[0.0, 0.0, -1.0],
@@ -171,7 +175,8 @@ def _add_ball(spec: mujoco.MjSpec, config: SimConfig, knobs: DomainKnobs, home: 
     ball_mat = spec.add_material(name="ball", rgba=[1.0, 0.45, 0.05, 1.0])
     ball_mat.specular, ball_mat.shininess = 0.1, 0.1
     body.add_geom(name="ball", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[r, 0, 0], material="ball",
-                  mass=m, contype=1, conaffinity=1, condim=6, priority=1, typeinertia=shell,
+                  mass=m, contype=PLATE_BIT | FLOOR_BIT, conaffinity=PLATE_BIT | FLOOR_BIT, condim=6, priority=1,
+                  typeinertia=shell,
                   friction=[knobs.ball_friction, config.torsional_friction_m, config.rolling_friction_m])
 
 

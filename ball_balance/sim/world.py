@@ -14,6 +14,12 @@ controller does). Commands are applied `DomainKnobs.latency_s` after they are gi
 `render()` makes test frames with known truth for the tracker: place the ball with
 `place_ball(x, y)` and the arm with `set_joint_positions(q)`, then `render()` returns
 (H x W x 3 uint8 BGR image, FrameTruth with the ball in the plate frame and in pixels).
+`render_exposure(s)` gives the raw frames over a shutter time (motion blur, with
+`history_s` set).
+
+Disturbances: `place_ball(x, y, vx, vy)` releases the ball rolling (spin consistent with
+rolling, so no speed is lost to slip), `push_ball(dvx, dvy)` is an impulse with the matching
+spin, `apply_force(fx, fy, duration_s)` a timed external force on the ball's centre.
 It renders in the calling thread; the ROS component uses `snapshot()` + CameraRenderer in
 its own thread instead.
 """
@@ -21,7 +27,7 @@ from __future__ import annotations
 
 import collections
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Optional, Sequence, Tuple
 
 import mujoco
@@ -84,6 +90,8 @@ class SimWorld:
 
     def __init__(self, config: SimConfig = SimConfig(), knobs: DomainKnobs = DomainKnobs(),
                  urdf_text: Optional[str] = None, seed: int = 0):
+        if knobs.ball_shell is not None:  # the domain chooses the ball (solid or hollow)
+            config = replace(config, ball_shell=knobs.ball_shell)
         self.config, self.knobs = config, knobs
         self.urdf_text = urdf_text if urdf_text is not None else robot.robot_description()
         self.model, self.ids = build_model(self.urdf_text, config, knobs)
@@ -92,6 +100,15 @@ class SimWorld:
         self.lower_rad = np.array([limits[n].lower for n in robot.JOINT_NAMES])
         self.upper_rad = np.array([limits[n].upper for n in robot.JOINT_NAMES])
         self.max_velocity_rad_s = np.array([limits[n].velocity for n in robot.JOINT_NAMES])
+        self.max_effort_n_m = np.array([limits[n].effort for n in robot.JOINT_NAMES])
+        dofs = self.ids.dof_arm   # M_ii in data.M (CSR rows, the diagonal last in each row)
+        self._mass_diag = self.model.M_rowadr[dofs] + self.model.M_rownnz[dofs] - 1
+        self._setpoint = np.zeros(6)
+        # room to the limits of [setpoint, setpoint, joint, joint] (down, up, down, up), less the margin
+        self._room_sign = np.repeat([1.0, -1.0, 1.0, -1.0], 6)
+        self._room_offset = np.concatenate((-self.lower_rad, self.upper_rad, -self.lower_rad, self.upper_rad)) \
+            - self.LIMIT_MARGIN_RAD
+        self.limit_guard_count = 0      # physics steps where the last-resort limit guard acted
         self.speed_scaling = 1.0
         self.rng = np.random.default_rng(seed)
         self._pending: collections.deque = collections.deque()  # (apply at time_s, targets)
@@ -99,6 +116,9 @@ class SimWorld:
         self._dropped = False
         self._renderer = None
         self._plate_vel = np.zeros(6)
+        self._forces: list = []     # (end time_s, [force N, torque N m] in world axes) on the ball
+        self.history_s = 0.0        # keep (time, qpos) of this much past (motion blur)
+        self._history: collections.deque = collections.deque()
         self.reset()
 
     # ---- state -----------------------------------------------------------------------
@@ -115,6 +135,8 @@ class SimWorld:
         """Time 0, arm at `joint_positions` (held there), ball at rest on the plate at `ball_xy`."""
         mujoco.mj_resetData(self.model, self.data)
         self._pending.clear()
+        self._forces = []
+        self._history.clear()
         self._dropped = False
         self.set_joint_positions(joint_positions)
         self.place_ball(*ball_xy)
@@ -125,21 +147,73 @@ class SimWorld:
         self.data.qpos[self.ids.qpos_arm] = q
         self.data.qvel[self.ids.dof_arm] = 0.0
         self.data.ctrl[self.ids.actuators] = q
+        self._setpoint[:] = q
         self._target[:] = q
         self._pending.clear()
         mujoco.mj_forward(self.model, self.data)
 
     def place_ball(self, x: float, y: float, vx: float = 0.0, vy: float = 0.0) -> None:
-        """Put the ball resting on the plate at (x, y) (plate frame, m), velocity (vx, vy) m/s."""
+        """Put the ball on the plate at (x, y) (plate frame, m), rolling at (vx, vy) m/s
+        relative to the plate, its spin consistent with rolling (no slip at the contact) and
+        with the plate's own motion, so none of the speed is lost to slip."""
         p_W, R_WP = self.plate_pose()
         z = PLATE_THICKNESS_M / 2.0 + self.config.ball_radius_m
         a = self.ids.ball_qpos
         self.data.qpos[a:a + 3] = p_W + R_WP @ np.array([x, y, z])
         self.data.qpos[a + 3:a + 7] = (1.0, 0.0, 0.0, 0.0)
         d = self.ids.ball_dof
-        self.data.qvel[d:d + 3] = R_WP @ np.array([vx, vy, 0.0])
-        self.data.qvel[d + 3:d + 6] = 0.0
+        self.data.qvel[d:d + 6] = 0.0
+        mujoco.mj_forward(self.model, self.data)
+        omega_W, v_plate_W = self._plate_velocity(self.data)
+        r_W = self.data.qpos[a:a + 3] - p_W
+        self.data.qvel[d:d + 3] = v_plate_W + np.cross(omega_W, r_W)
+        self.data.qvel[d + 3:d + 6] = omega_W    # identity orientation: body axes = world axes
         self._dropped = False
+        self._add_rolling_velocity(vx, vy)
+
+    def push_ball(self, dvx: float, dvy: float) -> None:
+        """An impulse: the ball's velocity relative to the plate changes by (dvx, dvy) m/s
+        (plate axes) with the matching change of spin, so it keeps rolling without slip."""
+        self._add_rolling_velocity(dvx, dvy)
+
+    def apply_force(self, fx_n: float, fy_n: float, duration_s: float, fz_n: float = 0.0) -> None:
+        """An external force (N, plate axes at the time of the call) on the ball's centre for
+        the next `duration_s` of simulated time (whole physics steps); forces add up.
+        Friction at the contact makes the spin follow, as for a finger pushing the ball."""
+        self.apply_wrench((fx_n, fy_n, fz_n), (0.0, 0.0, 0.0), duration_s)
+
+    def apply_wrench(self, force_n: Sequence[float], torque_n_m: Sequence[float], duration_s: float,
+                     in_plate_axes: bool = True) -> None:
+        """Force (N) and torque (N m) on the ball's centre for `duration_s` s (at least one
+        physics step), in plate axes at the time of the call or in world axes."""
+        values = np.concatenate([np.asarray(force_n, dtype=float).reshape(3),
+                                 np.asarray(torque_n_m, dtype=float).reshape(3), [duration_s]])
+        if not np.all(np.isfinite(values)) or duration_s < 0.0:
+            raise CommandError(f"wrench {values[:6].tolist()} for {duration_s} s: needs finite numbers "
+                               "and a duration >= 0")
+        R = self.plate_pose()[1] if in_plate_axes else np.eye(3)
+        end = self.time_s + max(duration_s, self.physics_dt_s)
+        self._forces.append((end, np.concatenate([R @ values[:3], R @ values[3:6]])))
+
+    def clear_forces(self) -> None:
+        """End every external force and torque on the ball now."""
+        self._forces = []
+        self.data.xfrc_applied[self.ids.ball_body, :] = 0.0
+
+    def _add_rolling_velocity(self, dvx: float, dvy: float) -> None:
+        if not (math.isfinite(dvx) and math.isfinite(dvy)):
+            raise CommandError(f"ball velocity ({dvx}, {dvy}) m/s must be finite")
+        if dvx == 0.0 and dvy == 0.0:
+            return
+        _, R_WP = self.plate_pose()
+        dv_W = R_WP @ np.array([dvx, dvy, 0.0])
+        # rolling without slip: contact point (at -r n from the centre) at rest relative to
+        # the plate, so d_omega = n x dv / r
+        domega_W = np.cross(R_WP[:, 2], dv_W) / self.config.ball_radius_m
+        d = self.ids.ball_dof
+        R_WB = self.data.xmat[self.ids.ball_body].reshape(3, 3)
+        self.data.qvel[d:d + 3] += dv_W
+        self.data.qvel[d + 3:d + 6] += R_WB.T @ domega_W  # a free joint's spin is in body axes
         mujoco.mj_forward(self.model, self.data)
 
     # ---- commands and stepping -------------------------------------------------------
@@ -174,10 +248,8 @@ class SimWorld:
         for _ in range(n):
             while self._pending and self._pending[0][0] <= self.time_s + 1e-12:
                 self._target[:] = self._pending.popleft()[1]
-            # slew-limit the servo setpoint to the joint velocity limit (x speed scaling)
-            max_step = self.max_velocity_rad_s * (self.speed_scaling * dt)
-            setpoint = self.data.ctrl[acts]
-            self.data.ctrl[acts] = setpoint + np.clip(self._target - setpoint, -max_step, max_step)
+            self.data.ctrl[acts] = self._servo_setpoint(dt)
+            self._apply_forces()
             last_time_s = self.data.time
             mujoco.mj_step(self.model, self.data)
             if self.data.time < last_time_s:  # MuJoCo reset the data: it diverged
@@ -185,8 +257,81 @@ class SimWorld:
                 self.data.time = last_time_s + dt  # time never runs backwards (it may be the clock)
                 raise SimulationError(f"physics diverged at t={self.data.time:.3f} s (MuJoCo reset its "
                                       "state); world reset to the last joint targets")
+            self._guard_limits()
+            if self.history_s > 0.0:
+                self._history.append((self.data.time, self.data.qpos.copy()))
+                while self._history and self._history[0][0] < self.data.time - self.history_s - 1e-9:
+                    self._history.popleft()
         if not self._dropped:
             self._dropped = self._off_plate()
+
+    # Fraction of the joint's torque (URDF effort) / inertia used to brake before a position
+    # limit: the rest is left for coupling from the other joints and for tracking.
+    BRAKE_TORQUE_SHARE = 0.5
+    # The servo never asks for more than this share of the velocity limit (transients and
+    # coupling from the other joints stay below the limit itself).
+    VELOCITY_SHARE = 0.95
+    # The setpoint stops this far inside a position limit: the joint-limit constraint is soft
+    # and coupling from the other joints moves a joint a fraction of a milliradian.
+    LIMIT_MARGIN_RAD = 1e-3
+
+    def _servo_setpoint(self, dt: float) -> np.ndarray:
+        """The position servo's setpoint for this physics step: a velocity-limited position servo.
+
+        1. The setpoint moves toward the target at most at the URDF velocity limit (x speed
+           scaling), and toward a position limit no faster than the joint can brake from
+           before the limit: v <= sqrt(2 a d), a = BRAKE_TORQUE_SHARE x effort / M_ii (M_ii at
+           the current pose), d = the room left to the limit (minus LIMIT_MARGIN_RAD).
+        2. The servo (kp, kv with kp / kv = 1 / servo_lag) settles at velocity = error / lag, so
+           clamping the error it sees to lag x (that same velocity bound) means it never
+           drives the joint faster than the limit or into a position limit, even after torque
+           saturation or when the other joints push it (the cause of the overshoots before).
+        Both stop LIMIT_MARGIN_RAD inside the position limits; the servo asks for at most
+        VELOCITY_SHARE of the velocity limit (coupling adds a few per cent).
+        """
+        q = self.data.qpos[self.ids.qpos_arm]
+        sp = self._setpoint
+        accel = self.BRAKE_TORQUE_SHARE * self.max_effort_n_m / self.data.M[self._mass_diag]
+        # velocity that can still be braked to zero within the room left, for the setpoint and
+        # the joint, downward and upward (one vector of 24: this runs every physics step)
+        room = self._room_sign * np.concatenate((sp, sp, q, q)) + self._room_offset
+        vmax = self.max_velocity_rad_s * self.speed_scaling
+        v = np.minimum(np.concatenate((vmax, vmax, vmax, vmax)),
+                       np.sqrt(2.0 * np.concatenate((accel, accel, accel, accel)) * np.maximum(room, 0.0)))
+        sp += np.minimum(np.maximum(self._target - sp, -v[0:6] * dt), v[6:12] * dt)
+        lag = self.config.servo_lag_s * self.VELOCITY_SHARE
+        return np.minimum(np.maximum(sp, q - v[12:18] * lag), q + v[18:24] * lag)
+
+    def _guard_limits(self) -> None:
+        """Last resort, as a drive's own limits: a joint past a position limit is put back on
+        it with no velocity outward, one faster than its velocity limit is slowed to it.
+        The servo keeps to the limits by itself in everything but extreme cases (every joint
+        swinging at full speed at once, where the coupling exceeds the URDF efforts); each
+        step where the guard acted is counted in `limit_guard_count`."""
+        qa, da = self.ids.qpos_arm, self.ids.dof_arm
+        q, v = self.data.qpos[qa], self.data.qvel[da]
+        vmax = self.max_velocity_rad_s
+        low, high = q < self.lower_rad, q > self.upper_rad
+        fast = np.abs(v) > vmax
+        if not (low | high | fast).any():
+            return
+        self.limit_guard_count += 1
+        q = np.clip(q, self.lower_rad, self.upper_rad)
+        v = np.clip(v, -vmax, vmax)
+        v[low] = np.maximum(v[low], 0.0)
+        v[high] = np.minimum(v[high], 0.0)
+        self.data.qpos[qa], self.data.qvel[da] = q, v
+        mujoco.mj_forward(self.model, self.data)
+
+    def _apply_forces(self) -> None:
+        body = self.ids.ball_body
+        self.data.xfrc_applied[body, :] = 0.0
+        if not self._forces:
+            return
+        now = self.data.time
+        self._forces = [(end, f) for end, f in self._forces if end > now + 1e-12]
+        for _, wrench_W in self._forces:
+            self.data.xfrc_applied[body, :] += wrench_W
 
     def advance(self, duration_s: float) -> None:
         """Step physics for `duration_s` of simulated time (rounded to whole steps)."""
@@ -218,6 +363,12 @@ class SimWorld:
         truth = self._truth(self.data)
         return not truth.on_plate or truth.z < -self.config.ball_radius_m
 
+    def _plate_velocity(self, data: mujoco.MjData) -> Tuple[np.ndarray, np.ndarray]:
+        """(omega, v) of the plate at its origin, world axes."""
+        mujoco.mj_objectVelocity(self.model, data, mujoco.mjtObj.mjOBJ_BODY, self.ids.plate_body,
+                                 self._plate_vel, 0)
+        return self._plate_vel[:3].copy(), self._plate_vel[3:].copy()
+
     def ball_truth(self) -> BallTruth:
         return self._truth(self.data)
 
@@ -226,9 +377,7 @@ class SimWorld:
         p_W, R_WP = data.xpos[body], data.xmat[body].reshape(3, 3)
         a, d = self.ids.ball_qpos, self.ids.ball_dof
         ball_W = data.qpos[a:a + 3]
-        # plate velocity at its origin, world axes: [angular; linear]
-        mujoco.mj_objectVelocity(self.model, data, mujoco.mjtObj.mjOBJ_BODY, body, self._plate_vel, 0)
-        omega_W, v_plate_W = self._plate_vel[:3], self._plate_vel[3:]
+        omega_W, v_plate_W = self._plate_velocity(data)
         r_W = ball_W - p_W
         v_rel_W = data.qvel[d:d + 3] - (v_plate_W + np.cross(omega_W, r_W))
         x, y, z = R_WP.T @ r_W
@@ -278,12 +427,30 @@ class SimWorld:
 
     def render(self) -> Tuple[np.ndarray, FrameTruth]:
         """Render the overhead camera now: (H x W x 3 uint8 BGR, FrameTruth). Calling thread."""
+        from ball_balance.sim.camera import develop
+
+        return develop([self._raw_render(self.data.qpos)], self.knobs.exposure), self.frame_truth()
+
+    def render_exposure(self, exposure_s: float, samples: int = 0) -> list:
+        """Raw frames (BGR uint8, no gain) spread over the last `exposure_s` of simulated time,
+        for motion blur (camera.develop averages them); one frame now when exposure_s is 0.
+        Needs `history_s >= exposure_s` set before stepping; `samples` 0: one per 2 ms (2-5)."""
+        if exposure_s <= 0.0 or not self._history:
+            return [self._raw_render(self.data.qpos)]
+        n = samples or int(min(5, max(2, round(exposure_s / 0.002) + 1)))
+        times = np.array([h[0] for h in self._history])
+        frames = []
+        for k in range(n):
+            t = self.time_s - exposure_s * k / (n - 1)
+            frames.append(self._raw_render(self._history[int(np.argmin(np.abs(times - t)))][1]))
+        return frames
+
+    def _raw_render(self, qpos: np.ndarray) -> np.ndarray:
         from ball_balance.sim.camera import CameraRenderer
 
         if self._renderer is None:
-            self._renderer = CameraRenderer(self.model, self.config.camera, self.knobs.exposure)
-        image = self._renderer.render(self.data.qpos)
-        return image, self.frame_truth()
+            self._renderer = CameraRenderer(self.model, self.config.camera, 1.0)
+        return self._renderer.render(qpos)
 
     def close(self) -> None:
         if self._renderer is not None:

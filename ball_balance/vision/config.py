@@ -45,7 +45,7 @@ SOURCE_SCHEMA = (
 )
 
 TRACKER_SCHEMA = (
-    # plate and markers (DESIGN.md section 5)
+    # plate and markers (docs/design.md section 5)
     Param("plate_side_m", pg.PLATE_SIDE_M, "plate side length", "m", 0.05, 5.0),
     Param("marker_side_m", pg.MARKER_SIDE_M, "ArUco marker side, black border included", "m", 0.005, 1.0),
     Param("marker_ids", _IDS, "ArUco DICT_4X4_50 ids on the plate",
@@ -62,6 +62,9 @@ TRACKER_SCHEMA = (
           "", 0.2, 10.0),
     Param("full_scan_period", 10, "while a marker is missing, search the whole image every N frames",
           "frames", 1, 10000),
+    Param("corner_noise_px", 0.3,
+          "marker corner noise (1 sigma) for the plate pose covariance; the fit residual when larger",
+          "px", 0.01, 10.0),
     Param("parallax_correction", True,
           "map the ball centre at its height above the plate (needs intrinsics, or estimates them)"),
     # ball segmentation
@@ -102,6 +105,7 @@ class TrackerConfig:
     plate_hold_s: float
     marker_roi_margin: float
     full_scan_period: int
+    corner_noise_px: float
     parallax_correction: bool
     hsv_lower: Tuple[int, int, int]
     hsv_upper: Tuple[int, int, int]

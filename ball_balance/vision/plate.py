@@ -1,18 +1,21 @@
 """The plate in the image: ArUco markers -> homography between plate metres and image pixels.
 
 Symbols: H_IP maps plate-frame points (x, y, 1) in metres to image pixels (u, v, 1);
-H_PI = inv(H_IP). Plate frame `plate_center` (DESIGN.md section 5): x right, y up as seen
+H_PI = inv(H_IP). Plate frame `plate_center` (docs/design.md section 5): x right, y up as seen
 by the overhead camera, z along the normal toward the camera.
 
 Life of a `PlateLocator`:
 - start-up: full-image marker search; once all markers are seen for `startup_frames`
   frames without moving, their averaged corners give the reference fit H_full (locked);
 - locked: markers are searched in small windows around their predicted positions (a
-  full-image search every `full_scan_period` frames while one is missing); >= 3 markers
-  refit H_full; 1 or 2 markers (a hand or the arm over the others) give the plate pose by a
-  fit with a prior that the plate pivots about its centre (`fit_pose_with_pivot_prior`,
-  needs intrinsics), else shift H_full by their mean image displacement; with none, the last H_IP is
-  kept for `plate_hold_s`, then the plate counts as not visible.
+  full-image search every `full_scan_period` frames while one is missing); all markers
+  refit H_full as a homography; with some hidden (a hand or the arm over them) and
+  intrinsics known, the plate pose is fitted with a prior that the plate pivots about its
+  centre (`fit_pose_with_pivot_prior`; 6 pose parameters instead of 8 homography ones: with
+  3 markers the far corner is 5x more exact than a homography's); without intrinsics >= 3
+  markers refit the homography, 1-2 shift H_full by their mean image displacement; with
+  none, the last H_IP is kept for `plate_hold_s`, then the plate counts as not visible.
+  `fit_kind` says which fit made the current H_IP.
 """
 from __future__ import annotations
 
@@ -24,6 +27,10 @@ import numpy as np
 from ball_balance.plate_geometry import PlateGeometry
 
 FULL_FIT_MIN_MARKERS = 3   # fewer visible markers: pose fit with a pivot prior, or a shift
+# the pivot prior of the 1-2 marker fit (1 sigma): the plate centre stays within a few mm of
+# where the last full fit saw it, the tilt may have changed by tenths of a radian
+PIVOT_PRIOR_SIGMA_T_M = 0.005
+PIVOT_PRIOR_SIGMA_ROT_RAD = 0.3
 STARTUP_PATIENCE = 3       # x startup_frames frames of a moving plate: lock on the latest frame
 
 Window = Tuple[int, int, int, int]   # x0, y0, x1, y1 (pixels, end exclusive)
@@ -96,7 +103,8 @@ def plate_pose(H_IP: np.ndarray, K: np.ndarray) -> Tuple[np.ndarray, np.ndarray]
     r1, r2, t = M[:, 0] / scale, M[:, 1] / scale, M[:, 2] / scale
     if t[2] < 0.0:          # the plate is in front of the camera: t_z > 0
         r1, r2, t = -r1, -r2, -t
-    U, _, Vt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
+    r3 = (r1[1] * r2[2] - r1[2] * r2[1], r1[2] * r2[0] - r1[0] * r2[2], r1[0] * r2[1] - r1[1] * r2[0])
+    U, _, Vt = np.linalg.svd(np.column_stack([r1, r2, r3]))    # nearest rotation
     return U @ Vt, t
 
 
@@ -107,8 +115,8 @@ def camera_centre_in_plate(H_IP: np.ndarray, K: np.ndarray) -> np.ndarray:
 
 
 def fit_pose_with_pivot_prior(plate_pts: np.ndarray, image_pts: np.ndarray, K: np.ndarray, R_ref: np.ndarray,
-                              t_ref: np.ndarray, sigma_px: float = 0.5, sigma_t_m: float = 0.005,
-                              sigma_rot_rad: float = 0.3, iterations: int = 5) -> np.ndarray:
+                              t_ref: np.ndarray, sigma_px: float = 0.5, sigma_t_m: float = PIVOT_PRIOR_SIGMA_T_M,
+                              sigma_rot_rad: float = PIVOT_PRIOR_SIGMA_ROT_RAD, iterations: int = 5) -> np.ndarray:
     """H_IP from a few marker corners, for a plate that tilts about its centre.
 
     Gauss-Newton on x = (rotation vector, t_CP) minimising
@@ -151,10 +159,12 @@ class PlateLocator:
         self.H_full: Optional[np.ndarray] = None   # reference fit (start-up average or >= 3 markers)
         self.K: Optional[np.ndarray] = None        # intrinsics, when known: 1-2 marker pose fit
         self._pose_ref: Optional[Tuple[np.ndarray, np.ndarray]] = None   # (R_CP, t_CP) of H_full
+        self._pose_cache: Optional[tuple] = None   # (H_IP, K, (R_CP, t_CP)): pose() once per fit
         self.H_IP: Optional[np.ndarray] = None     # current plate -> image
         self.H_PI: Optional[np.ndarray] = None     # current image -> plate
         self.last_seen_s: Optional[float] = None   # stamp of the last frame with a marker
         self.markers: Dict[int, np.ndarray] = {}   # this frame's markers (image px)
+        self.fit_kind = ""                         # "homography", "pivot" or "shift": what made H_IP
         self._startup_sum: Optional[np.ndarray] = None   # corners summed over the steady window
         self._startup_count = 0                          # frames in that sum
         self._startup_seen = 0                           # frames with all markers before the lock
@@ -213,15 +223,19 @@ class PlateLocator:
         ids = sorted(markers)
         image_pts = np.concatenate([markers[m] for m in ids])
         plate_pts = np.concatenate([self.marker_corners_P[m] for m in ids])
-        if len(ids) >= FULL_FIT_MIN_MARKERS:
+        if len(ids) == len(self.marker_ids) or (len(ids) >= FULL_FIT_MIN_MARKERS and self._pose_ref is None):
             self._set(self.fit(plate_pts, image_pts), full=True)
+            self.fit_kind = "homography"
         elif self._pose_ref is not None:
-            self._set(fit_pose_with_pivot_prior(plate_pts, image_pts, self.K, *self._pose_ref), full=False)
+            H_IP = fit_pose_with_pivot_prior(plate_pts, image_pts, self.K, *self._pose_ref)
+            self._set(H_IP, full=len(ids) >= FULL_FIT_MIN_MARKERS)
+            self.fit_kind = "pivot"
         else:
             # without intrinsics: a tilt shows as a perspective change that 1-2 corner markers
             # cannot reveal (a similarity fitted on them extrapolates worse than none): shift
             du, dv = (image_pts - apply_homography(self.H_full, plate_pts)).mean(axis=0)
             self._set(np.array([[1.0, 0.0, du], [0.0, 1.0, dv], [0.0, 0.0, 1.0]]) @ self.H_full, full=False)
+            self.fit_kind = "shift"
         return True
 
     def _startup(self, markers: Dict[int, np.ndarray]) -> None:
@@ -243,6 +257,7 @@ class PlateLocator:
             mean = (self._startup_sum / self._startup_count).reshape(-1, 2)
             plate_pts = np.concatenate([self.marker_corners_P[m] for m in self.marker_ids])
             self._set(self.fit(plate_pts, mean), full=True)
+            self.fit_kind = "homography"
 
     @staticmethod
     def fit(plate_pts: np.ndarray, image_pts: np.ndarray) -> np.ndarray:
@@ -258,15 +273,23 @@ class PlateLocator:
         self._pose_ref = plate_pose(self.H_full, K) if (K is not None and self.H_full is not None) else None
 
     def _set(self, H_IP: np.ndarray, full: bool) -> None:
-        if full:
-            self.H_full = H_IP
-            self._pose_ref = plate_pose(H_IP, self.K) if self.K is not None else None
         self.H_IP = H_IP
         self.H_PI = np.linalg.inv(H_IP)
+        if full:
+            self.H_full = H_IP
+            self._pose_ref = self.pose(self.K) if self.K is not None else None
+
+    def pose(self, K: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """(R_CP, t_CP) of the current H_IP with intrinsics K, computed once per fit."""
+        cache = self._pose_cache
+        if cache is None or cache[0] is not self.H_IP or cache[1] is not K:
+            cache = self._pose_cache = (self.H_IP, K, plate_pose(self.H_IP, K))
+        return cache[2]
 
     def reset(self) -> None:
         """Forget the plate pose (back to start-up)."""
         self.H_full = self.H_IP = self.H_PI = self.last_seen_s = self._pose_ref = None
+        self.fit_kind = ""
         self._startup_sum, self._startup_count, self._startup_seen = None, 0, 0
 
     # -- helpers for the ball search -------------------------------------------------------

@@ -1,7 +1,7 @@
 """Synthetic camera frames with known truth: the plate with its ArUco markers, seen by a
 pinhole camera, and the orange ball ray-traced as a sphere resting on the plate.
 
-For tests and benchmarks (no simulator needed). Plate frame as DESIGN.md section 5; the
+For tests and benchmarks (no simulator needed). Plate frame as docs/design.md section 5; the
 ball's centre is at z = ball radius. The camera looks down at the plate from C_P.
 """
 from __future__ import annotations

@@ -9,9 +9,14 @@ homography alone would put it too far from the point under the camera (by r/C_z 
 distance, several mm at the plate edge). With intrinsics K (calibration file, camera_info,
 or estimated from an oblique view of the plate) the camera centre C_P is recovered from
 the homography and the ray is intersected with the plane z = r instead.
+
+Pose quality: each frame with markers also yields the plate pose in the camera and its
+covariance from the corner fit (`ball_balance.vision.pose_quality`), reduced to
+`position_std_m`, the ball-position error that pose can cause (math.inf without markers).
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Dict, Optional, Tuple
@@ -24,7 +29,20 @@ from ball_balance.vision.ball_segmentation import BallBlob, BallSegmenter
 from ball_balance.vision.camera import CameraModel, Undistorter
 from ball_balance.vision.config import TrackerConfig
 from ball_balance.vision.kalman import BallKalman
-from ball_balance.vision.plate import PlateLocator, apply_homography, camera_centre_in_plate, estimate_focal_px
+from ball_balance.vision.plate import (
+    FULL_FIT_MIN_MARKERS,
+    PIVOT_PRIOR_SIGMA_ROT_RAD,
+    PIVOT_PRIOR_SIGMA_T_M,
+    PlateLocator,
+    apply_homography,
+    estimate_focal_px,
+)
+from ball_balance.vision.pose_quality import ball_position_std_m, pose_covariance
+
+# without calibration or an estimate from an oblique view, the pose covariance assumes a
+# 60 degree horizontal field of view (f = 0.866 x width); the figure scales little with it
+NOMINAL_FOCAL_PER_WIDTH = 0.5 / math.tan(math.radians(30.0))
+PRIOR_INFORMATION = np.diag([PIVOT_PRIOR_SIGMA_T_M ** -2] * 3 + [PIVOT_PRIOR_SIGMA_ROT_RAD ** -2] * 3)
 
 STAGES = ("undistort", "markers", "homography", "ball", "filter", "total")
 
@@ -44,6 +62,12 @@ class TrackerResult:
     pixel_u: float = -1.0             # raw detection (pixels), -1 when none
     pixel_v: float = -1.0
     plate_visible: bool = False
+    # plate pose fitted in this frame: plate_center in the camera, X_C = R_CP X_P + t_CP
+    # (None without markers), its covariance (6x6, [x y z rx ry rz], m^2 and rad^2, camera
+    # axes) and the 1-sigma ball-position error it causes (m, math.inf: no usable pose)
+    plate_pose: Optional[Tuple[np.ndarray, np.ndarray]] = None
+    pose_covariance: Optional[np.ndarray] = None
+    position_std_m: float = math.inf
     blob: Optional[BallBlob] = None
     measurement_m: Optional[Tuple[float, float]] = None
     timings_s: Dict[str, float] = field(default_factory=dict)
@@ -67,6 +91,7 @@ class BallTracker:
         self.set_camera(camera)
         self.C_P: Optional[np.ndarray] = None           # camera centre, plate frame (for parallax)
         self._K_estimated: Optional[np.ndarray] = None
+        self._K_nominal: Optional[np.ndarray] = None     # pose covariance without intrinsics
         self._plate_cmd: Optional[Tuple[float, float, float]] = None   # (u_x, u_y, stamp_s)
         self.frames = 0
         self.rejected_off_plate = 0
@@ -118,6 +143,8 @@ class BallTracker:
         if self.plate.update(markers, stamp_s):
             self._update_camera_centre(image_bgr.shape)
         result.plate_visible = self.plate.plate_visible(stamp_s)
+        if markers and self.plate.H_IP is not None:
+            self._pose_quality(result, image_bgr.shape)
         t3 = clock()
         timings["homography"] = t3 - t2
 
@@ -171,7 +198,34 @@ class BallTracker:
         if K is not self.plate.K:
             self.plate.set_intrinsics(K)
         if K is not None and self.config.parallax_correction:
-            self.C_P = camera_centre_in_plate(self.plate.H_IP, K)
+            R_CP, t_CP = self.plate.pose(K)
+            self.C_P = -R_CP.T @ t_CP          # camera centre, plate frame (X_C = 0)
+
+    def _pose_quality(self, result: TrackerResult, shape) -> None:
+        """This frame's plate pose, its covariance and position_std_m (see pose_quality)."""
+        plate, markers = self.plate, self.plate.markers
+        K = plate.K
+        if K is None:
+            height, width = shape[:2]
+            if self._K_nominal is None or self._K_nominal[0, 2] != (width - 1) / 2.0:
+                f = NOMINAL_FOCAL_PER_WIDTH * width
+                self._K_nominal = np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0, 0, 1.0]])
+            K = self._K_nominal
+        ids = sorted(markers)
+        plate_pts = np.concatenate([plate.marker_corners_P[m] for m in ids])
+        sigma_px = self.config.corner_noise_px
+        if len(ids) >= FULL_FIT_MIN_MARKERS:
+            # corner noise from the fit's residual when it says more (8 parameters at most)
+            image_pts = np.concatenate([markers[m] for m in ids])
+            residual = image_pts - apply_homography(plate.H_IP, plate_pts)
+            sigma_px = max(sigma_px, float(np.sqrt(np.sum(residual ** 2) / (residual.size - 8))))
+        # the pivot fit's prior is information too; a shift-only fit (no intrinsics) is
+        # approximated by the same model (it is worse after a tilt: the figure is optimistic)
+        prior = PRIOR_INFORMATION if plate.fit_kind != "homography" else None
+        R_CP, t_CP = plate.pose(K)
+        result.plate_pose = (R_CP, t_CP)
+        result.pose_covariance = pose_covariance(plate_pts, K, R_CP, t_CP, sigma_px, prior)
+        result.position_std_m = ball_position_std_m(result.pose_covariance)
 
     def _estimate_K(self, shape) -> Optional[np.ndarray]:
         """Intrinsics guessed from the start-up plate view (principal point at the image centre)."""

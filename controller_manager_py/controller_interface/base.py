@@ -64,6 +64,7 @@ class ControllerInterface:
         self.state_interfaces: List[StateInterface] = []
         self.lifecycle_state = State.UNCONFIGURED
         self._node = None
+        self.robot_description = ""  # URDF text the manager was loaded with ("" before hardware is loaded)
         self._logger = logging.getLogger("controller")
         self.manager_update_rate = 0
         self.introspection: List[Tuple[str, Callable[[], float]]] = []
@@ -82,7 +83,7 @@ class ControllerInterface:
         """Validate parameters (from `values`, or the node's parameters). Raises ParameterError."""
         schema = self.param_schema()
         if self._node is not None and values is None:
-            from ..parameters import declare_parameters
+            from ..parameters import declare_parameters, report_unknown_parameters
             node, declared = self._node, {}
             for p in schema:
                 if node.has_parameter(p.name):
@@ -90,14 +91,23 @@ class ControllerInterface:
                 else:
                     declared[p.name] = declare_parameters(node, [p])[p.name]
             self.params = MappingProxyType(declared)
+            report_unknown_parameters(node)  # e.g. a typo in the controller's section of the file
         else:
             self.params = validate(schema, values or {}, allow_unknown=True)
 
     def get_node(self):
         return self._node
 
+    def get_robot_description(self) -> str:
+        """The robot description (URDF) the manager's hardware was loaded from, as
+        ros2_control's ControllerInterfaceBase::get_robot_description(); read it in
+        on_configure or later (e.g. joint limits: manager.joint_limits.limits_from_description)."""
+        return self.robot_description
+
     def register_introspection(self, name: str, getter: Callable[[], float]) -> None:
-        """Publish `getter()` as `<controller>.<name>` on ~/introspection_data (call in on_configure)."""
+        """Publish `getter()` as `<controller>.<name>` on ~/introspection_data (call in on_configure).
+        Counters of bad input named `refused_*`, `clamped_*` or `limited_*` also appear in
+        /diagnostics, WARN when they grew since the previous report."""
         self.introspection.append((name, getter))
 
     def get_logger(self):

@@ -75,12 +75,14 @@ class AsyncParams:
 
 @dataclass
 class JointLimits:
-    """Limits of one joint from the URDF `<limit>` and the ros2_control min/max params."""
+    """Limits of one joint from the URDF `<limit>` and the ros2_control min/max params
+    (position rad or m, velocity per s, acceleration per s^2; inf: no limit)."""
 
     min_position: float = float("-inf")
     max_position: float = float("inf")
     max_velocity: float = float("inf")
     max_effort: float = float("inf")
+    max_acceleration: float = float("inf")
     disabled: frozenset = frozenset()
     """Command interfaces excluded by `<limits enable="false"/>` (on the joint: all of them)."""
 
@@ -94,6 +96,10 @@ class JointLimits:
     @property
     def has_velocity_limits(self) -> bool:
         return self.max_velocity < float("inf")
+
+    @property
+    def has_acceleration_limits(self) -> bool:
+        return self.max_acceleration < float("inf")
 
 
 @dataclass

@@ -6,15 +6,18 @@ Follows ros2_control's component_parser: `<ros2_control name type is_async rw_ra
 children `min`, `max`, `initial_value` are understood. Joint limits come from the URDF
 `<joint><limit lower upper velocity effort/>` (continuous joints have no position limits),
 narrowed by the command interface min/max params; `<limits enable="false"/>` in a joint or
-one of its command interfaces turns enforcement off there, as in ros2_control. Any problem raises DescriptionError with
-one line naming the offending element.
+one of its command interfaces turns enforcement off there, as in ros2_control; an
+`acceleration` command interface's max (or |min|) param sets the acceleration limit.
+A revolute or prismatic joint of a `<ros2_control>` block with no `<limit>` in the URDF is
+refused (`require_limits=False` accepts it): nothing could keep its commands in range.
+Any problem raises DescriptionError with one line naming the offending element.
 """
 from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
 from dataclasses import replace
-from typing import Dict, List
+from typing import Dict, List, Tuple
 
 from .types import AsyncParams, ComponentInfo, HardwareInfo, InterfaceInfo, JointLimits
 
@@ -26,8 +29,9 @@ class DescriptionError(ValueError):
 KINDS = ("system", "sensor", "actuator")
 
 
-def parse_control_resources(urdf: str) -> List[HardwareInfo]:
-    """All `<ros2_control>` blocks of `urdf`, in document order."""
+def parse_control_resources(urdf: str, require_limits: bool = True) -> List[HardwareInfo]:
+    """All `<ros2_control>` blocks of `urdf`, in document order. require_limits: refuse a
+    revolute/prismatic joint without `<limit>` (unless its limits are disabled in its block)."""
     try:
         root = ET.fromstring(urdf)
     except ET.ParseError as error:
@@ -37,8 +41,17 @@ def parse_control_resources(urdf: str) -> List[HardwareInfo]:
         blocks.insert(0, root)
     if not blocks:
         raise DescriptionError("robot description has no <ros2_control> tag")
-    urdf_limits = _urdf_joint_limits(root)
+    urdf_limits, unlimited = _urdf_joint_limits(root)
     infos = [_parse_block(block, urdf_limits) for block in blocks]
+    if require_limits:
+        for info in infos:
+            for joint in info.joints:
+                if joint.name in unlimited and info.limits[joint.name].enforced("position"):
+                    raise DescriptionError(
+                        f"joint '{joint.name}' ({unlimited[joint.name]}) has no <limit> in the URDF, so its commands "
+                        "cannot be kept in range: add <limit lower=... upper=... velocity=... effort=.../>, or "
+                        "<limits enable=\"false\"/> in its <ros2_control> <joint>, or set "
+                        "allow_joints_without_limits")
     names = [info.name for info in infos]
     duplicates = sorted({n for n in names if names.count(n) > 1})
     if duplicates:
@@ -88,6 +101,9 @@ def _parse_block(block: ET.Element, urdf_limits: Dict[str, JointLimits]) -> Hard
                     limits.max_position = min(limits.max_position, itf.max)
             elif itf.name == "velocity" and itf.max is not None:
                 limits.max_velocity = min(limits.max_velocity, abs(itf.max))
+            elif itf.name == "acceleration" and (itf.max is not None or itf.min is not None):
+                given = itf.max if itf.max is not None else itf.min
+                limits.max_acceleration = min(limits.max_acceleration, abs(given))
         info.limits[joint.name] = limits
     return info
 
@@ -136,11 +152,16 @@ def _params(element, where: str) -> Dict[str, str]:
     return params
 
 
-def _urdf_joint_limits(root: ET.Element) -> Dict[str, JointLimits]:
+def _urdf_joint_limits(root: ET.Element) -> Tuple[Dict[str, JointLimits], Dict[str, str]]:
+    """URDF `<joint>` limits by joint name, and the revolute/prismatic joints without `<limit>`
+    (name -> type)."""
     limits: Dict[str, JointLimits] = {}
+    unlimited: Dict[str, str] = {}
     for joint in root.iter("joint"):
-        name, limit = joint.get("name"), joint.find("limit")
-        if not name or limit is None or joint.get("type") is None:
+        name, limit, kind = joint.get("name"), joint.find("limit"), joint.get("type")
+        if name and limit is None and kind in ("revolute", "prismatic"):
+            unlimited[name] = kind
+        if not name or limit is None or kind is None:
             continue
         lim = JointLimits()
         if joint.get("type") in ("revolute", "prismatic"):
@@ -153,7 +174,7 @@ def _urdf_joint_limits(root: ET.Element) -> Dict[str, JointLimits]:
         if limit.get("effort") is not None:
             lim.max_effort = abs(_number(limit.get("effort"), f"joint '{name}' limit effort"))
         limits[name] = lim
-    return limits
+    return limits, unlimited
 
 
 def _number(text: str, where: str) -> float:

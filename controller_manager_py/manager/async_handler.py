@@ -12,6 +12,7 @@ import time as _time
 from typing import Callable, Sequence
 
 from ..hardware_interface.types import return_type
+from ..realtime import configure_thread
 
 
 class AsyncHandler:
@@ -76,12 +77,7 @@ class AsyncHandler:
         self.last_duration = _time.monotonic() - start
 
     def _run(self) -> None:
-        from .loop import set_cpu_affinity, set_realtime_priority
-
-        if self.thread_priority > 0:
-            set_realtime_priority(self.thread_priority)
-        if self.affinity:
-            set_cpu_affinity(self.affinity)
+        configure_thread(None, f"async thread '{self.name}'", self.thread_priority, self.affinity)
         if self._detached:
             period = self._period or 0.01
             next_time = _time.monotonic()

@@ -22,7 +22,7 @@ from ..plugins import CONTROLLER_GROUP, PluginError, load_class
 from . import switching
 from .controller_spec import ControllerSpec
 from .resource_manager import ResourceManager
-from .statistics import PeriodicityStats, Stats
+from .statistics import ExecutionTime, PeriodicityStats, Stats
 from .throttle import Throttle
 
 
@@ -43,6 +43,7 @@ class ControllerManager:
         self.release_node: Callable[[object], None] = lambda node: node.destroy_node()
         self.controller_config: Dict[str, Mapping] = dict(controller_config or {})
         self.rm = ResourceManager([], self.logger)
+        self.robot_description = ""  # the URDF the hardware was loaded from
         self.controllers: Dict[str, ControllerSpec] = {}
         self.ordered: List[ControllerSpec] = []  # active, in chain order; replaced, never mutated
         self.lock = threading.RLock()  # serialises executor-side operations
@@ -55,10 +56,16 @@ class ControllerManager:
         self._failed: List[str] = []  # reused every cycle
         self._failed_controllers: List[ControllerSpec] = []
         self.version = 0  # bumped on every visible change (lists, activity, statistics names)
-        # the manager's own statistics (ros2_control: read/update/write/total times)
+        # the manager's own statistics: ros2_control's per-cycle times (us) and our windows
+        self.execution_time = ExecutionTime()
         self.loop_stats = PeriodicityStats()
         self.read_time, self.update_time, self.write_time = Stats(), Stats(), Stats()
-        self.skipped_updates = 0
+        self.skipped_updates = 0  # periods skipped by overruns (set by the loop)
+        self.overruns = 0  # cycles that ended after the next deadline (set by the loop)
+        # False once the process is stopping under the manager (the node: its ROS context was
+        # shut down by Ctrl-C); a controller failing then is not a fault, and the loop ends
+        self.alive: Callable[[], bool] = lambda: True
+        self.stopping = False
         self._reset_stats = False
 
     # ---- time ---------------------------------------------------------------------------
@@ -70,17 +77,19 @@ class ControllerManager:
     # ---- hardware -----------------------------------------------------------------------
     def load_robot_description(self, urdf: str, node=None,
                                initial_states: Optional[Mapping[str, State]] = None,
-                               enforce_command_limits: bool = True) -> None:
+                               enforce_command_limits: bool = True, require_limits: bool = True) -> None:
         """Load hardware from a URDF; components are activated unless `initial_states` says
         otherwise (ros2_control's hardware_components_initial_state). enforce_command_limits:
-        ros2_control's switch for the joint limits stage. Raises ResourceError."""
+        ros2_control's switch for the joint limits stage; require_limits: refuse a
+        revolute/prismatic joint without a URDF <limit>. Raises ResourceError."""
         with self.lock:
             if self.rm.components:
                 raise ControllerError("a robot description is already loaded")
             rm = ResourceManager.from_description(urdf, self.update_rate, node, self.logger,
-                                                  enforce_command_limits)
+                                                  enforce_command_limits, require_limits)
             rm._clock = self.now
             self.rm = rm
+            self.robot_description = urdf  # handed to controllers (get_robot_description())
             for name in rm.components:
                 target = (initial_states or {}).get(name, State.ACTIVE)
                 if target != State.UNCONFIGURED:
@@ -90,12 +99,20 @@ class ControllerManager:
     def set_hardware_component_state(self, name: str, target: State) -> State:
         """Drive a component through its lifecycle (executor thread). The loop skips the
         component from the next cycle until the hooks are done, so they never run
-        concurrently with its read()/write(). Raises ResourceError."""
+        concurrently with its read()/write(). Controllers using its interfaces are deactivated
+        first (all of them for unconfigured/finalized, those commanding it for inactive); the
+        log says which and how to come back. Raises ResourceError."""
         with self.lock:
-            if target in (State.INACTIVE, State.UNCONFIGURED, State.FINALIZED):
-                # inactive hardware still reads: only the controllers commanding it must stop
-                self._deactivate_users(name, commands_only=target == State.INACTIVE)
             comp = self.rm.components.get(name)
+            if comp is not None and comp.state == State.FINALIZED and target != State.FINALIZED:
+                self.logger.error(f"hardware '{name}' is finalized and cannot become {target.label}: finalized "
+                                  "is final in the hardware lifecycle; restart the controller manager to load "
+                                  "it again")
+                return comp.state
+            stopped: List[str] = []
+            if comp is not None and target in (State.INACTIVE, State.UNCONFIGURED, State.FINALIZED):
+                # inactive hardware still reads: only the controllers commanding it must stop
+                stopped = self._deactivate_users(name, commands_only=target == State.INACTIVE)
             if comp is not None:
                 comp.transitioning = True
                 self._wait_for_cycle()
@@ -105,7 +122,22 @@ class ControllerManager:
                 if comp is not None:
                     comp.transitioning = False
             self._changed()
+            self._log_component_change(name, target, reached, stopped)
             return reached
+
+    def _log_component_change(self, name: str, target: State, reached: State, stopped: List[str]) -> None:
+        deactivated = f"deactivated controller(s) {stopped}" if stopped else "no controller was using it"
+        if reached != target:
+            self.logger.error(f"hardware '{name}' did not reach {target.label}; it is {reached.label} (see the "
+                              f"lines above); {deactivated}")
+        elif target == State.FINALIZED:
+            self.logger.warning(f"hardware '{name}' finalized: {deactivated}; its interfaces are gone until the "
+                                "controller manager restarts (a finalized component cannot be configured again)")
+        elif stopped:
+            self.logger.warning(f"hardware '{name}' is now {target.label}: {deactivated}; to resume, set it active "
+                                f"again and activate them (switch_controllers --activate {' '.join(stopped)})")
+        else:
+            self.logger.info(f"hardware '{name}' is now {target.label}")
 
     def _wait_for_cycle(self, timeout: float = 1.0) -> None:
         """With a running loop: return once the cycle in progress (if any) has finished."""
@@ -115,10 +147,12 @@ class ControllerManager:
         while self._cycle == start and self.loop_running and _time.monotonic() < deadline:
             _time.sleep(0.0005)
 
-    def _deactivate_users(self, component: str, commands_only: bool) -> None:
-        users = self._users_of(component, commands_only)
-        if users:
-            self.switch_controller([], [s.name for s in users], switching.BEST_EFFORT)
+    def _deactivate_users(self, component: str, commands_only: bool) -> List[str]:
+        """Deactivate the active controllers using `component`; returns their names."""
+        names = [s.name for s in self._users_of(component, commands_only)]
+        if names:
+            self.switch_controller([], names, switching.BEST_EFFORT)
+        return names
 
     def _users_of(self, component: str, commands_only: bool = False) -> List[ControllerSpec]:
         owner = self.rm.interface_owner
@@ -143,6 +177,7 @@ class ControllerManager:
             node = self.node_factory(name) if self.node_factory is not None else None
             logger = node.get_logger() if node is not None else logging.getLogger(name)
             try:
+                controller.robot_description = self.robot_description
                 result = controller.init(name, node, logger, self.update_rate)
             except Exception as error:  # noqa: BLE001
                 logger.error(f"controller '{name}': on_init raised {error!r}")
@@ -278,12 +313,21 @@ class ControllerManager:
         return plan
 
     def _apply(self, plan: switching.SwitchPlan, same_cycle: bool) -> None:
+        times, clock = self.execution_time, _time.monotonic
+        t0 = clock()
         switching.apply_deactivations(self, plan)
+        t1 = clock()
+        switching.perform_command_mode_switch(self, plan)
+        t2 = clock()
+        times.deactivation_time = (t1 - t0) * 1e6
+        times.switch_perform_mode_time = (t2 - t1) * 1e6
         if plan.activate_asap or same_cycle or not (plan.start_interfaces or plan.stop_interfaces):
             switching.apply_activations(self, plan)
+            times.activation_time = (clock() - t2) * 1e6
         else:  # let the hardware read once in its new mode before the controllers start
             self._pending_activations = plan
         self._reorder()
+        times.switch_time = (clock() - t0) * 1e6
 
     def _reorder(self) -> None:
         """Active controllers in chain order: a controller runs before the ones it commands.
@@ -333,6 +377,8 @@ class ControllerManager:
     def cycle(self, time: float, period: float) -> None:
         """One read -> update -> write at `time` (s); `period` (s) since the previous cycle."""
         start = _time.monotonic()
+        times = self.execution_time
+        times.new_cycle()
         if self._reset_stats:
             self._reset_stats = False
             for stats in self.all_stats():
@@ -352,6 +398,7 @@ class ControllerManager:
             try:
                 switching.apply_activations(self, plan)
                 self._reorder()
+                times.activation_time = times.switch_time = (_time.monotonic() - start) * 1e6
             finally:
                 self._switch_done.set()  # the caller returns once activations are done too
         failed = self._failed
@@ -365,9 +412,13 @@ class ControllerManager:
         if failed:
             self._hardware_failed(failed)
         end = _time.monotonic()
-        self.read_time.add((t_read - start) * 1e6)
-        self.update_time.add((t_update - t_read) * 1e6)
-        self.write_time.add((end - t_update) * 1e6)
+        times.read_time = (t_read - start) * 1e6
+        times.update_time = (t_update - t_read) * 1e6
+        times.write_time = (end - t_update) * 1e6
+        times.total_time = (end - start) * 1e6
+        self.read_time.add(times.read_time)
+        self.update_time.add(times.update_time)
+        self.write_time.add(times.write_time)
         self.loop_stats.add(start, end)
         self._cycle += 1
 
@@ -379,6 +430,9 @@ class ControllerManager:
             try:
                 result = spec.run(time, period * spec.divisor)
             except Exception as error:  # noqa: BLE001 - the loop survives a controller bug
+                if not self.alive():  # e.g. a publish after Ctrl-C shut the context down: not a fault
+                    self.stopping = True
+                    return
                 self.throttle.error(spec.name, f"controller '{spec.name}': update raised {error!r}; deactivating")
                 result = return_type.ERROR
             if result != return_type.OK:

@@ -7,18 +7,25 @@ standard deviation, in Hz) and execution time (mean and standard deviation, us) 
 defaults); the worst item sets the status level. Items with no samples yet are OK. The
 statistics cover the time since the previous roll-up: the node asks the loop to reset them
 after each one (`cm.request_stats_reset()`), so a slow start does not colour them forever.
+
+Refused and limited commands: a controller's introspection entries named `refused_*`,
+`clamped_*`, `limited_*` or `missed_*` (e.g. forward_command's `refused_commands`,
+onnx_policy's `missed_inferences`) and each hardware component's joint-limits stage
+(`limited_commands`) are listed with their counts; a count that grew since the previous
+roll-up makes its status WARN, naming how many.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Dict, List, Mapping, Tuple
+from typing import Dict, List, Mapping, Optional, Tuple
 
 from ..hardware_interface.types import State
 from ..parameters import Param
 from .statistics import PeriodicityStats
 
 OK, WARN, ERROR = 0, 1, 2  # diagnostic_msgs/DiagnosticStatus levels
+REFUSAL_PREFIXES = ("refused_", "clamped_", "limited_", "missed_")
 
 
 def _thresholds(scope: str, what: str, metric: str, warn: float, error: float):
@@ -91,13 +98,33 @@ def grade_stats(status: Status, who: str, stats: PeriodicityStats, expected_hz: 
             status.grade(_level(value, thresholds, key), f"{who}: {text} {value:.0f} us")
 
 
-def roll_up(cm, thresholds: Mapping[str, float]) -> List[Status]:
-    """The three statuses for the manager `cm` (read from the executor thread)."""
+def grade_count(status: Status, who: str, what: str, value: float, counts: Dict[str, float]) -> None:
+    """List a refusal counter; WARN when it grew since the previous roll-up (`counts` keeps it)."""
+    key = f"{who}.{what}"
+    previous = counts.get(key, 0.0)
+    counts[key] = value
+    status.values.append((f"{who} {what.replace('_', ' ')}", f"{value:.0f}"))
+    if value > previous:
+        status.grade(WARN, f"{who}: {value - previous:.0f} {what.replace('_', ' ')} since the last report "
+                           f"({value:.0f} in all)")
+
+
+def roll_up(cm, thresholds: Mapping[str, float], counts: Optional[Dict[str, float]] = None) -> List[Status]:
+    """The three statuses for the manager `cm` (read from the executor thread). counts: the
+    refusal counters of the previous roll-up, updated in place (None: every count is new)."""
+    counts = {} if counts is None else counts
     controllers = Status("Controllers Activity")
     states: Dict[str, int] = {}
     for spec in list(cm.controllers.values()):
         states[spec.state.label] = states.get(spec.state.label, 0) + 1
         controllers.values.append((spec.name, spec.state.label))
+        for what, getter in list(spec.c.introspection):
+            if what.startswith(REFUSAL_PREFIXES):
+                try:
+                    value = float(getter())
+                except Exception:  # noqa: BLE001 - a counter that vanished with a reconfigure
+                    continue
+                grade_count(controllers, spec.name, what, value, counts)
         if spec.state == State.ACTIVE:
             grade_stats(controllers, spec.name, spec.stats, spec.effective_rate, thresholds, "controllers")
             if spec.async_handler is not None:
@@ -106,6 +133,8 @@ def roll_up(cm, thresholds: Mapping[str, float]) -> List[Status]:
     hardware = Status("Hardware Components Activity")
     for comp in list(cm.rm.components.values()):
         hardware.values.append((comp.name, comp.state.label))
+        if comp.limiter.limited_names():
+            grade_count(hardware, comp.name, "limited_commands", float(comp.limiter.clamped), counts)
         if comp.state == State.FINALIZED:
             hardware.grade(ERROR, f"{comp.name} is finalized")
         if comp.state in (State.ACTIVE, State.INACTIVE):
@@ -119,6 +148,10 @@ def roll_up(cm, thresholds: Mapping[str, float]) -> List[Status]:
     manager = Status("Controller Manager Activity")
     grade_stats(manager, "update loop", cm.loop_stats, cm.update_rate, thresholds, "controller_manager",
                 with_execution_time=False)
-    manager.values.append(("skipped periods (overruns)", str(cm.skipped_updates)))
+    slowest_hz = cm.loop_stats.periodicity.min  # the longest period since the previous report
+    manager.values += [("update loop longest period (ms)",
+                        f"{1e3 / slowest_hz:.3f}" if slowest_hz == slowest_hz and slowest_hz > 0 else "nan"),
+                       ("overruns", str(cm.overruns)),
+                       ("skipped periods (overruns)", str(cm.skipped_updates))]
     return [controllers.finish(summary), hardware.finish(f"{len(cm.rm.components)} component(s) OK"),
             manager.finish("update loop on time")]

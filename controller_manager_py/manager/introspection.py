@@ -1,15 +1,20 @@
 """The entries of ~/statistics and ~/introspection_data: (name, getter) pairs, ros2_control's names.
 
-statistics:
+statistics (`<cm>` is the manager node's name, `controller_manager` by default):
   `<controller>.stats/execution_time/<field>` (us), `<controller>.stats/periodicity/<field>` (Hz)
   `<hw>.stats/read_cycle/{execution_time,periodicity}/<field>`, same for `write_cycle`
-  `controller_manager.stats/{read_time,update_time,write_time,total_time}/<field>` (us),
-  `controller_manager.stats/periodicity/<field>` (Hz), `controller_manager.stats/skipped_periods`
+  `<cm>.{update,read,write,total,switch,switch_chained_mode,switch_perform_mode,deactivation,
+  activation}_time` (us, the last cycle's; ros2_control Jazzy's names)
   with <field> in max, min, average, standard_deviation, sample_count, current_value.
+  Our additions: `<cm>.stats/periodicity/<field>` (Hz) and `<cm>.stats/execution_time/<field>`
+  (us, total time) over the diagnostics window, `<cm>.overruns` and `<cm>.skipped_periods`
+  (counts since start); a controller's own `statistics` list of (name, Stats) as
+  `<controller>.<name>/<field>`.
 introspection_data:
   `state_interface.<name>`, `command_interface.<name>`, `command_interface.<name>.is_limited`
   (for joints with limits), `<component>.<variable>` and `<controller>.<variable>` registered
-  in on_configure, `<component>.data_age` (s, async hardware) and
+  in on_configure, `<component>.limited_commands` (commands changed by the joint limits
+  stage since start), `<component>.data_age` (s, async hardware) and
   `<controller>.skipped_async_triggers` (async controllers).
 The getters read live values; they are called from the publishing timer, not the loop.
 """
@@ -31,18 +36,20 @@ def _periodic(prefix: str, stats: PeriodicityStats) -> List[Entry]:
             *_stats(f"{prefix}/periodicity", stats.periodicity)]
 
 
-def statistics_entries(cm) -> List[Entry]:
-    m = "controller_manager.stats"
-    entries: List[Entry] = [*_stats(f"{m}/read_time", cm.read_time), *_stats(f"{m}/update_time", cm.update_time),
-                            *_stats(f"{m}/write_time", cm.write_time),
-                            *_stats(f"{m}/total_time", cm.loop_stats.execution_time),
-                            *_stats(f"{m}/periodicity", cm.loop_stats.periodicity),
-                            (f"{m}/skipped_periods", lambda: cm.skipped_updates)]
+def statistics_entries(cm, cm_name: str = "controller_manager") -> List[Entry]:
+    times = cm.execution_time
+    entries: List[Entry] = [(f"{cm_name}.{f}", (lambda f=f: getattr(times, f))) for f in times.FIELDS]
+    entries += [*_periodic(f"{cm_name}.stats", cm.loop_stats),
+                (f"{cm_name}.overruns", lambda: cm.overruns),
+                (f"{cm_name}.skipped_periods", lambda: cm.skipped_updates)]
     for comp in list(cm.rm.components.values()):
         entries += _periodic(f"{comp.name}.stats/read_cycle", comp.read_stats)
         entries += _periodic(f"{comp.name}.stats/write_cycle", comp.write_stats)
     for spec in list(cm.controllers.values()):
         entries += _periodic(f"{spec.name}.stats", spec.stats)
+        # a controller's own running statistics (e.g. onnx_policy's inference_time, data_age)
+        for what, stats in list(getattr(spec.c, "statistics", ())):
+            entries += _stats(f"{spec.name}.{what}", stats)
     return entries
 
 
@@ -57,6 +64,8 @@ def introspection_entries(cm) -> List[Entry]:
             entries.append((f"command_interface.{name}.is_limited", (lambda h=handle: float(h.is_limited))))
     for comp in rm.components.values():
         entries += [(f"{comp.name}.{var}", getter) for var, getter in comp.plugin.introspection]
+        if comp.limiter.limited_names():
+            entries.append((f"{comp.name}.limited_commands", lambda c=comp: float(c.limiter.clamped)))
         if comp.info.is_async:
             entries.append((f"{comp.name}.data_age", lambda c=comp: c.data_age(cm.now())))
     for spec in list(cm.controllers.values()):

@@ -1,50 +1,109 @@
-"""The loop thread: read -> update -> write at the manager's rate, overruns counted.
+"""The loop thread: read -> update -> write at the manager's rate, overruns shed, not queued.
 
 Timing: absolute deadlines (next = previous + period) so sleeping jitter does not
-accumulate. When a cycle ends after the next deadline the missed periods are counted in
-`overruns` / `skipped_periods`, the schedule restarts from now, and one throttled
-warning says how many (ros2_control logs every one). With
+accumulate. A cycle that ends after the next deadline is an overrun: the loop does not
+run the missed cycles in a burst to catch up; the whole periods missed are counted in
+`skipped_periods` (`overruns` counts the late cycles), the schedule restarts from the end
+of the late cycle, and one throttled warning says how many. With
 `expect_blocking_read_write` the hardware's blocking read sets the pace: no sleep, only
 `minimum_cycle_time` (s) between cycle starts (0: a tenth of the nominal period, so a read
-that does not block after all cannot make a real-time thread spin at full speed). The time given to the cycle is the
-manager's clock (`cm.now()`: simulated when a component provides the clock); the period
-is the difference of two such times (the nominal period for the first cycle).
+that does not block after all cannot make a real-time thread spin at full speed). The time
+given to the cycle is the manager's clock (`cm.now()`: simulated when a component provides
+the clock); the period is the difference of two such times (the nominal period for the
+first cycle).
 
-Idle work: `idle_hook()` (if set) runs after a cycle only when at least half a period is
-left before the next deadline; the node uses it to publish statistics in the loop's
-slack, where its interpreter time cannot delay a wake-up (see ros/node.py). The loop
-thread asks Linux for 1 us timer slack (default 50 us) so sleeps end on time.
+Where the jitter of a Python loop comes from, and what each knob does about it (figures:
+benchmarks/controller_manager_bench.py):
+  - The interpreter lock, in the cycle. Python hands the lock to a waiting thread after
+    the switch interval, whatever the threads' priorities: the executor thread, woken by a
+    message, would take it from the loop mid-cycle and keep it until it blocks or the loop
+    asks back. With `hold_interpreter` the loop raises the switch interval to a period from
+    its wake-up until it sleeps: others get the lock when the loop sleeps, not mid-cycle.
+  - The interpreter lock, at wake-up. After its sleep the loop needs the lock back; if the
+    executor thread holds it (a service, a subscription callback, a message conversion in C)
+    the loop waits, as long as that thread's burst of Python (a callback: up to ~0.2 ms) or,
+    for longer work, the switch interval (set by the node). The lock is taken back before the
+    deadline: the tails below are spent holding it (with `hold_interpreter`).
+  - The kernel's wake-up latency (tens of us, hundreds in a loaded virtual machine).
+    `spin_tail` (s): the last part of the wait is a busy loop on the clock (one core busy for
+    that long per cycle). `wake_tail` (s): before that, a second sleep *holding* the lock
+    (clock_nanosleep through ctypes.PyDLL); measured here its short wake-up is late more
+    often than a busy wait, so the node leaves it off.
+  - Garbage collection. A collection runs in whichever thread allocates, holding the lock;
+    a full one over the ~10^5 objects of an rclpy process takes milliseconds. With
+    `gc_mode="idle"` the objects alive at start are frozen (gc.freeze), automatic collection
+    is off, and the loop collects in its slack (after a cycle with IDLE_GC_FRACTION of a
+    period left, or when GC_OVERDUE times late), generation by generation with Python's own
+    thresholds; survivors of a full collection are frozen too. "freeze": frozen at start, collection automatic.
+    "automatic": Python's default. When the loop stops, automatic collection is restored.
+  - Scheduling: the loop thread's SCHED_FIFO priority and CPU affinity (realtime.py).
+
+Idle work: after each cycle `idle_hook(budget)` (if set) is called with the time (s) left
+before the loop must start waiting for its next deadline; it must do only what fits (the
+node publishes statistics there when its measured cost fits the budget, else a cycle later:
+see ros/node.py). Garbage is collected (gc_mode "idle") only when more than
+IDLE_GC_FRACTION of a period is left.
+
+Cycle log: with `cycle_log` set (a path), the last CYCLE_LOG_LENGTH cycles' deadline,
+start and end, and when the wait before it came back from its lock-releasing sleep
+(`woke`, the lock re-acquired) and from its lock-holding sleep (`ready`), all
+time.monotonic() s, are kept in preallocated arrays and written to that .npz file when the
+loop stops (with `wake_tail` and `spin_tail`), for timing analysis: the benchmark reads it.
 """
 from __future__ import annotations
 
-import ctypes
-import os
+import gc
+import sys
 import threading
 import time as _time
+from array import array
 from typing import Callable, Optional, Sequence
 
+from ..realtime import configure_thread, sleep_until
 from .controller_manager import ControllerManager
 from .throttle import Throttle
+
+GC_MODES = ("idle", "freeze", "automatic")
+CYCLE_LOG_LENGTH = 1 << 16
+MIN_PERIOD_FRACTION = 0.98
+"""After a late start the next cycle comes at least this fraction of a period later: a late
+wake-up moves the schedule instead of being followed by a short period."""
+IDLE_GC_FRACTION = 0.3
+GC_OVERDUE = 50  # times the first generation's threshold: collected even without slack
+setswitchinterval = sys.setswitchinterval
 
 
 class ControlLoop:
     def __init__(self, cm: ControllerManager, expect_blocking_read_write: bool = False,
-                 minimum_cycle_time: float = 0.0, thread_priority: int = 0, cpu_affinity: Sequence[int] = ()):
+                 minimum_cycle_time: float = 0.0, thread_priority: int = 0, cpu_affinity: Sequence[int] = (),
+                 wake_tail: float = 0.0, spin_tail: float = 0.0, gc_mode: str = "automatic",
+                 hold_interpreter: bool = False, cycle_log: str = ""):
         """thread_priority: SCHED_FIFO priority of the loop thread (1..99; 0 = leave it normal).
-        cpu_affinity: CPUs the loop thread may run on (empty: any)."""
+        cpu_affinity: CPUs the loop thread may run on (empty: any). wake_tail, spin_tail (s),
+        gc_mode, hold_interpreter, cycle_log: see the module docstring."""
+        if gc_mode not in GC_MODES:
+            raise ValueError(f"gc_mode must be one of {GC_MODES}, got {gc_mode!r}")
         self.cm = cm
         self.period = 1.0 / cm.update_rate
         self.blocking = expect_blocking_read_write
         self.minimum_cycle_time = minimum_cycle_time
-        self.overruns = 0
-        self.skipped_periods = 0
+        self.wake_tail = min(max(0.0, wake_tail), 0.5 * self.period)
+        self.spin_tail = min(max(0.0, spin_tail), 0.5 * self.period)
+        self.gc_mode = gc_mode
+        self.hold_interpreter = hold_interpreter
+        self.overruns = 0  # cycles that ended after the next deadline
+        self.skipped_periods = 0  # whole periods with no cycle because of overruns
         self.cycles = 0
+        self.collections = 0  # garbage collections run in the loop's slack (gc_mode "idle")
         self.errors = 0  # cycles that raised (a bug): logged throttled, the loop goes on
         self.throttle = Throttle(cm.logger, 5.0)
-        self.idle_hook: Optional[Callable[[], None]] = None
+        self.idle_hook: Optional[Callable[[float], None]] = None  # idle_hook(budget s): see the docstring
         self.thread_priority = thread_priority
         self.cpu_affinity = tuple(cpu_affinity)
         self.realtime = False  # True when the SCHED_FIFO priority was granted
+        self.cycle_log = cycle_log
+        # deadline, start, end, woke, ready (see the module docstring)
+        self._log = tuple(array("d", bytes(8 * CYCLE_LOG_LENGTH)) for _ in range(5)) if cycle_log else None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="controller_manager_loop", daemon=True)
 
@@ -53,87 +112,138 @@ class ControlLoop:
         self._thread.start()
 
     def stop(self) -> None:
+        """Stop the loop (returns within about a period); idempotent, any thread."""
         self._stop.set()
-        if self._thread.is_alive():
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout=5.0)
         self.cm.loop_running = False
 
     def _run(self) -> None:
-        _set_timer_slack_ns(1000)
-        if self.thread_priority > 0:
-            self.realtime = set_realtime_priority(self.thread_priority)
-            if not self.realtime:
-                self.cm.logger.warning(f"could not give the loop thread SCHED_FIFO priority {self.thread_priority} "
-                                       "(needs CAP_SYS_NICE or an rtprio limit); running at normal priority, "
-                                       "expect more jitter under load")
-        if self.cpu_affinity and not set_cpu_affinity(self.cpu_affinity):
-            self.cm.logger.warning(f"could not pin the loop thread to CPUs {list(self.cpu_affinity)}; "
-                                   "running on any CPU")
+        self.realtime = configure_thread(self.cm.logger, "the loop thread", self.thread_priority,
+                                         self.cpu_affinity, timer_slack_ns=1000)
+        if self.gc_mode != "automatic":
+            gc.collect()
+            gc.freeze()  # what exists now lives as long as the process: never scanned again
+            if self.gc_mode == "idle":
+                gc.disable()
+        switch_interval = sys.getswitchinterval()
+        try:
+            self._cycles()
+        finally:
+            setswitchinterval(switch_interval)  # (raised while the loop held the lock)
+            if self.gc_mode == "idle":
+                gc.enable()
+            self.cm.loop_running = False
+            self._write_cycle_log()
+
+    def _cycles(self) -> None:
         cm, period, stop = self.cm, self.period, self._stop
+        tail, spin = self.wake_tail + self.spin_tail, self.spin_tail
         monotonic, sleep = _time.monotonic, _time.sleep
+        log = self._log
+        idle_collect = self.gc_mode == "idle"
+        hold = self.hold_interpreter
+        wake_interval = sys.getswitchinterval()  # how soon the loop asks for the lock when it wakes
+        hold_interval = max(wake_interval, period)  # how long others wait before asking it back
+        min_gap = MIN_PERIOD_FRACTION * period
         previous = cm.now() - period
         next_deadline = monotonic()
-        try:
-            while not stop.is_set():
-                now = cm.now()
-                try:
-                    cm.cycle(now, now - previous if now > previous else period)
-                except Exception as error:  # noqa: BLE001 - a bug in one cycle does not stop the loop
-                    self.errors += 1
-                    self.throttle.error("cycle", f"cycle failed: {error!r} (errors so far: {self.errors})")
-                previous = now
-                self.cycles += 1
-                if self.blocking:
-                    next_deadline += self.minimum_cycle_time or 0.1 * period
-                    delay = next_deadline - monotonic()
-                    if delay > 0:
-                        sleep(delay)
-                    else:
-                        next_deadline = monotonic()
-                    continue
-                next_deadline += period
+        while not stop.is_set() and not cm.stopping:
+            if hold:
+                setswitchinterval(hold_interval)
+            start = monotonic()
+            now = cm.now()
+            try:
+                cm.cycle(now, now - previous if now > previous else period)
+            except Exception as error:  # noqa: BLE001 - a bug in one cycle does not stop the loop
+                self.errors += 1
+                self.throttle.error("cycle", f"cycle failed: {error!r} (errors so far: {self.errors})")
+            previous = now
+            if log is not None:
+                i = self.cycles % CYCLE_LOG_LENGTH
+                log[0][i], log[1][i], log[2][i] = next_deadline, start, monotonic()
+            self.cycles += 1
+            if self.blocking:
+                next_deadline += self.minimum_cycle_time or 0.1 * period
                 delay = next_deadline - monotonic()
-                if delay > 0.5 * period and self.idle_hook is not None:
-                    try:
-                        self.idle_hook()
-                    except Exception as error:  # noqa: BLE001 - idle work never stops the loop
-                        self.throttle.error("idle", f"idle work failed: {error!r}")
-                    delay = next_deadline - monotonic()
-                if delay > 0.0:
+                if hold:
+                    setswitchinterval(wake_interval)
+                if delay > 0:
                     sleep(delay)
-                elif -delay >= period:
-                    missed = int(-delay / period)
-                    self.overruns += 1
-                    self.skipped_periods += missed
-                    cm.skipped_updates = self.skipped_periods
-                    self.throttle.warn("overrun", f"overrun: the cycle took too long, {missed} period(s) of "
-                                       f"{period * 1e3:.1f} ms skipped (total {self.skipped_periods})")
+                else:
                     next_deadline = monotonic()
-        finally:
-            cm.loop_running = False
+                continue
+            # the next deadline on the grid, but never so soon after a late start that the
+            # period would shrink by more than MIN_PERIOD_FRACTION (the grid moves instead)
+            next_deadline += period
+            if next_deadline < start + min_gap:
+                next_deadline = start + min_gap
+            delay = next_deadline - monotonic()
+            if delay <= 0.0:
+                self._overrun(-delay)
+                next_deadline = monotonic()
+                continue
+            if idle_collect and (delay - tail > IDLE_GC_FRACTION * period
+                                 or gc.get_count()[0] > GC_OVERDUE * gc.get_threshold()[0]):
+                self._collect_garbage()  # (overdue: a loop with no slack must not grow without bound)
+                delay = next_deadline - monotonic()
+            if self.idle_hook is not None and delay > tail:
+                try:
+                    self.idle_hook(delay - tail)
+                except Exception as error:  # noqa: BLE001 - idle work never stops the loop
+                    self.throttle.error("idle", f"idle work failed: {error!r}")
+                delay = next_deadline - monotonic()
+            if hold:
+                setswitchinterval(wake_interval)
+            if delay > tail:
+                sleep(delay - tail)  # releases the interpreter lock
+            if hold:
+                setswitchinterval(hold_interval)
+            if log is not None:
+                log[3][self.cycles % CYCLE_LOG_LENGTH] = monotonic()
+            if tail > spin:
+                sleep_until(next_deadline - spin, hold_interpreter=True)
+            if log is not None:
+                log[4][self.cycles % CYCLE_LOG_LENGTH] = monotonic()
+            if spin > 0.0:
+                while monotonic() < next_deadline:
+                    pass
 
+    def _overrun(self, late: float) -> None:
+        """The cycle ended `late` s after the next deadline: shed, count, warn (throttled)."""
+        missed = int(late / self.period)
+        self.overruns += 1
+        self.skipped_periods += missed
+        self.cm.skipped_updates = self.skipped_periods
+        self.cm.overruns = self.overruns
+        self.throttle.warn("overrun", f"overrun: a cycle ended {late * 1e3:.2f} ms after the next deadline "
+                           f"({self.period * 1e3:.2f} ms period); {missed} period(s) skipped, not caught up "
+                           f"(overruns so far: {self.overruns}, skipped periods: {self.skipped_periods})")
 
-def _set_timer_slack_ns(ns: int) -> None:
-    """prctl(PR_SET_TIMERSLACK) for the calling thread; silently ignored where unsupported."""
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(29, ctypes.c_ulong(ns), 0, 0, 0)
-    except (OSError, AttributeError):
-        pass
+    def _collect_garbage(self) -> None:
+        """In the loop's slack: the collection Python would have run automatically, if due."""
+        count0, count1, count2 = gc.get_count()
+        threshold0, threshold1, threshold2 = gc.get_threshold()
+        if count0 < threshold0:
+            return
+        generation = 0
+        if count1 >= threshold1:
+            generation = 2 if count2 >= threshold2 else 1
+        gc.collect(generation)
+        if generation == 2:
+            gc.freeze()
+        self.collections += 1
 
+    def _write_cycle_log(self) -> None:
+        if self._log is None:
+            return
+        try:
+            import numpy as np
 
-def set_cpu_affinity(cpus: Sequence[int]) -> bool:
-    """Pin the calling thread to `cpus` (Linux applies affinity per thread); False when refused."""
-    try:
-        os.sched_setaffinity(0, set(cpus))
-        return True
-    except (OSError, AttributeError, ValueError):
-        return False
-
-
-def set_realtime_priority(priority: int) -> bool:
-    """SCHED_FIFO for the calling thread; False when the system refuses."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-        return True
-    except (OSError, AttributeError):
-        return False
+            n = min(self.cycles, CYCLE_LOG_LENGTH)
+            order = [(self.cycles - n + k) % CYCLE_LOG_LENGTH for k in range(n)]
+            deadline, start, end, woke, ready = (np.frombuffer(a, dtype=np.float64)[order] for a in self._log)
+            np.savez(self.cycle_log, deadline=deadline, start=start, end=end, woke=woke, ready=ready,
+                     period=self.period, wake_tail=self.wake_tail, spin_tail=self.spin_tail)
+        except Exception as error:  # noqa: BLE001 - a diagnostic aid never breaks shutdown
+            self.cm.logger.error(f"cannot write the cycle log {self.cycle_log}: {error!r}")

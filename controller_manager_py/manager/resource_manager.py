@@ -17,7 +17,7 @@ from ..hardware_interface.types import CallbackReturn, HardwareInfo, State, retu
 from ..hardware_interface.urdf import DescriptionError, parse_control_resources
 from ..plugins import HARDWARE_GROUP, PluginError, load_class
 from .async_handler import AsyncHandler
-from .joint_limits import JointLimiter
+from .joint_limits import HandleLimiter
 from .statistics import PeriodicityStats
 from .throttle import Throttle
 
@@ -30,12 +30,12 @@ class Component:
     """One loaded hardware component and the manager's bookkeeping around it."""
 
     def __init__(self, info: HardwareInfo, plugin: HardwareComponentInterface, manager_rate: int,
-                 enforce_command_limits: bool = True):
+                 enforce_command_limits: bool = True, logger=None):
         self.info, self.plugin = info, plugin
         self.name = info.name
         self.state = State.UNCONFIGURED
-        self.limiter = JointLimiter(info.limits if enforce_command_limits else {}, plugin.command_handles,
-                                    plugin.state_handles)
+        self.limiter = HandleLimiter(info.limits if enforce_command_limits else {}, plugin.command_handles,
+                                     plugin.state_handles, logger, info.name)
         rate = info.rw_rate if 0 < info.rw_rate <= manager_rate else manager_rate
         self.divisor = max(1, round(manager_rate / rate)) if rate else 1
         self.rw_rate = manager_rate // self.divisor if manager_rate else 0
@@ -118,10 +118,11 @@ class ResourceManager:
 
     @classmethod
     def from_description(cls, urdf: str, manager_rate: int, node=None, logger=None,
-                         enforce_command_limits: bool = True) -> ResourceManager:
+                         enforce_command_limits: bool = True, require_limits: bool = True) -> ResourceManager:
+        """require_limits: refuse revolute/prismatic joints without a URDF <limit>."""
         logger = logger or logging.getLogger("resource_manager")
         try:
-            infos = parse_control_resources(urdf)
+            infos = parse_control_resources(urdf, require_limits=require_limits and enforce_command_limits)
         except DescriptionError as error:
             raise ResourceError(str(error)) from None
         components = []
@@ -142,7 +143,7 @@ class ResourceManager:
                 used = manager_rate // max(1, round(manager_rate / info.rw_rate))
                 logger.warning(f"hardware '{info.name}': rw_rate {info.rw_rate} Hz is not a divisor of "
                                f"{manager_rate} Hz; using {used} Hz")
-            components.append(Component(info, plugin, manager_rate, enforce_command_limits))
+            components.append(Component(info, plugin, manager_rate, enforce_command_limits, logger))
         return cls(components, logger)
 
     # ---- availability and claiming ---------------------------------------------------------

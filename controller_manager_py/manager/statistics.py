@@ -75,3 +75,23 @@ class PeriodicityStats:
         self.execution_time.reset()
         self.periodicity.reset()
         self._last_start = None
+
+
+class ExecutionTime:
+    """The manager's per-cycle times in us, ros2_control's `ControllerManagerExecutionTime`:
+    read, update, write and total (read + update + write, switch included) of the last cycle;
+    the switch phases of the last cycle that applied a switch and 0 in the others.
+    Chained-mode changes happen inside activation and deactivation here: that time is 0."""
+
+    FIELDS = ("update_time", "read_time", "write_time", "total_time", "switch_time", "switch_chained_mode_time",
+              "switch_perform_mode_time", "deactivation_time", "activation_time")
+    __slots__ = FIELDS
+
+    def __init__(self):
+        for name in self.FIELDS:
+            setattr(self, name, 0.0)
+
+    def new_cycle(self) -> None:
+        """Called when a cycle starts: the switch phases are 0 unless this cycle switches."""
+        self.switch_time = self.switch_chained_mode_time = self.switch_perform_mode_time = 0.0
+        self.deactivation_time = self.activation_time = 0.0

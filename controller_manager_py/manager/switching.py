@@ -214,6 +214,10 @@ def apply_deactivations(cm: ControllerManager, plan: SwitchPlan) -> None:
     for spec in plan.deactivate:
         if spec.state == State.ACTIVE:
             deactivate(cm, spec)
+
+
+def perform_command_mode_switch(cm: ControllerManager, plan: SwitchPlan) -> None:
+    """After the deactivations: the hardware switches its command modes for the plan."""
     if plan.start_interfaces or plan.stop_interfaces:
         for comp in cm.rm.components.values():
             mine = set(comp.plugin.command_handles)

@@ -25,17 +25,19 @@ class Throttle:
         self._last[key] = now
         return True
 
-    def _suffix(self, key: str) -> str:
+    def suffix(self, key: str) -> str:
+        """' (N more since the last report)' for `key` (empty when none), and restart its count;
+        for callers that format their line only when `due()`."""
         n = self._suppressed.pop(key, 0)
         return f" ({n} more since the last report)" if n else ""
 
     def warn(self, key: str, message: str) -> None:
         if self.due(key):
-            self.logger.warning(message + self._suffix(key))
+            self.logger.warning(message + self.suffix(key))
 
     def error(self, key: str, message: str) -> None:
         if self.due(key):
-            self.logger.error(message + self._suffix(key))
+            self.logger.error(message + self.suffix(key))
 
 
 def names_of(handles) -> List[str]:

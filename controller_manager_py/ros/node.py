@@ -20,7 +20,12 @@ parameters come from the same --params-file (the `<name>:` section) or from a fi
 """
 from __future__ import annotations
 
+import os
+import signal
 import sys
+import threading
+import time
+import warnings
 from pathlib import Path
 
 import rclpy
@@ -33,10 +38,11 @@ from ..hardware_interface.types import State
 from ..manager.controller_manager import ControllerError, ControllerManager
 from ..manager.diagnostics import THRESHOLD_PARAMS, roll_up
 from ..manager.introspection import introspection_entries, statistics_entries
-from ..manager.loop import ControlLoop, set_realtime_priority
+from ..manager.loop import ControlLoop
 from ..manager.resource_manager import ResourceError
 from ..manager.switching import STRICT, SwitchError
 from ..parameters import Param, ParameterError, declare_parameters
+from ..realtime import lock_memory, set_realtime_priority
 from .services import ControllerManagerServices
 from .statistics_publisher import StatisticsRegistry
 
@@ -54,6 +60,8 @@ SCHEMA = (
     Param("hardware_synchronization.minimum_cycle_time", 0.0, "with blocking read/write: least time per cycle",
           unit="s", min=0.0),
     Param("enforce_command_limits", True, "clamp commands to the URDF joint limits before write()"),
+    Param("allow_joints_without_limits", False, "accept revolute/prismatic joints that have no URDF <limit> "
+          "(their commands are then not limited)"),
     Param("activate_controllers", _NONE, "controllers loaded, configured and activated at start (in order)"),
     Param("inactive_controllers", _NONE, "controllers loaded and configured at start"),
     Param("statistics.publish_rate", 20.0, "rate of ~/statistics and ~/introspection_data", unit="Hz",
@@ -64,21 +72,43 @@ SCHEMA = (
     Param("cpu_affinity", [-1], "CPUs the loop thread may run on ([-1]: any)"),
     Param("executor_thread_priority", 40, "SCHED_FIFO priority of the executor thread (0 = normal): a "
           "preempted thread holding Python's interpreter lock would stall the loop", min=0, max=99),
-    Param("gil_switch_interval", 2e-5, "Python's thread switch interval (lower: less loop jitter)", unit="s",
-          min=1e-5, max=0.01),
+    Param("gil_switch_interval", 2e-5, "Python's thread switch interval: how long the loop waits for the "
+          "interpreter after waking before it asks for it", unit="s", min=1e-6, max=0.01),
+    Param("hold_interpreter", True, "the loop keeps Python's interpreter lock from its wake-up until it "
+          "sleeps (the switch interval is raised meanwhile), so no other thread interrupts a cycle"),
+    Param("wake_tail", 0.0, "before the spin tail, this part of the wait is slept holding the interpreter (a "
+          "second, short sleep: in a virtual machine its wake-up is often later than a busy wait's), so "
+          "no other thread is running Python when the cycle is due (0: off)", unit="s", min=0.0, max=0.01),
+    Param("spin_tail", 1e-4, "the last part before a deadline is a busy wait holding the interpreter (beats the "
+          "kernel's wake-up "
+          "latency; costs that much CPU per cycle)", unit="s", min=0.0, max=0.01),
+    Param("gc_mode", "idle", "Python garbage collection: idle (objects at start frozen, collections run in "
+          "the loop's slack), freeze (frozen at start, automatic), automatic (Python's default)",
+          choices=("idle", "freeze", "automatic")),
+    Param("lock_memory", False, "mlockall the process at start so no page fault delays a cycle "
+          "(needs RLIMIT_MEMLOCK)"),
+    Param("cycle_log_file", "", "write the last 65536 cycles' deadline, start and end times (monotonic s) "
+          "to this .npz file at exit (timing analysis; empty: off)"),
     *THRESHOLD_PARAMS,
 )
 CONTROLLER_KEYS = ("type", "fallback_controllers", "params_file")
 
 
 class ControllerManagerNode(Node):
-    def __init__(self, node_name: str = "controller_manager"):
-        super().__init__(node_name, allow_undeclared_parameters=True)
+    def __init__(self, node_name: str = "controller_manager", **node_kwargs):
+        """node_kwargs: rclpy Node's (e.g. `context`)."""
+        super().__init__(node_name, allow_undeclared_parameters=True, **node_kwargs)
         self.params = declare_parameters(self, SCHEMA)
         sys.setswitchinterval(self.params["gil_switch_interval"])
+        if self.params["lock_memory"]:
+            problem = lock_memory()
+            if problem is not None:
+                self.get_logger().warning(f"lock_memory: cannot lock the process memory ({problem}); "
+                                          "a page fault may delay a cycle")
         config = self._controller_config()
         self.cm = ControllerManager(self.params["update_rate"], self.get_logger(), self._make_controller_node, config)
         self.cm.release_node = self._release_controller_node
+        self.cm.alive = self.context.ok
         self.loop = None
         self._unattached = []
         self.cm_services = ControllerManagerServices(self, self.cm, self.controller_type)
@@ -89,8 +119,12 @@ class ControllerManagerNode(Node):
         self.introspection = StatisticsRegistry(self, "~/introspection_data")
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._published_version = -1
+        self._refusal_counts = {}  # refusal counters at the previous /diagnostics (WARN when they grow)
         self._idle_cycles = 0
         self._publish_every = max(1, round(self.cm.update_rate / self.params["statistics.publish_rate"]))
+        # registries still to publish this round, and each one's last publishing time (s)
+        self._pending_publish = []
+        self._publish_cost = {}
         self.create_timer(0.05, self.on_registry_timer)
         self.create_timer(self.params["diagnostics.period"], self.on_diagnostics_timer)
         self._description_sub = None
@@ -138,7 +172,8 @@ class ControllerManagerNode(Node):
     def _load_hardware(self, urdf: str, at_startup: bool) -> bool:
         try:
             self.cm.load_robot_description(urdf, node=self, initial_states=self._initial_states(),
-                                           enforce_command_limits=self.params["enforce_command_limits"])
+                                           enforce_command_limits=self.params["enforce_command_limits"],
+                                           require_limits=not self.params["allow_joints_without_limits"])
         except (ResourceError, ControllerError) as error:
             if at_startup:  # run_node prints it as one line and exits non-zero
                 raise ParameterError(f"robot description: {error}") from None
@@ -180,7 +215,10 @@ class ControllerManagerNode(Node):
     def _release_controller_node(self, node) -> None:
         if self.executor is not None:
             self.executor.remove_node(node)
-        node.destroy_node()
+        with warnings.catch_warnings():
+            if not self.context.ok():  # at exit: rcl cannot finish the rosout publisher, as expected
+                warnings.simplefilter("ignore", RuntimeWarning)
+            node.destroy_node()
 
     def controller_type(self, name: str) -> str:
         """`<name>.type` (and `<name>.fallback_controllers`) as currently set, e.g. by a spawner."""
@@ -197,8 +235,8 @@ class ControllerManagerNode(Node):
         for node in self._unattached:
             self.executor.add_node(node)
         self._unattached = []
-        if not self.cm.rm.components or self.loop is not None:
-            return
+        if not self.cm.rm.components or self.loop is not None or not self.context.ok():
+            return  # (a Ctrl-C during start-up: nothing to start)
         activate = [n for n in self.params["activate_controllers"] if n]
         inactive = [n for n in self.params["inactive_controllers"] if n]
         for name in [*activate, *inactive]:
@@ -216,9 +254,14 @@ class ControllerManagerNode(Node):
         blocking = self.params["hardware_synchronization.expect_blocking_read_write"]
         self.loop = ControlLoop(self.cm, blocking, self.params["hardware_synchronization.minimum_cycle_time"],
                                 self.params["thread_priority"],
-                                [cpu for cpu in self.params["cpu_affinity"] if cpu >= 0])
+                                [cpu for cpu in self.params["cpu_affinity"] if cpu >= 0],
+                                wake_tail=self.params["wake_tail"], spin_tail=self.params["spin_tail"],
+                                gc_mode=self.params["gc_mode"], hold_interpreter=self.params["hold_interpreter"],
+                                cycle_log=self.params["cycle_log_file"])
         self.loop.idle_hook = self.on_loop_idle
         self.on_registry_timer()
+        if not self.context.ok():
+            return
         self.loop.start()
         self.get_logger().info(f"update loop running at {self.cm.update_rate} Hz; active controllers: "
                                f"{[s.name for s in self.cm.ordered]}")
@@ -233,24 +276,36 @@ class ControllerManagerNode(Node):
         version = self.cm.version
         if version != self._published_version:
             self._published_version = version
-            self.statistics.set_entries(statistics_entries(self.cm))
+            self.statistics.set_entries(statistics_entries(self.cm, self.get_name()))
             self.introspection.set_entries(introspection_entries(self.cm))
             self.activity_pub.publish(self.cm_services.activity())
 
-    def on_loop_idle(self) -> None:
-        """Loop thread, in a cycle's slack: statistics at statistics.publish_rate, then introspection."""
+    def on_loop_idle(self, budget: float) -> None:
+        """Loop thread, in a cycle's slack (`budget` s before the loop must wait for its next
+        deadline): ~/statistics then ~/introspection_data at statistics.publish_rate, each only
+        when its last measured publishing time (x1.5) fits the budget, else in a later cycle, so
+        publishing never makes a cycle start late."""
         self._idle_cycles += 1
-        k = self._idle_cycles % self._publish_every
-        if k == 0:
-            self.statistics.publish()
-        elif k == 1 or self._publish_every == 1:
-            self.introspection.publish()
+        if self._idle_cycles >= self._publish_every and not self._pending_publish:
+            self._idle_cycles = 0
+            self._pending_publish = [self.statistics, self.introspection]
+        if not self._pending_publish:
+            return
+        registry = self._pending_publish[0]
+        cost = self._publish_cost.get(id(registry), 0.0)
+        if 1.5 * cost > budget:
+            self._publish_cost[id(registry)] = 0.95 * cost  # a cost measured in a bad moment fades
+            return
+        start = time.monotonic()
+        registry.publish()
+        self._publish_cost[id(registry)] = time.monotonic() - start
+        self._pending_publish.pop(0)
 
     def on_diagnostics_timer(self) -> None:
         thresholds = {p.name: self.params[p.name] for p in THRESHOLD_PARAMS}
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
-        for status in roll_up(self.cm, thresholds):
+        for status in roll_up(self.cm, thresholds, self._refusal_counts):
             msg.status.append(DiagnosticStatus(
                 level=bytes([status.level]), name=f"{self.get_name()}: {status.name}", message=status.message,
                 hardware_id=self.get_fully_qualified_name(),
@@ -259,13 +314,44 @@ class ControllerManagerNode(Node):
         self.cm.request_stats_reset()
 
     def destroy_node(self):
+        """Stop the loop, then deactivate and unload the controllers and shut the hardware down.
+        Usually runs after Ctrl-C has shut the ROS context down: the loop has stopped by itself
+        at its first failed publish (cm.alive), and rcl's complaints about finishing the rosout
+        publishers of a shut-down context are expected, not shown. A second Ctrl-C meanwhile
+        says that the shutdown is under way; a third exits at once."""
+        if not self.context.ok():  # stopping after Ctrl-C (not an in-process user destroying the node)
+            _tolerate_further_interrupts(self.get_name())
         if self.loop is not None:
             self.loop.stop()
-        try:
-            self.cm.shutdown()
-        except Exception as error:  # noqa: BLE001 - best effort at exit
-            self.get_logger().error(f"shutdown: {error!r}")
-        return super().destroy_node()
+        with warnings.catch_warnings():
+            if not self.context.ok():
+                warnings.simplefilter("ignore", RuntimeWarning)
+            try:
+                self.cm.shutdown()
+            except Exception as error:  # noqa: BLE001 - best effort at exit
+                if self.context.ok():
+                    self.get_logger().error(f"shutdown: {error!r}")
+            return super().destroy_node()
+
+
+def _tolerate_further_interrupts(name: str) -> None:
+    """While shutting down (main thread only): a Ctrl-C prints one line instead of raising
+    KeyboardInterrupt in the middle of the hardware's shutdown; a second one exits at once."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    interrupts = [0]
+
+    def on_interrupt(signum, frame):
+        interrupts[0] += 1
+        if interrupts[0] == 1:
+            print(f"{name}: already stopping (controllers and hardware are being shut down); "
+                  "Ctrl-C again to exit at once", file=sys.stderr, flush=True)
+        else:
+            os._exit(130)
+    try:
+        signal.signal(signal.SIGINT, on_interrupt)
+    except (ValueError, OSError):
+        pass
 
 
 def forwarded_ros_args(argv) -> list:

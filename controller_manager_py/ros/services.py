@@ -141,10 +141,23 @@ class ControllerManagerServices:
             request.activate_asap, timeout), response)
 
     # ---- hardware ----------------------------------------------------------------------------
+    def _data_types(self):
+        """'joint/interface' -> the URDF's data_type (ros2_control's default 'double'), per kind."""
+        def build():
+            types = {True: {}, False: {}}
+            for comp in list(self.cm.rm.components.values()):
+                for part in (*comp.info.joints, *comp.info.sensors, *comp.info.gpios):
+                    for commands, infos in ((True, part.command_interfaces), (False, part.state_interfaces)):
+                        for itf in infos:
+                            types[commands][f"{part.name}/{itf.name}"] = itf.data_type or "double"
+            return types
+        return self._cached("data_types", build)
+
     def _interfaces(self, names, commands: bool):
         rm = self.cm.rm
         available_fn = rm.command_available if commands else rm.state_available
-        return [cm_msg.HardwareInterface(name=n, data_type="double", is_available=available_fn(n),
+        data_types = self._data_types()[commands]  # controllers' exported interfaces: double
+        return [cm_msg.HardwareInterface(name=n, data_type=data_types.get(n, "double"), is_available=available_fn(n),
                                          is_claimed=n in rm.claimed) for n in names]
 
     def on_list_hardware_components(self, request, response):

@@ -7,21 +7,29 @@ targets with non-existent include paths, so any interface package that depends o
 another package's messages fails to configure. Rewriting them once after install fixes it.
 Idempotent: files already pointing at existing folders are left alone.
 
-usage: python fix_wheel_cmake_paths.py VENV
+usage: python fix_wheel_cmake_paths.py PREFIX   (a venv, or a stand-in installation's prefix)
+
+Without numpy importable (a system Python whose numpy comes later, in the workspace venv),
+only the Python include folder is named.
 """
 import pathlib
 import re
 import sys
 import sysconfig
 
-import numpy
-
 INCLUDES = re.compile(r'INTERFACE_INCLUDE_DIRECTORIES "([^"]*/opt/python/[^"]*)"')
 
 
 def main() -> int:
     venv = pathlib.Path(sys.argv[1])
-    ours = f'INTERFACE_INCLUDE_DIRECTORIES "{sysconfig.get_paths()["include"]};{numpy.get_include()}"'
+    folders = [sysconfig.get_paths()["include"]]
+    try:
+        import numpy
+
+        folders.append(numpy.get_include())
+    except ImportError:
+        pass
+    ours = f'INTERFACE_INCLUDE_DIRECTORIES "{";".join(folders)}"'
     fixed = 0
     for path in (venv / "share").glob("*/cmake/*Export.cmake"):
         text = path.read_text()

@@ -1,5 +1,6 @@
 """ball_tracker as a real process: synthetic frames in over DDS, /ball_state out."""
 import math
+import time
 from pathlib import Path
 
 import cv2
@@ -36,15 +37,24 @@ def image_msg(image, stamp_ns, encoding="bgr8"):
 
 class FrameFeeder:
     """Publishes frames (and camera_info) from the test's graph node at 30 Hz (reliable QoS
-    unless told otherwise)."""
+    unless told otherwise). `lockstep`: the next frame only once the last one was answered
+    on /ball_state (or after 1 s), so that a busy machine never makes the tracker skip one."""
 
-    def __init__(self, graph, frames, qos=10):
+    def __init__(self, graph, frames, qos=10, lockstep=False):
         self.frames, self.sent, self.stamps = frames, 0, []
         self.pub = graph.node.create_publisher(Image, "/camera/image_raw", qos)
         self.info_pub = graph.node.create_publisher(CameraInfo, "/camera/camera_info", qos_profile_sensor_data)
         self.timer = graph.node.create_timer(1 / 30, self.tick)
+        self.lockstep, self.answered, self.last_sent_s = lockstep, set(), 0.0
+        if lockstep:
+            graph.node.create_subscription(BallState, "/ball_state", lambda m: self.answered.add(
+                (m.header.stamp.sec, m.header.stamp.nanosec)), qos_profile_sensor_data)
 
     def tick(self):
+        if self.lockstep and self.stamps and self.stamps[-1] not in self.answered \
+                and time.monotonic() - self.last_sent_s < 1.0:
+            return
+        self.last_sent_s = time.monotonic()
         msg = self.frames[self.sent % len(self.frames)]
         if isinstance(msg, Image):
             stamp_ns = 1_700_000_000 * 10**9 + self.sent * 33_333_333
@@ -84,6 +94,50 @@ def test_frames_over_dds_give_ball_state_with_truth_flags_and_stamps(launcher, g
     assert 0 < msg.pixel_u < 640 and 0 < msg.pixel_v < 480
 
 
+def test_plate_pose_with_covariance_has_the_ball_state_stamp_and_the_image_frame(launcher, graph, scene):
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+
+    from ball_balance.vision.pose_quality import ball_position_std_m
+
+    launcher.start(tracker_cmd(), name="ball_tracker")
+    image, _ = scene.render(BALL_XY)
+    frame = image_msg(image, 0)
+    frame.header.frame_id = "overhead_camera_optical"
+    feeder = FrameFeeder(graph, [frame])
+    feeder.info = camera_info(scene)
+    poses, states = {}, {}
+    graph.node.create_subscription(PoseWithCovarianceStamped, "/plate_pose",
+                                   lambda m: poses.__setitem__(stamp_key(m), m), qos_profile_sensor_data)
+    graph.node.create_subscription(BallState, "/ball_state",
+                                   lambda m: states.__setitem__(stamp_key(m), m), qos_profile_sensor_data)
+    graph.spin_until(lambda: any(s.ball_found and k in poses for k, s in states.items()), 40,
+                     "a /ball_state with the ball and its /plate_pose")
+    key = next(k for k, s in states.items() if s.ball_found and k in poses)
+    pose = poses[key]
+    assert pose.header.frame_id == "overhead_camera_optical"
+    # the synthetic camera looks straight down from camera_height_m
+    assert abs(pose.pose.pose.position.z - scene.camera.camera_height_m) < 0.01
+    assert 0.0 < ball_position_std_m(pose.pose.covariance) < 0.001
+
+
+def stamp_key(msg):
+    return msg.header.stamp.sec, msg.header.stamp.nanosec
+
+
+def test_tracker_says_when_the_camera_stops_and_when_it_is_back(launcher, graph, scene):
+    tracker = launcher.start(tracker_cmd("camera_timeout_s:=0.5"), name="ball_tracker")
+    image, _ = scene.render(BALL_XY)
+    feeder = FrameFeeder(graph, [image_msg(image, 0)])
+    feeder.info = camera_info(scene)
+    graph.collect(BallState, "/ball_state", qos=qos_profile_sensor_data, timeout=30)
+    stopped, back = (tracker.output().count(line) for line in ("no camera frame for", "camera frames are back"))
+    feeder.timer.cancel()
+    graph.spin_until(lambda: tracker.output().count("no camera frame for") > stopped, 20, "the camera-stopped warning")
+    feeder.timer.reset()
+    graph.spin_until(lambda: tracker.output().count("camera frames are back") > back, 20, "the camera-back line")
+    assert tracker.running
+
+
 def test_best_effort_image_publisher_is_matched_too(launcher, graph, scene):
     tracker = launcher.start(tracker_cmd(), name="ball_tracker")
     image, _ = scene.render(BALL_XY)
@@ -100,7 +154,7 @@ def test_ball_missing_published_every_frame_with_flags(launcher, graph, scene):
     with_ball, _ = scene.render(BALL_XY)
     without, _ = scene.render(None)
     frames = [image_msg(with_ball, 0)] * 6 + [image_msg(without, 0)] * 6
-    feeder = FrameFeeder(graph, frames)
+    feeder = FrameFeeder(graph, frames, lockstep=True)
     feeder.info = camera_info(scene)
     msgs = graph.collect(BallState, "/ball_state", count=30, qos=qos_profile_sensor_data, timeout=30)
     assert all(m.markers_found == 4 for m in msgs)             # one message per frame, ball or not

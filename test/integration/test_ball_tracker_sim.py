@@ -9,6 +9,7 @@ from test_sim_arm import start_sim
 from harness import ROOT, executable
 
 pytestmark = pytest.mark.integration
+MAX_TRUTH_GAP_NS = 30_000_000
 
 
 def stamp_ns(msg):
@@ -27,8 +28,12 @@ def test_tracker_on_the_simulated_camera_matches_the_truth(launcher, graph, tmp_
     assert tracker.running
     for state in states:
         assert state.tracking_valid and state.markers_found == 4 and state.header.frame_id == "plate_center"
-        # the truth sample nearest the frame's capture stamp (truth comes at the loop rate)
+        # truth comes at its own rate (100 Hz) over best effort, so a busy machine may lose
+        # some: take the nearest sample within MAX_TRUTH_GAP_NS and carry it to the frame's
+        # capture stamp with its velocity (the ball's acceleration, < 1 m/s^2, adds < 0.5 mm)
         nearest = min(truths, key=lambda t: abs(t - stamp_ns(state)))
-        assert abs(nearest - stamp_ns(state)) < 5_000_000
+        dt = (stamp_ns(state) - nearest) * 1e-9
+        assert abs(dt) < MAX_TRUTH_GAP_NS * 1e-9, f"no truth sample within {MAX_TRUTH_GAP_NS / 1e6:.0f} ms"
         truth = truths[nearest]
-        assert abs(state.x - truth.x) < 0.002 and abs(state.y - truth.y) < 0.002
+        assert abs(state.x - (truth.x + truth.vx * dt)) < 0.002
+        assert abs(state.y - (truth.y + truth.vy * dt)) < 0.002

@@ -34,15 +34,16 @@ FAKE_CONTROLLER_MANAGER = textwrap.dedent("""
     def list_components(request, response):
         response.component = [HardwareComponentState(
             name='ur_arm', type='system', plugin_name='mock_components/GenericSystem',
-            state=State(id=3, label='active'),
-            command_interfaces=[HardwareInterface(name='joint1/velocity', is_available=True,
+            state=State(id=3, label='active'), rw_rate=250, is_async=True,
+            command_interfaces=[HardwareInterface(name='joint1/velocity', data_type='double', is_available=True,
                                                   is_claimed=states['plate_controller'] == 'active')],
-            state_interfaces=[HardwareInterface(name='joint1/position', is_available=True)])]
+            state_interfaces=[HardwareInterface(name='joint1/position', data_type='double', is_available=True)])]
         return response
 
     def list_interfaces(request, response):
-        response.command_interfaces = [HardwareInterface(name='joint1/velocity', is_available=True)]
-        response.state_interfaces = [HardwareInterface(name='joint1/position', is_available=True)]
+        response.command_interfaces = [HardwareInterface(name='joint1/velocity', data_type='double',
+                                                         is_available=True)]
+        response.state_interfaces = [HardwareInterface(name='joint1/position', data_type='bool', is_available=True)]
         return response
 
     def load(request, response):
@@ -109,19 +110,25 @@ def test_list_controllers_prints_aligned_name_type_state(launcher, manager):
         "plate_controller        ball_balance/PlateController                   inactive",
     ]
     verbose = ros2py(launcher, "control", "list_controllers", "-v").stdout
+    assert verbose.splitlines()[1:3] == ["\tupdate_rate: 500 Hz", "\tis_async: False"]
     assert "\trequired command interfaces:\n\t\tjoint1/velocity\n" in verbose
+    assert "\texported reference interfaces:\n\texported state interfaces:\n" in verbose
 
 
 def test_hardware_components_and_interfaces(launcher, manager):
     components = ros2py(launcher, "control", "list_hardware_components", "-v").stdout
-    assert components.splitlines()[:5] == [
+    assert components.splitlines()[:7] == [
         "Hardware Component 1", "\tname: ur_arm", "\ttype: system",
-        "\tplugin name: mock_components/GenericSystem", "\tstate: id=3 label=active"]
-    assert "\t\tjoint1/velocity [available] [unclaimed]" in components
-    assert "\tstate interfaces\n\t\tjoint1/position [available]" in components
+        "\tplugin name: mock_components/GenericSystem", "\tstate: id=3 label=active",
+        "\tread/write rate: 250 Hz", "\tis_async: True"]
+    assert "\t\tjoint1/velocity [double] [available] [unclaimed]" in components
+    assert "\tstate interfaces\n\t\tjoint1/position [double] [available]" in components
     interfaces = ros2py(launcher, "control", "list_hardware_interfaces").stdout
     assert interfaces == ("command interfaces\n\tjoint1/velocity [available] [unclaimed]\n"
                           "state interfaces\n\tjoint1/position\n")
+    typed = ros2py(launcher, "control", "list_hardware_interfaces", "-v").stdout
+    assert typed == ("command interfaces\n\tjoint1/velocity [double] [available] [unclaimed]\n"
+                     "state interfaces\n\tjoint1/position [bool]\n")
 
 
 def test_controller_lifecycle_through_the_verbs(launcher, manager):
@@ -133,6 +140,9 @@ def test_controller_lifecycle_through_the_verbs(launcher, manager):
     refused = ros2py(launcher, "control", "switch_controllers", "--activate", "nope", "--strict")
     assert refused.returncode == 1
     assert refused.stderr.strip() == "ros2py: Error switching controllers: cannot switch nope"
+    nothing = ros2py(launcher, "control", "switch_controllers", "--activate", "nope", "--best-effort")
+    assert (nothing.returncode, nothing.stdout) == (1, "")
+    assert nothing.stderr.strip() == "ros2py: switch changed nothing (activate nope: not done)"
 
     loaded = ros2py(launcher, "control", "load_controller", "extra", "--set-state", "active")
     assert loaded.stdout.splitlines() == ["Successfully loaded controller extra", "Successfully activated extra"]
@@ -163,6 +173,16 @@ def test_verbs_against_our_ros2_control_node(launcher, graph):
     swapped = ros2py(launcher, "control", "switch_controllers", "--deactivate", "forward_position_controller",
                      "--activate", "scaled_joint_trajectory_controller", "--strict")
     assert swapped.returncode == 0, swapped.stderr
+    again = ros2py(launcher, "control", "switch_controllers", "--activate", "scaled_joint_trajectory_controller",
+                   "--best-effort")
+    assert again.returncode == 1 and again.stderr.startswith(
+        "ros2py: switch changed nothing (activate scaled_joint_trajectory_controller: not done): "), again.stderr
+    assert "already active" in again.stderr
+    verbose = ros2py(launcher, "control", "list_controllers", "-v").stdout
+    assert "scaled_joint_trajectory_controller" in verbose and "\tupdate_rate: 500 Hz\n\tis_async: False\n" in verbose
+    components = ros2py(launcher, "control", "list_hardware_components", "-v").stdout
+    assert "\tread/write rate: 500 Hz\n\tis_async: False\n" in components
+    assert "\t\tshoulder_pan_joint/position [double] [available] [claimed]" in components
     after = states()
     assert (after["forward_position_controller"], after["scaled_joint_trajectory_controller"]) == \
         ("inactive", "active")

@@ -1,5 +1,6 @@
 """`ros2py` against real processes: topics, nodes, parameters, bags, run; one-line errors."""
 import os
+import re
 import signal
 import textwrap
 
@@ -66,7 +67,10 @@ def test_topic_list_info_hz_and_node_list_see_the_publisher(launcher, ball_state
     assert "Node name: ball_state_source\n" in info and "  Reliability: BEST_EFFORT\n" in info
     hz = ros2py(launcher, "topic", "hz", "/ball_state", "--duration", "3.5").stdout
     rates = [float(line.split(":")[1]) for line in hz.splitlines() if line.startswith("average rate:")]
-    assert rates and all(10.0 < rate < 30.0 for rate in rates), hz  # published at 20 Hz
+    # published at 20 Hz; judged over the longest window (the last line): the first windows
+    # hold a handful of arrivals, and a publisher starved on a busy machine sends in bursts
+    # (4 Hz and 40 Hz over its first 5 and 19 messages at load 15)
+    assert rates and 10.0 < rates[-1] < 30.0, hz
     assert "\tmin: " in hz and " std dev: " in hz and " window: " in hz
     assert "/ball_state_source" in ros2py(launcher, "node", "list").stdout.splitlines()
     services = ros2py(launcher, "service", "list", "-t").stdout.splitlines()
@@ -125,19 +129,24 @@ def test_run_execs_an_installed_executable(launcher, ball_state_source):
     assert result.returncode == 0 and "/ball_state" in result.stdout.splitlines()
 
 
-def test_bag_record_writes_mcap_that_decodes_to_the_published_messages(launcher, ball_state_source, tmp_path):
+def recorded_so_far(output: str) -> int:
+    """The message count of the recorder's latest progress line ('[  5.0 s] 12 msgs in 1 topics ...')."""
+    counts = re.findall(r"\] (\d+) msgs in ", output)
+    return int(counts[-1]) if counts else 0
+
+
+def test_bag_record_writes_mcap_that_decodes_to_the_published_messages(launcher, graph, ball_state_source, tmp_path):
     from ball_tracker_msgs.msg import BallState
     from mcap.reader import make_reader
     from rclpy.serialization import deserialize_message
 
     out = tmp_path / "ball_bag"
     recorder = launcher.start([executable("ros2py"), "bag", "record", "-o", str(out), "/ball_state"], name="bag")
-    deadline_reached = False
-    try:
-        recorder.wait(timeout=4.0)
-    except Exception:  # noqa: BLE001 - still recording, as it should
-        deadline_reached = True
-    assert deadline_reached, recorder.output()
+    # until its progress line counts 5 messages (a fixed 4 s recorded none at load 15:
+    # discovery and the subscription's match took longer)
+    graph.spin_until(lambda: recorded_so_far(recorder.output()) >= 5 or not recorder.running, 60,
+                     "the recorder to count 5 messages")
+    assert recorder.running, recorder.output()
     os.killpg(recorder.popen.pid, signal.SIGINT)
     assert recorder.wait(timeout=20) == 0, recorder.output()
     assert "Recorded " in recorder.output()
@@ -147,7 +156,7 @@ def test_bag_record_writes_mcap_that_decodes_to_the_published_messages(launcher,
         assert reader.get_header().profile == "ros2"
         records = list(reader.iter_messages())
         (rosbag2_record,) = [m for m in reader.iter_metadata() if m.name == "rosbag2"]
-    assert "version: 8" in rosbag2_record.metadata["serialized_metadata"]
+    assert "version: 9" in rosbag2_record.metadata["serialized_metadata"]
     assert len(records) >= 5
     schema, channel, message = records[0]
     assert (schema.name, schema.encoding) == ("ball_tracker_msgs/msg/BallState", "ros2msg")

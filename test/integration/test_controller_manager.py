@@ -57,7 +57,7 @@ def switch(graph, activate=(), deactivate=(), strictness=SwitchController.Reques
 def test_services_commands_switching_and_numbers_over_dds(launcher, graph):
     node = start_manager(launcher)
     graph.wait_for_service("/controller_manager/list_controllers", timeout=30)
-    graph.spin_until(lambda: len(controllers(graph)) == 3, 15, "the configured controllers")  # spawned at start
+    graph.spin_until(lambda: len(controllers(graph)) == 3, 45, "the configured controllers")  # spawned at start
     listed = controllers(graph)
     assert listed["joint_state_broadcaster"].state == "active"
     assert listed["forward_position_controller"].state == "active"
@@ -125,7 +125,8 @@ def test_services_commands_switching_and_numbers_over_dds(launcher, graph):
     (values,) = graph.collect(StatisticsValues, "/controller_manager/statistics/values")
     assert values.names_version == names.names_version and len(values.values) == len(names.names)
     value = dict(zip(names.names, values.values))
-    assert value["controller_manager.stats/total_time/sample_count"] > 0
+    assert value["controller_manager.total_time"] > 0  # ros2_control Jazzy's name
+    assert value["controller_manager.stats/execution_time/sample_count"] > 0
     assert value["joint_state_broadcaster.stats/execution_time/sample_count"] > 0
     assert math.isfinite(value["controller_manager.stats/periodicity/average"])
     (intro,) = graph.collect(StatisticsNames, "/controller_manager/introspection_data/names", qos=LATCHED)
@@ -146,7 +147,7 @@ def test_description_from_topic_and_the_spawner(launcher, graph, tmp_path):
     publisher = graph.node.create_publisher(String, "/robot_description", LATCHED)
     publisher.publish(String(data=URDF.read_text()))
     graph.wait_for_service("/controller_manager/list_controllers", timeout=30)
-    graph.spin_until(lambda: "joint_state_broadcaster" in controllers(graph), 15, "controllers spawned")
+    graph.spin_until(lambda: "joint_state_broadcaster" in controllers(graph), 45, "controllers spawned")
     env_run = launcher.run([executable("spawner"), "scaled_joint_trajectory_controller", "--inactive"], timeout=30)
     assert env_run.returncode == 0, env_run.stderr
     run = launcher.run([executable("spawner"), "forward_position_controller"], timeout=30)
@@ -191,3 +192,61 @@ def test_malformed_description_stops_with_one_clear_line(launcher, tmp_path):
     assert process.wait(timeout=30) == 2
     lines = [line for line in process.output().splitlines() if line.strip()]
     assert any("unknown hardware plugin 'acme/Robot'" in line for line in lines), lines
+
+
+def _without_limit(joint: str) -> str:
+    text = URDF.read_text()
+    start = text.index(f'<joint name="{joint}" type="revolute">')
+    limit_start = text.index("<limit", start)
+    return text[:limit_start] + text[text.index("/>", limit_start) + 2:]
+
+
+def test_joint_without_limit_is_refused_at_start_with_one_line_unless_allowed(launcher, graph, tmp_path):
+    unlimited = tmp_path / "unlimited.urdf"
+    unlimited.write_text(_without_limit("elbow_joint"))
+    process = start_manager(launcher, urdf=unlimited)
+    assert process.wait(timeout=30) == 2
+    (line,) = [line for line in process.output().splitlines() if "no <limit>" in line]
+    assert "elbow_joint" in line and "allow_joints_without_limits" in line
+    allowed = start_manager(launcher, "allow_joints_without_limits:=true", urdf=unlimited)
+    graph.wait_for_service("/controller_manager/list_controllers", timeout=30)
+    assert allowed.running
+
+
+def test_forward_command_at_50_rad_is_limited_counted_in_diagnostics(launcher, graph):
+    start_manager(launcher, "diagnostics.period:=0.5")
+    graph.wait_for_service("/controller_manager/list_controllers", timeout=30)
+    graph.spin_until(lambda: controllers(graph).get("forward_position_controller") is not None
+                     and controllers(graph)["forward_position_controller"].state == "active", 20, "forward controller")
+    publisher = graph.node.create_publisher(Float64MultiArray, "/forward_position_controller/commands", 10)
+    graph.wait_for_topic("/forward_position_controller/commands")
+    command = [0.0, -1.5707963267948966, 50.0, -1.5707963267948966, 1.5707963267948966, 0.0]
+    elbow = []
+
+    def at_limit():
+        publisher.publish(Float64MultiArray(data=command))
+        states = graph.collect(JointState, "/joint_states", timeout=10)
+        elbow.append(dict(zip(states[0].name, states[0].position))["elbow_joint"])
+        return abs(elbow[-1] - math.pi) < 1e-6
+    graph.spin_until(at_limit, 30, "the elbow at its URDF limit")
+    assert max(elbow) <= math.pi + 1e-9
+
+    def warned():
+        (diag,) = graph.collect(DiagnosticArray, "/diagnostics", timeout=10)
+        hardware = [s for s in diag.status if s.name.endswith("Hardware Components Activity")]
+        return hardware and hardware[0].level == b"\x01" and "mock_ur" in hardware[0].message \
+            and "limited commands" in hardware[0].message
+    publisher.publish(Float64MultiArray(data=command))
+    graph.spin_until(warned, 20, "a WARN naming the limited commands on /diagnostics")
+
+
+@pytest.mark.parametrize("interrupts", [1, 2])
+def test_ctrl_c_stops_the_manager_without_errors(launcher, graph, interrupts):
+    process = start_manager(launcher)
+    graph.collect(JointState, "/joint_states", count=5, timeout=30)  # the loop is publishing
+    for _ in range(interrupts):
+        os.kill(process.popen.pid, signal.SIGINT)
+    code = process.wait(timeout=30)
+    output = process.output()
+    assert "Traceback" not in output and "RCLError" not in output and "context is invalid" not in output, output
+    assert code in (0, -signal.SIGINT), output  # a second Ctrl-C at the very end may end it by the signal

@@ -25,7 +25,7 @@ def test_ball_state_is_byte_correct_for_an_independent_dds_reader(launcher, grap
     msg.header.stamp.sec, msg.header.stamp.nanosec = 1700000000, 123456789
     publisher = graph.node.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
     reader = launcher.start(python_cmd(str(READER)), name="cyclone_reader")
-    graph.spin_until(lambda: publisher.publish(msg) or not reader.running, timeout=30,
+    graph.spin_until(lambda: publisher.publish(msg) or not reader.running, timeout=90,
                      what="the Cyclone DDS reader to receive a sample")
     assert reader.wait(timeout=5) == 0, reader.output()
     received = json.loads(reader.output().strip().splitlines()[-1])

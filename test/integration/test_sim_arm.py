@@ -18,7 +18,13 @@ from harness import ROOT, executable
 
 pytestmark = pytest.mark.integration
 CONTROLLERS = str(ROOT / "config" / "ur_controllers.yaml")
+SIM_MANAGER = str(ROOT / "config" / "sim_manager.yaml")  # the simulated arm's scheduling, as sim_arm.sh
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+# the arm's first /joint_states after start: MuJoCo's model, the manager and its controllers
+# load in a new process; 60 s ran out once at load 18 (a deadline: costs nothing when it is up)
+START_TIMEOUT = 120.0
 
 
 def start_sim(launcher, tmp_path, trajectory=False, **params):
@@ -28,7 +34,7 @@ def start_sim(launcher, tmp_path, trajectory=False, **params):
     active = "scaled_joint_trajectory_controller" if trajectory else "forward_position_controller"
     inactive = "forward_position_controller" if trajectory else "scaled_joint_trajectory_controller"
     return launcher.start([executable("ros2_control_node"), "--ros-args", "--params-file", CONTROLLERS,
-                           "-p", f"robot_description_file:={urdf}",
+                           "--params-file", SIM_MANAGER, "-p", f"robot_description_file:={urdf}",
                            "-p", f"activate_controllers:=[joint_state_broadcaster, {active}]",
                            "-p", f"inactive_controllers:=[{inactive}]"])
 
@@ -57,11 +63,11 @@ def joint_positions(msg: JointState) -> np.ndarray:
 
 def test_forward_position_commands_move_the_arm_and_the_camera_sees_the_plate(launcher, graph, tmp_path):
     start_sim(launcher, tmp_path)
-    (state,) = graph.collect(JointState, "/joint_states", timeout=60)
+    (state,) = graph.collect(JointState, "/joint_states", timeout=START_TIMEOUT)
     assert np.allclose(joint_positions(state), robot.HOME_POSITIONS_RAD, atol=1e-3)
 
     image, = graph.collect(Image, "/camera/image_raw", qos=qos_profile_sensor_data, timeout=30)
-    frames = graph.collect(Image, "/camera/image_raw", count=10, qos=10, timeout=30)  # reliable: all frames
+    frames = graph.collect(Image, "/camera/image_raw", count=10, qos=qos_profile_sensor_data, timeout=30)
     stamps = [f.header.stamp.sec + f.header.stamp.nanosec * 1e-9 for f in frames]
     assert all(b > a for a, b in zip(stamps, stamps[1:], strict=False))
     info, = graph.collect(CameraInfo, "/camera/camera_info", qos=qos_profile_sensor_data, timeout=30)
@@ -95,6 +101,37 @@ def test_forward_position_commands_move_the_arm_and_the_camera_sees_the_plate(la
     graph.collect(JointState, "/joint_states", predicate=reached, timeout=30)
 
 
+def test_50_rad_forward_command_keeps_the_simulated_joints_within_their_limits(launcher, graph, tmp_path):
+    start_sim(launcher, tmp_path, camera_enabled=False)
+    limits = robot.joint_limits(robot.robot_description())
+    lower = np.array([limits[n].lower for n in robot.JOINT_NAMES])
+    upper = np.array([limits[n].upper for n in robot.JOINT_NAMES])
+    vmax = np.array([limits[n].velocity for n in robot.JOINT_NAMES])
+    graph.collect(JointState, "/joint_states", timeout=START_TIMEOUT)
+    pub = graph.node.create_publisher(Float64MultiArray, "/forward_position_controller/commands", 10)
+    home = np.array(robot.HOME_POSITIONS_RAD)
+    far = home.copy()
+    far[[0, 2]] = 50.0   # shoulder_pan and elbow, as the fault probe did; the rest not commanded
+
+    def within(command):
+        def check(msg):
+            pub.publish(Float64MultiArray(data=command.tolist()))
+            index = {name: i for i, name in enumerate(msg.name)}
+            q = joint_positions(msg)
+            v = np.array([msg.velocity[index[name]] for name in robot.JOINT_NAMES])
+            assert np.all(q >= lower) and np.all(q <= upper), f"joint positions {q} past the limits"
+            assert np.all(np.abs(v) <= vmax), f"joint velocities {v} past the limits"
+            return True
+        return check
+
+    # out to the limits (pan 6.28 rad away at 3 rad/s) and back, every message checked
+    graph.collect(JointState, "/joint_states", predicate=lambda m: within(far)(m) and joint_positions(m)[0] > 6.2,
+                  timeout=120)
+    graph.collect(JointState, "/joint_states", count=200, predicate=within(far), timeout=60)
+    graph.collect(JointState, "/joint_states", predicate=lambda m: within(home)(m)
+                  and np.allclose(joint_positions(m), home, atol=1e-3), timeout=120)
+
+
 def test_dropped_ball_is_reported_and_reset(launcher, graph, tmp_path):
     start_sim(launcher, tmp_path, camera_enabled=False, ball_x=0.15)
     reports = []
@@ -120,7 +157,7 @@ def test_trajectory_moves_the_arm(launcher, graph, tmp_path):
     from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
     start_sim(launcher, tmp_path, trajectory=True, camera_enabled=False)
-    graph.collect(JointState, "/joint_states", timeout=60)
+    graph.collect(JointState, "/joint_states", timeout=START_TIMEOUT)
     target = np.array(robot.HOME_POSITIONS_RAD) + np.array([0.0, 0.0, 0.0, -0.05, 0.05, 0.0])
     traj = JointTrajectory(joint_names=list(robot.JOINT_NAMES),
                            points=[JointTrajectoryPoint(positions=target.tolist(),
@@ -138,6 +175,53 @@ def test_trajectory_moves_the_arm(launcher, graph, tmp_path):
     graph.collect(JointState, "/joint_states", predicate=reached, timeout=30)
 
 
+def test_pause_step_reset_and_push_services(launcher, graph, tmp_path):
+    from geometry_msgs.msg import Vector3Stamped
+    from std_srvs.srv import SetBool
+
+    start_sim(launcher, tmp_path, camera_enabled=False, step_simulation_steps=10)
+    clocks = []
+    graph.node.create_subscription(Clock, "/clock", lambda m: clocks.append(m.clock.sec + m.clock.nanosec * 1e-9),
+                                   QoSProfile(depth=10))
+    truths = []
+    graph.node.create_subscription(BallState, "/sim/ball_truth", truths.append, qos_profile_sensor_data)
+    graph.spin_until(lambda: len(clocks) > 0, 60, "/clock")
+    assert not graph.call(Trigger, "/sim/step_simulation", Trigger.Request()).success  # not paused
+    assert graph.call(SetBool, "/sim/set_pause", SetBool.Request(data=True)).success
+
+    def step() -> float:
+        response = graph.call(Trigger, "/sim/step_simulation", Trigger.Request())
+        assert response.success and "10 physics step" in response.message
+        start = float(response.message.rsplit("t=", 1)[1].split()[0])
+        # /clock runs at 500 Hz of sim time: the 10 ms step shows within one 2 ms tick
+        graph.spin_until(lambda: clocks[-1] >= start + 0.008 - 1e-6, 30, "the clock to follow the step")
+        return start
+
+    step()                  # after this one the pause has surely been taken by the loop
+    first = step()
+    second = step()
+    assert second - first == pytest.approx(0.010, abs=1e-6)   # paused: only the steps move time
+    assert graph.call(SetBool, "/sim/set_pause", SetBool.Request(data=False)).success
+    graph.spin_until(lambda: clocks[-1] > second + 0.1, 30, "the clock to run again")
+
+    pub = graph.node.create_publisher(Vector3Stamped, "/sim/push_ball", 10)
+    graph.wait_for_topic("/sim/push_ball")
+    push = Vector3Stamped()
+    push.header.frame_id = "plate_center"
+    push.vector.x = 0.1
+
+    def rolling():
+        if not truths or abs(truths[-1].vx) < 0.05:
+            pub.publish(push)
+            return False
+        return True
+
+    graph.spin_until(rolling, 30, "the pushed ball to roll")
+    assert graph.call(Trigger, "/sim/reset_world", Trigger.Request()).success
+    graph.spin_until(lambda: abs(truths[-1].vx) < 0.01 and abs(truths[-1].x) < 0.005, 30,
+                     "the ball at rest at the centre after reset_world")
+
+
 @pytest.mark.parametrize("params,message", [({"camera_width": 0}, "camera_width"),
                                             ({"domain": "moon"}, "unknown domain")])
 def test_bad_hardware_parameter_stops_the_node_with_a_clear_error(launcher, tmp_path, params, message):
@@ -151,7 +235,7 @@ def test_sim_arm_script_runs_the_graph_and_ctrl_c_stops_everything(launcher, gra
     import signal
 
     script = launcher.start(["bash", str(ROOT / "scripts" / "sim_arm.sh"), "--param", "camera_enabled=false"])
-    graph.collect(JointState, "/joint_states", timeout=60)
+    graph.collect(JointState, "/joint_states", timeout=START_TIMEOUT)
     graph.wait_for_topic("/tf_static")
     graph.wait_for_topic("/forward_position_controller/commands")
     os.kill(script.popen.pid, signal.SIGINT)  # the script only: its trap must stop the rest

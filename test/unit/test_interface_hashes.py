@@ -37,11 +37,19 @@ UPSTREAM_JAZZY = {
 }
 
 
+def _type_json(type_name: str) -> dict:
+    package, kind, name = type_name.split("/")
+    return json.loads((Path(get_package_share_directory(package)) / kind / f"{name}.json").read_text())
+
+
 def type_hashes(type_name: str) -> dict:
     """All hashes rosidl recorded for `type_name` (itself and the types it references)."""
-    package, kind, name = type_name.split("/")
-    path = Path(get_package_share_directory(package)) / kind / f"{name}.json"
-    return {entry["type_name"]: entry["hash_string"] for entry in json.loads(path.read_text())["type_hashes"]}
+    return {entry["type_name"]: entry["hash_string"] for entry in _type_json(type_name)["type_hashes"]}
+
+
+def type_description(type_name: str) -> dict:
+    """The type description rosidl hashed for `type_name` (with referenced_type_descriptions)."""
+    return _type_json(type_name)["type_description_msg"]
 
 
 @pytest.mark.parametrize("type_name", sorted(UPSTREAM_JAZZY))

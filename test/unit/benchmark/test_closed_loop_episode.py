@@ -1,8 +1,25 @@
-"""The closed-loop benchmark episode: reproducible from its seed, and it balances."""
+"""The closed-loop benchmark episode: reproducible from its seed, it balances, and its spec
+expresses pushes, forces, occlusions, the ball type, knob overrides and the reference protocol."""
+import dataclasses
 import math
 
-from ball_balance.benchmark.episode import EpisodeSpec, run_episode
+import numpy as np
+import pytest
+
+from ball_balance.benchmark.episode import (
+    EpisodeSpec,
+    Exposure,
+    Force,
+    Occlusion,
+    Push,
+    episode_events,
+    episode_knobs,
+    reference_protocol,
+    run_episode,
+)
+from ball_balance.benchmark.metrics import recovery_times
 from ball_balance.benchmark.report import aggregate, format_table
+from ball_balance.sim.config import SimConfigError
 
 
 def test_same_seed_same_result_and_the_ball_is_balanced():
@@ -18,3 +35,81 @@ def test_mpc_episode_reports_solver_times_and_the_table_prints():
     assert math.isfinite(result.metrics["peak_tilt_rad"]) and result.metrics["peak_tilt_rad"] <= 0.15 + 1e-9
     table = format_table(aggregate([result]))
     assert "mpc" in table and "circle" in table
+
+
+def test_pushes_domain_pushes_and_reports_the_recovery_time():
+    result = run_episode(EpisodeSpec(controller="pid", domain="pushes", seed=2, duration_s=7.0))
+    assert result.metrics["drop"] == 0.0
+    # one push at 4 s (0.15 m/s): back within 5 mm in a finite time
+    assert 0.0 < result.metrics["push_recover_s"] < 3.0
+
+
+def test_events_in_the_spec_act_on_the_episode():
+    quiet = EpisodeSpec(controller="pid", seed=1, duration_s=4.0, record=True)
+    pushed = dataclasses.replace(quiet, events=(Push(2.0, 0.2, 0.0), Force(3.0, 0.05, 0.0, 0.01)))
+    a, b = run_episode(quiet), run_episode(pushed)
+    assert "push_recover_s" not in a.metrics and "push_recover_max_s" in b.metrics
+    late = a.series["t"] > 2.2   # after the push (the series count from the engagement)
+    assert b.series["x"][late].max() > a.series["x"][late].max() + 0.01
+
+
+def test_two_markers_hidden_are_reported_to_the_controller():
+    spec = EpisodeSpec(controller="pid", seed=1, duration_s=3.0, events=(Occlusion(1.0, 1.0, (0, 3)),))
+    result = run_episode(spec)
+    assert result.metrics["drop"] == 0.0 and "engaged_frac" in result.metrics
+
+
+def test_hand_domains_hide_seeded_markers_at_intervals():
+    spec = EpisodeSpec(controller="pid", domain="hand_2", seed=4, duration_s=7.0, record=True)
+    events = episode_events(spec, episode_knobs(spec))
+    assert [e.t_s for e in events] == [3.0, 6.0] and all(len(e.markers) == 2 for e in events)
+    result = run_episode(spec)
+    assert np.nanmin(result.series["markers"]) == 2 and np.nanmax(result.series["markers"]) == 4
+
+
+def test_ball_type_release_speed_and_knobs_come_from_the_spec():
+    spec = EpisodeSpec(controller="pid", seed=3, duration_s=3.0, ball="solid", release_speed_m_s=(0.1, 0.1),
+                       knobs=(("frame_drop_prob", 0.2), ("stamp_jitter_s", 0.002)))
+    knobs = episode_knobs(spec)
+    assert knobs.ball_shell is False and knobs.frame_drop_prob == 0.2
+    assert run_episode(spec).metrics["drop"] == 0.0
+    with pytest.raises(SimConfigError, match="unknown knob"):
+        episode_knobs(dataclasses.replace(spec, knobs=(("gravity", 2.0),)))
+    with pytest.raises(SimConfigError, match="ball"):
+        episode_knobs(dataclasses.replace(spec, ball="glass"))
+
+
+def test_reference_protocol_releases_near_the_centre_and_reports_its_rmse():
+    spec = reference_protocol(EpisodeSpec(controller="pid", seed=5, duration_s=4.0))
+    assert spec.release_radius_m == (0.0, 0.02) and spec.duration_s == 20.0
+    result = run_episode(dataclasses.replace(spec, duration_s=3.0))
+    assert 0.0 < result.metrics["rmse_release_m"] < 0.02
+    table = format_table(aggregate([result]))
+    assert "reference system's protocol" in table and "34 mm" in table
+
+
+def test_recovery_time_counts_until_the_error_stays_inside():
+    t = np.arange(0.0, 3.0, 0.02)
+    err = np.where(t < 1.5, 0.02, 0.001)
+    err[(t > 1.6) & (t < 1.7)] = 0.01    # a brief excursion: not yet recovered
+    assert recovery_times(t, err, [1.0], dropped=False) == [pytest.approx(0.7, abs=0.03)]
+    assert recovery_times(t, np.full_like(t, 0.02), [1.0], dropped=False) == [math.inf]
+
+
+def test_vision_mode_sees_the_hand_and_the_camera_impairments():
+    spec = EpisodeSpec(controller="pid", mode="vision", seed=1, duration_s=2.0, record=True,
+                       events=(Occlusion(1.0, 0.6, (2,)), Exposure(0.5, 0.8)),
+                       knobs=(("sensor_noise", 3.0), ("blur_exposure_s", 0.004)))
+    result = run_episode(spec)
+    markers = result.series["markers"]
+    assert result.metrics["drop"] == 0.0
+    assert markers.max() == 4 and markers.min() == 3
+
+
+def test_fast_mode_reports_the_pose_uncertainty_of_the_visible_markers():
+    from ball_balance.benchmark.episode import fast_position_std_m
+    from ball_balance.sim.config import CameraConfig
+
+    stds = [fast_position_std_m(visible, CameraConfig(), 0.3) for visible in ((0, 1, 2, 3), (0, 1, 2), (0, 3), (2,))]
+    assert stds == sorted(stds) and 0.0 < stds[0] < 0.001
+    assert fast_position_std_m((), CameraConfig(), 0.3) == math.inf

@@ -1,7 +1,7 @@
 """ros2py helpers without DDS: MCAP schema text, parameter files and values."""
 import pytest
 
-from ball_balance.cli.bag import SEPARATOR, message_definition, nested_types
+from ball_balance.cli.bag_format import SEPARATOR, message_definition, nested_types
 from ball_balance.cli.errors import CliError
 from ball_balance.cli.param import flatten, nest, parameters_from_file, python_to_value, value_to_python
 
@@ -60,3 +60,42 @@ def test_interface_show_expands_nested_types_with_tabs():
     assert "\n---\n" in service and "\n\tint32 sec\n" in service
     with pytest.raises(CliError, match="foo/msg/Bar"):
         interface_text("foo/msg/Bar")
+
+
+class _Endpoint:
+    def __init__(self, reliability: str, durability: str):
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+        self.qos_profile = QoSProfile(depth=5, reliability=ReliabilityPolicy[reliability],
+                                      durability=DurabilityPolicy[durability])
+
+
+def test_the_recorder_matches_every_publisher_and_rematches_when_one_joins():
+    from ball_balance.cli.bag import matching_policies
+
+    reliable, latched = _Endpoint("RELIABLE", "VOLATILE"), _Endpoint("RELIABLE", "TRANSIENT_LOCAL")
+    assert matching_policies([reliable]) == ("reliable", "volatile")
+    assert matching_policies([latched]) == ("reliable", "transient_local")
+    assert matching_policies([latched, reliable]) == ("reliable", "volatile")
+    assert matching_policies([reliable, _Endpoint("BEST_EFFORT", "VOLATILE")]) == ("best_effort", "volatile")
+    assert matching_policies([]) == ("best_effort", "volatile")
+
+
+def test_recorded_qos_profiles_are_jazzy_names_and_play_back_as_publishers():
+    from ball_balance.cli.bag import offered_profiles
+    from ball_balance.cli.bag_format import dump_yaml, parse_offered_qos
+    from ball_balance.cli.bag_play import publisher_qos
+
+    class Info:
+        qos_profile = _Endpoint("BEST_EFFORT", "VOLATILE").qos_profile
+
+    (profile,) = offered_profiles([Info()])
+    assert (profile["history"], profile["depth"], profile["reliability"], profile["durability"]) == \
+        ("keep_last", 5, "best_effort", "volatile")
+    assert profile["deadline"] == {"sec": 9223372036, "nsec": 854775807}  # unset: infinite
+    assert parse_offered_qos(dump_yaml([profile])) == [profile]
+    qos = publisher_qos([profile])
+    assert (qos.reliability.name, qos.durability.name, qos.depth) == ("BEST_EFFORT", "VOLATILE", 5)
+    # metadata version 8 wrote the policies as integers
+    old = publisher_qos(parse_offered_qos("- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n"))
+    assert (old.reliability.name, old.durability.name, old.depth) == ("RELIABLE", "TRANSIENT_LOCAL", 10)

@@ -51,3 +51,35 @@ def test_closed_loop_settles_from_off_centre_release():
         u = pid.step(plant.p, plant.v, ref, 0.02)
         plant.advance(u, 0.02)
     assert np.linalg.norm(plant.p) < 0.002
+
+
+def test_saturation_by_a_big_error_never_charges_the_integral_against_it():
+    """A large error saturates through P and D: the integral must not swing to its opposite
+    clamp (the bug left the ball 10-15 mm off target for seconds after a big move)."""
+    gains = PidGains(kp=2.0, ki=0.4, kd=0.75, u_max_rad=0.15, i_limit_rad=0.03, i_zone_m=0.02,
+                     antiwindup_time_s=0.2)
+    pid = AxisPid(gains, K_G)
+    pid.integral = 0.01                      # a little integral toward +u from before the move
+    for _ in range(100):                     # 2 s saturated at +u_max by a 0.09 m error
+        assert pid.step(0.09, 0.05, 0.0, 0.02) == 0.15
+        assert pid.integral == 0.01          # outside i_zone_m: held, neither integrated nor bled
+    for _ in range(100):                     # inside the zone, saturated by a fast approach (D)
+        assert pid.step(0.01, 0.3, 0.0, 0.02) == 0.15
+        assert pid.integral >= 0.0           # unwound toward zero, never past it
+    assert pid.integral == 0.0
+    pid.integral = -0.05                     # an integral opposing the saturation is not touched
+    pid.step(0.01, 0.5, 0.0, 0.02)
+    assert pid.integral == -0.05             # conditional integration: e > 0 pushes out, no growth
+
+
+def test_after_a_saturating_release_the_ball_settles_close_to_the_target():
+    pid = PlatePid(PidGains(kp=2.0, ki=0.4, kd=0.75), K_G)
+    plant = DelayedPlant(x0=(0.12, -0.1), v0=(0.2, -0.2), delay_s=0.04)
+    ref = Stationary().sample(0.0)
+    saturated = 0
+    for _ in range(250):                     # 5 s at 50 Hz
+        u = pid.step(plant.p, plant.v, ref, 0.02)
+        saturated += max(abs(u[0]), abs(u[1])) >= 0.15
+        plant.advance(u, 0.02)
+    assert saturated > 5                     # the case under test: the output did saturate
+    assert np.linalg.norm(plant.p) < 0.003   # (the integral at its opposite clamp left ~12 mm)

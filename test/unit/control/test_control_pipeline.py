@@ -4,12 +4,13 @@ import math
 
 import numpy as np
 import pytest
-from control_plant import DelayedPlant
+from control_plant import K_G, DelayedPlant
 from test_control_kinematics import LEVEL_HOME, UR_JOINTS, URDF
 
+from ball_balance.control.estimation import EstimatorConfig
 from ball_balance.control.kinematics import Chain, PlateKinematics, ShaperConfig
-from ball_balance.control.pipeline import ControlPipeline, PipelineConfig
-from ball_balance.control.references import Stationary
+from ball_balance.control.pipeline import TILT_LAWS, ControlPipeline, PipelineConfig, make_tilt_law, register_tilt_law
+from ball_balance.control.references import Circle, Stationary
 from ball_balance.control.safety import BallObservation, Mode
 
 pytestmark = pytest.mark.skipif(not URDF.exists(), reason="robot description not in the tree yet")
@@ -17,10 +18,10 @@ DT = 0.02
 STEP = 0.03
 
 
-def _pipeline(controller, mode="wrist"):
+def _pipeline(controller, mode="wrist", reference=None, **cfg):
     kin = PlateKinematics(Chain.from_urdf(URDF.read_text(), UR_JOINTS), LEVEL_HOME,
                           shaper=ShaperConfig(max_joint_step_rad=STEP), mode=mode)
-    return ControlPipeline(PipelineConfig(controller=controller), kin, Stationary())
+    return ControlPipeline(PipelineConfig(controller=controller, **cfg), kin, reference or Stationary())
 
 
 def _observe(plant, **kw):
@@ -49,7 +50,7 @@ def test_homes_engages_and_balances_an_off_centre_ball(controller, mode):
 
 
 def test_nan_and_lost_markers_hold_then_return_home_without_jumps():
-    pipe = _pipeline("pid")
+    pipe = _pipeline("pid", brake_on_loss_s=0.0)   # braking off: the last tilt is held
     plant = DelayedPlant(x0=(0.05, 0.0))
     q_prev = np.array(LEVEL_HOME)
     for i in range(25):
@@ -70,3 +71,106 @@ def test_nan_and_lost_markers_hold_then_return_home_without_jumps():
     assert modes[0] == Mode.HOLDING and Mode.RETURNING in modes
     assert modes[-1] == Mode.READY
     np.testing.assert_allclose(q_prev, LEVEL_HOME, atol=0.011)
+
+
+class _ConstantLaw:
+    """A stand-in for a plugged-in law (e.g. a learned policy): records what it is given."""
+
+    def __init__(self, cfg):
+        self.cfg, self.contexts, self.resets = cfg, [], 0
+
+    def reset(self):
+        self.resets += 1
+
+    def tilt(self, ctx):
+        self.contexts.append(ctx)
+        return (0.01, -0.02)
+
+
+def test_a_registered_tilt_law_drives_the_plate_through_the_same_pipeline():
+    register_tilt_law("constant_for_test", _ConstantLaw)
+    try:
+        kin = PlateKinematics(Chain.from_urdf(URDF.read_text(), UR_JOINTS), LEVEL_HOME,
+                              shaper=ShaperConfig(max_joint_step_rad=STEP))
+        pipe = ControlPipeline(PipelineConfig(controller="constant_for_test", law_params={"x": 1}), kin,
+                               Stationary())
+        plant = DelayedPlant(x0=(0.02, 0.0))
+        q = np.array(LEVEL_HOME)
+        for i in range(20):
+            result = pipe.step(i * DT, _observe(plant), q)
+            q = result.q_cmd
+        assert result.mode == Mode.ENGAGED and result.u == (0.01, -0.02)
+        ctx = pipe.law.contexts[-1]
+        assert pipe.law.cfg.law_params == {"x": 1}
+        assert ctx.pos_m.shape == (2,) and tuple(ctx.ref.p) == (0.0, 0.0) and ctx.dt_s == pytest.approx(DT)
+        np.testing.assert_allclose(pipe.kin.tilt_of(q), (0.01, -0.02), atol=1e-6)
+    finally:
+        TILT_LAWS.pop("constant_for_test")
+
+
+def test_an_unknown_or_missing_tilt_law_is_refused_by_name():
+    with pytest.raises(ValueError, match="unknown controller 'nope'"):
+        make_tilt_law(PipelineConfig(controller="nope"))
+    register_tilt_law("missing_for_test", "ball_balance.no_such_module:make")
+    try:
+        with pytest.raises(ValueError, match="controller 'missing_for_test' is not available"):
+            make_tilt_law(PipelineConfig(controller="missing_for_test"))
+    finally:
+        TILT_LAWS.pop("missing_for_test")
+
+
+def _circle_then_lost(brake_on_loss_s):
+    """A ball tracked on a circle (r 0.1 m, 5 s lap), then the tracking is lost for good."""
+    pipe = _pipeline("pid", mode="pivot", reference=Circle(0.1, 5.0), brake_on_loss_s=brake_on_loss_s)
+    plant = DelayedPlant(x0=(0.1, 0.0))
+    q = np.array(LEVEL_HOME)
+    speeds, tilts = [], []
+    for i in range(int(14.0 / DT)):
+        lost = i * DT >= 10.0
+        result = pipe.step(i * DT, _observe(plant, tracking_valid=not lost), q)
+        q = result.q_cmd
+        tilt = pipe.kin.tilt_of(q) if result.mode != Mode.HOMING else (0.0, 0.0)
+        plant.advance(tilt, DT)
+        if lost:
+            speeds.append(np.linalg.norm(plant.v))
+            tilts.append(np.max(np.abs(tilt)))
+    return pipe, plant, np.array(speeds), np.array(tilts)
+
+
+def test_a_ball_lost_while_moving_is_braked_before_the_plate_levels():
+    pipe, plant, speeds, tilts = _circle_then_lost(brake_on_loss_s=0.8)
+    assert speeds[0] > 0.1                               # it was moving (2 pi 0.1 / 5 = 0.126 m/s)
+    assert speeds[-1] < 0.15 * speeds[0]                 # braked: nearly at rest when level
+    assert np.linalg.norm(plant.p) < 0.2                 # still on the plate (half side 0.2285)
+    assert np.max(tilts[int(1.0 / DT):]) < 0.002         # bounded: level again after the braking
+    assert pipe.safety.mode == Mode.READY
+    # without braking the plate levels with the ball still rolling at full speed
+    _, plant_off, speeds_off, _ = _circle_then_lost(brake_on_loss_s=0.0)
+    assert speeds_off[-1] > 0.7 * speeds_off[0]
+
+
+def _circle_error_on_a_half_gain_plant(controller, adapt):
+    """RMS tracking error over the last 4 s of a 12 s circle on a plant at half the model's k g
+    (half gravity) with a constant push (plate not level)."""
+    estimator = EstimatorConfig(adapt_gain=adapt, adapt_offset=adapt)
+    pipe = _pipeline(controller, mode="pivot", reference=Circle(0.08, 8.0), estimator=estimator)
+    plant = DelayedPlant(x0=(0.08, 0.0), k_g=0.5 * K_G)
+    offset_tilt = np.array([0.01, -0.005])          # a plate 0.6 degrees off level
+    q = np.array(LEVEL_HOME)
+    errors = []
+    for i in range(int(12.0 / DT)):
+        result = pipe.step(i * DT, _observe(plant), q)
+        q = result.q_cmd
+        tilt = pipe.kin.tilt_of(q) if result.mode != Mode.HOMING else (0.0, 0.0)
+        plant.advance(np.asarray(tilt) + offset_tilt, DT)
+        if i * DT >= 8.0:
+            errors.append(np.linalg.norm(plant.p - pipe.reference.sample(i * DT + DT - pipe.t_engaged).p))
+    return float(np.sqrt(np.mean(np.square(errors)))), pipe
+
+
+@pytest.mark.parametrize("controller", ["pid", "mpc"])
+def test_both_controllers_adapt_to_a_weaker_plant_and_a_tilted_plate(controller):
+    fixed, _ = _circle_error_on_a_half_gain_plant(controller, adapt=False)
+    adapted, pipe = _circle_error_on_a_half_gain_plant(controller, adapt=True)
+    assert abs(pipe.plant.k_g - 0.5 * K_G) < 0.15 * K_G
+    assert adapted < 0.6 * fixed

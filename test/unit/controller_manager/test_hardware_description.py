@@ -1,6 +1,8 @@
 """The <ros2_control> description: parsing, bad input, plugin lookup, the mock system."""
+import logging
+
 import pytest
-from cm_helpers import HOME, JOINTS, MOCK_UR, make_manager, run
+from cm_helpers import HOME, JOINTS, MOCK_UR, make_manager, run, spawn
 
 from controller_manager_py.hardware_interface import State, parse_control_resources
 from controller_manager_py.hardware_interface.urdf import DescriptionError
@@ -79,3 +81,26 @@ def test_initial_state_keeps_a_component_unconfigured_until_asked():
     cm.load_robot_description(MOCK_UR, initial_states={"mock_ur": State.UNCONFIGURED})
     assert cm.rm.components["mock_ur"].state == State.UNCONFIGURED
     assert cm.set_hardware_component_state("mock_ur", State.ACTIVE) == State.ACTIVE
+
+
+def test_finalizing_hardware_logs_the_controllers_it_deactivated_and_that_restart_is_the_way_back(caplog):
+    cm = make_manager()
+    cm.logger = logging.getLogger("cm_finalize")
+    spawn(cm, "jsb", "joint_state_broadcaster/JointStateBroadcaster")
+    with caplog.at_level(logging.INFO, logger="cm_finalize"):
+        assert cm.set_hardware_component_state("mock_ur", State.FINALIZED) == State.FINALIZED
+        assert cm.set_hardware_component_state("mock_ur", State.ACTIVE) == State.FINALIZED
+    finalized, refused = [r.getMessage() for r in caplog.records if r.name == "cm_finalize"][-2:]
+    assert "hardware 'mock_ur' finalized: deactivated controller(s) ['jsb']" in finalized
+    assert "cannot become active" in refused and "restart the controller manager" in refused
+    assert cm.controllers["jsb"].state == State.INACTIVE
+
+
+def test_deactivating_hardware_says_how_to_resume(caplog):
+    cm = make_manager()
+    cm.logger = logging.getLogger("cm_inactive")
+    spawn(cm, "fwd", "position_controllers/JointGroupPositionController", {"joints": JOINTS})
+    with caplog.at_level(logging.INFO, logger="cm_inactive"):
+        cm.set_hardware_component_state("mock_ur", State.INACTIVE)
+    (line,) = [r.getMessage() for r in caplog.records if r.name == "cm_inactive" and "now inactive" in r.getMessage()]
+    assert "deactivated controller(s) ['fwd']" in line and "switch_controllers --activate fwd" in line

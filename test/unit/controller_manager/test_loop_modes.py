@@ -119,10 +119,16 @@ def test_simulated_clock_from_the_hardware_drives_controller_time():
 def test_hardware_driven_mode_lets_a_blocking_read_set_the_pace():
     cm = make_manager(rate=500, urdf=MOCK_UR.replace("mock_components/GenericSystem", "cm_helpers:BlockingSystem"))
     loop = ControlLoop(cm, expect_blocking_read_write=True)
+    started = time.monotonic()
     loop.start()
-    time.sleep(0.3)
+    deadline = started + 30.0  # a deadline, not a duration: a busy machine only slows it
+    while loop.cycles < 10 and time.monotonic() < deadline:
+        time.sleep(0.01)
     loop.stop()
-    assert 5 < loop.cycles < 60  # ~100 Hz from the 10 ms read, not 500 Hz
+    elapsed = time.monotonic() - started
+    assert loop.cycles >= 10
+    # each cycle blocks 10 ms in read(): ~100 Hz at most, never the manager's 500 Hz
+    assert loop.cycles <= elapsed / 0.010 + 1
     assert loop.overruns == 0
 
 

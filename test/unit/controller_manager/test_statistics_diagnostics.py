@@ -1,5 +1,7 @@
 """Statistics (names, values, first sample), publishing rules, and diagnostics levels."""
 import math
+import threading
+import time
 
 import pytest
 from cm_helpers import JOINTS, make_manager, run, spawn
@@ -37,8 +39,13 @@ def test_statistics_and_introspection_use_ros2_control_names():
     stats = dict(statistics_entries(cm))
     for name in ("fwd.stats/execution_time/average", "fwd.stats/periodicity/standard_deviation",
                  "mock_ur.stats/read_cycle/execution_time/max", "mock_ur.stats/write_cycle/periodicity/sample_count",
-                 "controller_manager.stats/update_time/current_value", "controller_manager.stats/periodicity/min"):
+                 "controller_manager.stats/periodicity/min", "controller_manager.stats/execution_time/max"):
         assert name in stats, name
+    jazzy = [f"controller_manager.{x}_time" for x in ("update", "read", "write", "total", "switch",
+                                                       "switch_chained_mode", "switch_perform_mode",
+                                                       "deactivation", "activation")]
+    assert [n for n in stats if n in jazzy] == jazzy
+    assert stats["controller_manager.total_time"]() > 0.0
     assert stats["fwd.stats/execution_time/sample_count"]() == 10
     assert stats["fwd.stats/periodicity/sample_count"]() == 9
     intro = dict(introspection_entries(cm))
@@ -82,6 +89,7 @@ def test_manager_diagnostics_report_loop_periodicity():
         t += 1 / 500 if k % 2 else 1 / 250  # alternating 2 ms / 4 ms: large std dev
     *_, manager = roll_up(cm, THRESHOLDS)
     assert manager.level == ERROR and "periodicity" in manager.message
+    assert ("update loop longest period (ms)", "4.000") in manager.values
 
 
 class FakePublisher:
@@ -134,3 +142,41 @@ def test_names_only_on_change_values_only_with_subscribers():
     assert node.publishers["full"].sent == []
     registry.set_entries([("a", lambda: 1.0)])
     assert node.publishers["names"].sent[-1].names_version == 2
+
+
+def test_the_cycle_that_applies_a_switch_reports_its_switch_times_and_the_next_reports_zero():
+    cm = make_manager()
+    spawn(cm, "fwd", "position_controllers/JointGroupPositionController", {"joints": JOINTS}, activate=False)
+    cm.loop_running = True  # cycles are driven by hand
+    thread = threading.Thread(target=cm.switch_controller, args=(["fwd"], [], 2))
+    thread.start()
+    deadline = time.monotonic() + 10
+    while cm._pending is None and time.monotonic() < deadline:
+        time.sleep(0.001)
+    run(cm, 1)
+    thread.join(10)
+    times = cm.execution_time
+    assert times.switch_time > 0 and times.activation_time > 0 and times.switch_time >= times.activation_time
+    run(cm, 1)
+    assert times.switch_time == 0.0 and times.total_time > 0.0
+
+
+def test_refused_and_limited_commands_turn_diagnostics_warn_with_counts_then_ok_again():
+    cm = make_manager(rate=500)
+    fwd = spawn(cm, "fwd", "position_controllers/JointGroupPositionController", {"joints": JOINTS})
+    counts = {}
+    controllers, hardware, _ = roll_up(cm, THRESHOLDS, counts)
+    assert controllers.level == OK and hardware.level == OK
+    fwd.slot.offer([float("nan")] * 6)  # refused at the edge
+    fwd.slot.offer([0.0, -1.57, 50.0, -1.57, 1.57, 0.0])  # accepted, then limited before write
+    run(cm, 3)
+    for stats in cm.all_stats():  # synthetic cycles: their timing is not what is tested here
+        stats.reset()
+    controllers, hardware, _ = roll_up(cm, THRESHOLDS, counts)
+    assert controllers.level == WARN and "fwd: 1 refused commands since the last report (1 in all)" \
+        in controllers.message
+    assert hardware.level == WARN and "mock_ur: 3 limited commands" in hardware.message
+    assert ("fwd refused commands", "1") in controllers.values
+    fwd.slot.reset()
+    controllers, hardware, _ = roll_up(cm, THRESHOLDS, counts)
+    assert controllers.level == OK and hardware.level == OK  # nothing new since the last report

@@ -117,19 +117,60 @@ def test_domain_and_knob_overrides_reach_the_world():
     assert system.world.knobs.gravity_scale == 1.5 and system.world.knobs.ball_mass_kg == 0.004
 
 
-def test_realtime_pacing_follows_the_wall_clock():
-    import time
+class _WallClock:
+    """A wall clock the test moves by hand, so pacing is checked without depending on how
+    busy the machine is (a real sleep can overshoot by tens of ms on two busy cores)."""
 
+    def __init__(self):
+        import time
+
+        self._time, self.now_s = time, 1000.0
+
+    def monotonic(self):
+        return self.now_s
+
+    def __getattr__(self, name):
+        return getattr(self._time, name)
+
+
+def test_realtime_pacing_follows_the_wall_clock(monkeypatch):
+    from ball_balance.hardware import mujoco_system
+
+    wall = _WallClock()
+    monkeypatch.setattr(mujoco_system, "_time", wall)
     system, result = make_system({"pacing": "realtime"})
     assert result == CallbackReturn.SUCCESS
     system.on_configure(State.UNCONFIGURED)
     system.on_activate(State.INACTIVE)
     system.read(system.now(), PERIOD_S)
-    sim_start, wall_start = system.now(), time.monotonic()
-    while time.monotonic() - wall_start < 0.3:
+    sim_start, wall_start = system.now(), wall.now_s
+    for _ in range(75):  # 0.3 s of cycles 4 ms apart
+        wall.now_s += 0.004
         system.read(system.now(), PERIOD_S)
-        time.sleep(0.004)
-    assert system.now() - sim_start == pytest.approx(time.monotonic() - wall_start, abs=0.02)
+    assert system.now() - sim_start == pytest.approx(wall.now_s - wall_start, abs=2 * PERIOD_S)
+    assert system.overruns == 0
+
+
+def test_realtime_pacing_skips_a_long_stall_instead_of_spiralling(monkeypatch):
+    """After a 200 ms stall the simulation catches up at most 50 ms and re-anchors (counted),
+    rather than running hundreds of physics steps in one cycle."""
+    from ball_balance.hardware import mujoco_system
+
+    wall = _WallClock()
+    monkeypatch.setattr(mujoco_system, "_time", wall)
+    system, _ = make_system({"pacing": "realtime"})
+    system.on_configure(State.UNCONFIGURED)
+    system.on_activate(State.INACTIVE)
+    system.read(system.now(), PERIOD_S)
+    before = system.now()
+    wall.now_s += 0.2
+    system.read(system.now(), PERIOD_S)
+    assert system.now() - before == pytest.approx(0.05, abs=2 * PERIOD_S)
+    assert system.overruns == 1
+    wall.now_s += 0.004  # then it follows the wall clock again from the new anchor
+    later = system.now()
+    system.read(system.now(), PERIOD_S)
+    assert system.now() - later == pytest.approx(0.004, abs=PERIOD_S)
 
 
 def test_without_sim_time_the_manager_keeps_its_clock():
@@ -161,3 +202,59 @@ def test_initial_speed_scaling_factor_slows_the_joints(caplog):
     with caplog.at_level(logging.ERROR):
         assert system.on_init(info) == CallbackReturn.ERROR
     assert "initial_speed_scaling_factor" in caplog.text
+
+
+def test_pause_stops_the_clock_and_steps_advance_it_exactly(system):
+    run_cycles(system, 5)
+    system.request_pause(True)
+    run_cycles(system, 1)
+    paused_at = system.now()
+    run_cycles(system, 20)
+    assert system.now() == paused_at
+    system.request_steps(7)
+    run_cycles(system, 3)
+    assert system.now() == pytest.approx(paused_at + 7 * system.world.physics_dt_s)
+    system.request_pause(False)
+    run_cycles(system, 10)
+    assert system.now() == pytest.approx(paused_at + 7 * system.world.physics_dt_s + 10 * PERIOD_S)
+
+
+def test_reset_world_puts_arm_and_ball_back_at_rest(system):
+    system.set_command("wrist_2_joint/position", robot.HOME_POSITIONS_RAD[4] + 0.1)
+    system.request_push((0.1, 0.0, 0.0))
+    run_cycles(system, 100)
+    assert abs(system.get_state("ball/x")) > 0.01
+    assert system.get_state("wrist_2_joint/position") > robot.HOME_POSITIONS_RAD[4] + 0.05
+    system.request_reset_world()
+    for joint, q in zip(robot.JOINT_NAMES, robot.HOME_POSITIONS_RAD, strict=True):
+        system.set_command(f"{joint}/position", q)
+    run_cycles(system, 1)
+    assert system.get_state("wrist_2_joint/position") == pytest.approx(robot.HOME_POSITIONS_RAD[4], abs=1e-3)
+    assert system.get_state("ball/x") == pytest.approx(0.0, abs=1e-3)
+    assert abs(system.get_state("ball/vx")) < 0.01
+
+
+def test_push_and_timed_wrench_move_the_ball(system):
+    system.request_push((0.0, 0.1, 0.0))
+    run_cycles(system, 50)
+    assert system.get_state("ball/vy") == pytest.approx(0.1, rel=0.05)
+    system.request_reset_world()
+    run_cycles(system, 1)
+    mass = system.world.knobs.ball_mass_kg
+    system.request_wrench((0.01, 0.0, 0.0), (0.0, 0.0, 0.0), 0.05, True)
+    run_cycles(system, 100)   # 0.2 s: the force acted for 0.05 s of it
+    expected = system.world.config.rolling_factor * 0.01 * 0.05 / mass
+    assert system.get_state("ball/vx") == pytest.approx(expected, rel=0.1)
+
+
+def test_pushes_domain_pushes_the_ball_in_the_hosted_simulation():
+    system, result = make_system({"domain": "pushes"})
+    assert result == CallbackReturn.SUCCESS
+    system.on_configure(State.UNCONFIGURED)
+    system.on_activate(State.INACTIVE)
+    run_cycles(system, int(3.9 / PERIOD_S))
+    assert abs(system.get_state("ball/vx")) + abs(system.get_state("ball/vy")) < 0.01
+    run_cycles(system, int(0.2 / PERIOD_S))   # the first push at 4 s
+    speed = (system.get_state("ball/vx") ** 2 + system.get_state("ball/vy") ** 2) ** 0.5
+    assert speed == pytest.approx(0.15, rel=0.1)
+    system.on_shutdown(State.ACTIVE)

@@ -1,0 +1,179 @@
+"""`ros2py bag play BAG [--rate R] [--loop] [--topics T...] [--clock [HZ]]`: publish a recorded
+MCAP bag again, as `ros2 bag play` does.
+
+Each topic gets a publisher with the QoS its recording publishers offered (reliability,
+durability and depth of the first recorded profile; reliable when none was recorded), and
+the recorded CDR bytes are published as they are (no decoding). Messages go out in receive
+(log) time order, at their recorded spacing divided by --rate. --clock publishes /clock with
+the bag's time at HZ (default 40), for nodes with use_sim_time; without it, a recorded
+/clock topic is played like any other.
+"""
+from __future__ import annotations
+
+import struct
+import sys
+import time
+from typing import Dict, List, Optional
+
+from ball_balance.cli.bag_format import DURABILITY, RELIABILITY, mcap_files, parse_offered_qos, policy_name
+from ball_balance.cli.errors import CliError
+from ball_balance.cli.session import Session, absolute_name
+
+
+def publisher_qos(profiles: List[dict]):
+    """A publisher QoS like the recorded publishers' (the first profile; reliable, volatile by default)."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+    reliability, durability, depth = "reliable", "volatile", 10
+    if profiles:
+        first = profiles[0]
+        reliability = policy_name(first.get("reliability", "reliable"), RELIABILITY)
+        durability = policy_name(first.get("durability", "volatile"), DURABILITY)
+        depth = int(first.get("depth") or depth)
+    if reliability not in ("reliable", "best_effort"):
+        reliability = "reliable"
+    if durability not in ("volatile", "transient_local"):
+        durability = "volatile"
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(1, depth),
+                      reliability=ReliabilityPolicy[reliability.upper()],
+                      durability=DurabilityPolicy[durability.upper()])
+
+
+class _Channel:
+    def __init__(self, topic: str, type_name: str, profiles: List[dict]):
+        self.topic, self.type_name, self.profiles = topic, type_name, profiles
+        self.publisher = None
+
+
+def read_channels(paths: List[str], selected: Optional[List[str]]) -> Dict[int, _Channel]:
+    """(file index, channel id) -> _Channel for the selected topics of the bag's files."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+
+    channels = {}
+    for index, path in enumerate(paths):
+        try:
+            with open(path, "rb") as stream:
+                summary = make_reader(stream).get_summary()
+        except (McapError, struct.error, ValueError, EOFError) as error:
+            raise CliError(f"'{path}' is not a readable MCAP file: {error}") from None
+        if summary is None:
+            raise CliError(f"'{path}' has no summary section (recording interrupted?)")
+        for channel_id, channel in summary.channels.items():
+            if selected is not None and channel.topic not in selected:
+                continue
+            schema = summary.schemas.get(channel.schema_id)
+            if schema is None or channel.message_encoding != "cdr":
+                continue
+            channels[(index, channel_id)] = _Channel(
+                channel.topic, schema.name, parse_offered_qos(channel.metadata.get("offered_qos_profiles", "")))
+    return channels
+
+
+def _messages(paths: List[str], topics: List[str]):
+    """(file index, channel id, log time ns, data) of every message, in log time order per file."""
+    from mcap.reader import make_reader
+
+    for index, path in enumerate(paths):
+        with open(path, "rb") as stream:
+            for _, channel, message in make_reader(stream).iter_messages(topics=topics, log_time_order=True):
+                yield index, channel.id, message.log_time, message.data
+
+
+def cmd_play(args) -> int:
+    from ball_balance.cli.messages import get_interface
+
+    if args.rate <= 0:
+        raise CliError(f"--rate must be > 0, got {args.rate}")
+    paths = mcap_files(args.bag_path)
+    selected = [absolute_name(t) for t in args.topics] if args.topics else None
+    channels = read_channels(paths, selected)
+    if not channels:
+        wanted = f" among {', '.join(selected)}" if selected else ""
+        raise CliError(f"nothing to play: no recorded topic{wanted} in '{args.bag_path}'")
+    topics = sorted({c.topic for c in channels.values()})
+    if selected:
+        missing = [t for t in selected if t not in topics]
+        if missing:
+            raise CliError(f"not in the bag: {', '.join(missing)} (it holds: "
+                           f"{', '.join(sorted({c.topic for c in read_channels(paths, None).values()}))})")
+    with Session(args.spin_time, name="ros2py_bag_play") as session:
+        node = session.node
+        publishers = {}
+        for channel in channels.values():
+            key = (channel.topic, channel.type_name)
+            if key not in publishers:
+                publishers[key] = node.create_publisher(get_interface(channel.type_name), channel.topic,
+                                                        publisher_qos(channel.profiles))
+            channel.publisher = publishers[key]
+        clock = _ClockPublisher(node, args.clock) if args.clock else None
+        print(f"Playing {', '.join(topics)} from '{args.bag_path}' at rate {args.rate:g}"
+              f"{' (looping)' if args.loop else ''}; Ctrl-C to stop", file=sys.stderr, flush=True)
+        if args.delay > 0:
+            session.spin_for(args.delay)  # let subscribers be discovered before the first message
+        try:
+            played = 0
+            while True:
+                played += _play_once(session, paths, topics, channels, args.rate, clock, args.playback_duration)
+                if not args.loop or not session.context.ok():
+                    break
+        except KeyboardInterrupt:
+            pass
+    print(f"Played {played} messages", file=sys.stderr, flush=True)
+    return 0
+
+
+class _ClockPublisher:
+    """/clock at `rate_hz` with the bag's time while playing (rosbag2's --clock)."""
+
+    def __init__(self, node, rate_hz: float):
+        from rclpy.qos import QoSProfile
+        from rosgraph_msgs.msg import Clock
+
+        self.msg = Clock()
+        self.period_ns = int(1e9 / rate_hz)
+        self.publisher = node.create_publisher(Clock, "/clock", QoSProfile(depth=1))
+        self.next_ns = None
+
+    def publish(self, bag_ns: int) -> None:
+        self.msg.clock.sec, self.msg.clock.nanosec = divmod(bag_ns, 1_000_000_000)
+        self.publisher.publish(self.msg)
+
+
+def _play_once(session: Session, paths, topics, channels, rate: float, clock: Optional[_ClockPublisher],
+               duration_s: Optional[float] = None) -> int:
+    """Publish the bag once (its first duration_s seconds); the bag's time runs at `rate` times the wall clock."""
+    start_wall = time.monotonic_ns()
+    start_bag = None
+    played = 0
+    if clock is not None:
+        clock.next_ns = None  # the bag's time starts again (--loop)
+
+    def bag_now() -> int:
+        return start_bag + int((time.monotonic_ns() - start_wall) * rate)
+
+    def wait_until(bag_ns: int) -> None:
+        while True:
+            now = bag_now()
+            if clock is not None and (clock.next_ns is None or now >= clock.next_ns):
+                clock.publish(now)
+                clock.next_ns = now + int(clock.period_ns * rate)
+            if now >= bag_ns:
+                return
+            target = bag_ns if clock is None else min(bag_ns, clock.next_ns)
+            time.sleep(max(0.0, min(0.1, (target - now) / rate / 1e9)))
+
+    for index, channel_id, log_ns, data in _messages(paths, topics):
+        channel = channels.get((index, channel_id))
+        if channel is None:
+            continue
+        if start_bag is None:
+            start_bag = log_ns
+        if duration_s is not None and log_ns - start_bag > duration_s * 1e9:
+            break
+        wait_until(log_ns)
+        if not session.context.ok():
+            break
+        channel.publisher.publish(data)
+        played += 1
+    return played

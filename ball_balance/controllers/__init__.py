@@ -1,0 +1,1 @@
+"""ball_balance's controllers for controller_manager_py (plugins registered in setup.py)."""

@@ -1,0 +1,369 @@
+"""Vectorised training plant: many ball-on-plate episodes stepped at once in numpy (no ROS, no torch).
+
+It models what stands between the controller and the ball in the MuJoCo simulation, at the
+rates the closed-loop benchmark uses (ball_balance/benchmark/episode.py):
+
+    camera 30 Hz (frames dropped with frame_drop_prob) -> detection noise -> per-axis
+    constant-velocity Kalman (the tracker's parameters) -> visible vision_delay_s later ->
+    control tick 50 Hz: latency prediction over the state's age (the pipeline's, with the
+    nominal k g), PID + policy correction -> shaping (tilt-rate limit per tick, total tilt
+    limit) -> camera-to-command latency -> servo lag -> plate tilt -> x'' = -k g sin(tilt + bias)
+
+randomised per episode over `DomainRanges` (wider than the benchmark's extreme_dr). Each
+episode also knows the truth (`teacher_tilt`): the state predicted exactly over its own
+latency and servo lag, and the true k g, which a PD law turns into the tilt a controller
+with perfect knowledge would command: the label the policy learns to approximate from
+what it can observe.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Optional
+
+import numpy as np
+
+from ball_balance.control import config as control_config
+from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
+from ball_balance.policy.observation import ObservationBuilder
+
+CONTROL_DT_S = 0.02
+SUBSTEP_S = 0.005
+SUBSTEPS = int(round(CONTROL_DT_S / SUBSTEP_S))
+CAMERA_RATE_HZ = 30.0
+REFERENCES = ("stationary", "circle", "figure_eight")
+# the PID parameters the residual is trained on top of (recorded in the model, checked at run time)
+BASE_PID_KEYS = ("kp", "ki", "kd", "i_limit_rad", "i_zone_m", "deadband_m", "antiwindup_time_s", "max_tilt_cmd_rad",
+                 "rolling_factor", "gravity_m_s2")
+
+
+@dataclass(frozen=True)
+class DomainRanges:
+    """Uniform ranges (low, high) drawn per episode; every one covers the benchmark's extreme_dr."""
+
+    gravity_scale: tuple = (0.35, 1.8)
+    solid_ball_prob: float = 0.3          # rolling factor 5/7 instead of 3/5
+    latency_s: tuple = (0.0, 0.22)        # camera-to-command latency added to the commands
+    detection_noise_m: tuple = (0.0, 0.006)
+    frame_drop_prob: tuple = (0.0, 0.12)
+    servo_lag_s: tuple = (0.003, 0.02)
+    tilt_step_rad: tuple = (0.018, 0.024)  # tilt change per control tick the joint-step limit allows
+    tilt_bias_rad: tuple = (-0.004, 0.004)  # plate not quite level at the commanded tilt
+    gain_error: tuple = (0.93, 1.07)       # unmodelled rolling losses, slip
+    release_radius_m: tuple = (0.0, 0.11)
+    release_speed_m_s: tuple = (0.0, 0.15)
+    push_prob_per_s: float = 0.05         # random pushes (disturbance rejection)
+    push_speed_m_s: tuple = (0.05, 0.2)
+
+    def as_dict(self) -> dict:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+
+@dataclass(frozen=True)
+class Nominal:
+    """What the controllers assume (config/pid.yaml values, the tracker's Kalman)."""
+
+    k_g: float = ROLLING_FACTOR_SHELL * GRAVITY_M_S2
+    u_max_rad: float = 0.15
+    max_total_tilt_rad: float = 0.20
+    vision_delay_s: float = 0.015
+    max_prediction_s: float = 0.5
+    meas_noise_m: float = 0.001
+    accel_noise_m_s2: float = 1.0
+    init_vel_std_m_s: float = 0.5
+    fast_noise_floor_m: float = 0.0005   # the benchmark's fast mode: never less (pixel quantisation)
+
+
+def reference_table(kind: str, n_ticks: int) -> np.ndarray:
+    """(n_ticks, 3, 2): p, v, a of the benchmark's reference `kind` at every control tick
+    (the same Reference objects and parameters the pipeline builds)."""
+    from ball_balance.benchmark.episode import controller_values
+
+    ref = control_config.reference(controller_values("pid", kind))
+    out = np.zeros((n_ticks, 3, 2))
+    for n in range(n_ticks):
+        s = ref.sample(n * CONTROL_DT_S)
+        out[n] = (s.p, s.v, s.a)
+    return out
+
+
+class BatchPid:
+    """ball_balance.control.pid.AxisPid over a batch (same rule: deadband, zone, anti-windup)."""
+
+    def __init__(self, shape, values: dict, k_g: float, u_max: float):
+        self.kp, self.ki, self.kd = values["kp"], values["ki"], values["kd"]
+        self.i_limit, self.deadband, self.i_zone = values["i_limit_rad"], values["deadband_m"], values["i_zone_m"]
+        self.t_aw, self.k_g, self.u_max = values["antiwindup_time_s"], k_g, u_max
+        self.integral = np.zeros(shape)
+
+    def step(self, e_raw, ve, a_ref, dt):
+        e = np.where(np.abs(e_raw) < self.deadband, 0.0, e_raw - np.sign(e_raw) * self.deadband)
+        u_pd = self.kp * e + self.kd * ve - a_ref / self.k_g
+        candidate = self.integral + np.where(np.abs(e) < self.i_zone, e * dt, 0.0)
+        u_raw = u_pd + self.ki * candidate
+        pushing = ((u_raw > self.u_max) & (e > 0)) | ((u_raw < -self.u_max) & (e < 0))
+        self.integral = np.where(pushing, self.integral, candidate)
+        i_max = self.i_limit / self.ki if self.ki > 0 else np.inf
+        self.integral = np.clip(self.integral, -i_max, i_max)
+        u_raw = u_pd + self.ki * self.integral
+        u = np.clip(u_raw, -self.u_max, self.u_max)
+        if self.ki > 0 and self.t_aw > 0:
+            # back-calculation: unwind only the integral pushing into the limit, to zero at most
+            into = np.sign(u_raw - u)
+            unwind = (u != u_raw) & (np.abs(e) < self.i_zone) & (self.integral * into > 0)
+            bleed = np.abs(u_raw - u) / (self.ki * self.t_aw) * dt
+            self.integral = np.where(unwind, into * np.maximum(0.0, np.abs(self.integral) - bleed), self.integral)
+        return u
+
+
+class PlateBatch:
+    """`batch` episodes of `duration_s`, stepped together. Use:
+
+        env = PlateBatch(256, seed); obs = env.reset()
+        while not env.finished: obs = env.step(action)   # action (batch, 2) in [-1, 1] or None
+    """
+
+    def __init__(self, batch: int, seed: int, ranges: DomainRanges = DomainRanges(), nominal: Nominal = Nominal(),
+                 duration_s: float = 20.0, action_scale_rad: float = 0.1, teacher_wn: float = 4.0,
+                 teacher_zeta: float = 0.85):
+        self.b, self.ranges, self.nom = batch, ranges, nominal
+        self.rng = np.random.default_rng(seed)
+        self.n_ticks = int(round(duration_s / CONTROL_DT_S))
+        self.action_scale = action_scale_rad
+        self.wn, self.zeta = teacher_wn, teacher_zeta
+        from ball_balance.benchmark.episode import controller_values
+
+        self.pid_values = controller_values("pid", "stationary")
+        pad = int(0.5 / CONTROL_DT_S) + 2   # the teacher looks ahead up to its latency + lag
+        self.refs = np.stack([reference_table(k, self.n_ticks + pad) for k in REFERENCES])   # (R, n, 3, 2)
+        self.builder = ObservationBuilder(batch)
+
+    # ---- episode start ---------------------------------------------------------------
+    def reset(self) -> np.ndarray:
+        b, r, rng, n = self.b, self.ranges, self.rng, self.nom
+
+        def u(lim, size=b):
+            return rng.uniform(lim[0], lim[1], size)
+
+        self.g_scale = u(r.gravity_scale)
+        self.k_roll = np.where(rng.random(b) < r.solid_ball_prob, ROLLING_FACTOR_SOLID, ROLLING_FACTOR_SHELL)
+        self.latency = u(r.latency_s)
+        self.noise = np.maximum(u(r.detection_noise_m), n.fast_noise_floor_m)
+        self.drop_p = u(r.frame_drop_prob)
+        self.servo_lag = u(r.servo_lag_s)
+        self.tilt_step = u(r.tilt_step_rad)
+        self.bias = u(r.tilt_bias_rad, (b, 2))
+        self.gain = u(r.gain_error, (b, 2))
+        self.k_g_true = (self.k_roll * GRAVITY_M_S2 * self.g_scale)[:, None] * self.gain   # (b, 2)
+        self.ref_kind = rng.integers(0, len(REFERENCES), b)
+        radius, angle = u(r.release_radius_m), u((0.0, 2 * np.pi))
+        speed, heading = u(r.release_speed_m_s), u((0.0, 2 * np.pi))
+        self.x = np.stack([radius * np.cos(angle), radius * np.sin(angle)], 1)
+        self.v = np.stack([speed * np.cos(heading), speed * np.sin(heading)], 1)
+        self.theta = np.zeros((b, 2))          # plate tilt
+        self.hist_len = int(np.ceil((r.latency_s[1] + Nominal.max_prediction_s) / CONTROL_DT_S)) + 4
+        self.cmd_hist = np.zeros((b, 2, self.hist_len))   # shaped commands by tick (ring, index tick % len)
+        self.cmd = np.zeros((b, 2))            # last shaped command
+        self.u_law = np.zeros((b, 2))          # last law output
+        # Kalman per axis: state (x, v), covariance p00 p01 p11
+        self.kf_x = np.zeros((b, 2))
+        self.kf_v = np.zeros((b, 2))
+        self.kf_p = np.zeros((b, 2, 3))
+        self.kf_init = np.zeros(b, bool)
+        self.kf_t = np.zeros(b)
+        self.meas_r = np.maximum(self.noise, self.nom.meas_noise_m) ** 2
+        self.pending = []                      # (visible_at, est x, est v, stamp, valid mask)
+        self.obs_x = np.zeros((b, 2))
+        self.obs_v = np.zeros((b, 2))
+        self.obs_stamp = np.full(b, np.nan)
+        self.next_frame = 0.0
+        self.tick = 0
+        self.t_engaged = None
+        self.alive = np.ones(b, bool)
+        self.engaged = np.zeros(b, bool)
+        self.sq_err = np.zeros(b)
+        self.n_err = np.zeros(b)
+        self.pid = BatchPid((b, 2), self.pid_values, self.nom.k_g, self.nom.u_max_rad)
+        self.builder.reset()
+        return self._observe()
+
+    @property
+    def finished(self) -> bool:
+        return self.tick >= self.n_ticks or not self.alive.any()
+
+    @property
+    def time_s(self) -> float:
+        return self.tick * CONTROL_DT_S
+
+    # ---- sensing ---------------------------------------------------------------------
+    def _camera(self) -> None:
+        t = self.time_s
+        while self.next_frame <= t + 1e-9:
+            self.next_frame += 1.0 / CAMERA_RATE_HZ
+            arrived = self.rng.random(self.b) >= self.drop_p
+            z = self.x + self.rng.normal(0.0, 1.0, (self.b, 2)) * self.noise[:, None]
+            self._kalman(t, z, arrived)
+            self.pending.append((t + self.nom.vision_delay_s, self.kf_x.copy(), self.kf_v.copy(), t,
+                                 arrived & self.kf_init))
+        while self.pending and self.pending[0][0] <= t + 1e-9:
+            _, ex, ev, stamp, valid = self.pending.pop(0)
+            self.obs_x[valid], self.obs_v[valid] = ex[valid], ev[valid]
+            self.obs_stamp[valid] = stamp
+
+    def _kalman(self, t, z, arrived) -> None:
+        n = self.nom
+        start = arrived & ~self.kf_init
+        run = arrived & self.kf_init
+        dt = (t - self.kf_t)[:, None]
+        q = n.accel_noise_m_s2 ** 2
+        x, v, p = self.kf_x, self.kf_v, self.kf_p
+        # predict (every initialised track, detection or not: the filter coasts on missing frames)
+        x_p = x + v * dt
+        p00 = p[..., 0] + 2 * dt * p[..., 1] + dt * dt * p[..., 2] + q * dt ** 4 / 4
+        p01 = p[..., 1] + dt * p[..., 2] + q * dt ** 3 / 2
+        p11 = p[..., 2] + q * dt ** 2
+        # update
+        r = self.meas_r[:, None]
+        s = p00 + r
+        k0, k1 = p00 / s, p01 / s
+        y = z - x_p
+        m = run[:, None]
+        self.kf_x = np.where(m, x_p + k0 * y, x)
+        self.kf_v = np.where(m, v + k1 * y, v)
+        new_p = np.stack([(1 - k0) * p00, (1 - k0) * p01, p11 - k1 * p01], -1)
+        self.kf_p = np.where(m[..., None], new_p, p)
+        self.kf_t = np.where(run, t, self.kf_t)
+        if start.any():
+            self.kf_x[start], self.kf_v[start] = z[start], 0.0
+            self.kf_p[start] = np.stack([np.broadcast_to(self.meas_r[start, None], (start.sum(), 2)),
+                                         np.zeros((start.sum(), 2)),
+                                         np.full((start.sum(), 2), n.init_vel_std_m_s ** 2)], -1)
+            self.kf_t[start] = t
+            self.kf_init |= start
+
+    def _predicted_state(self):
+        """The pipeline's latency prediction: the state at its stamp carried to now over the
+        commanded tilts (nominal k g, no actuation delay: config/pid.yaml)."""
+        t = self.time_s
+        age = np.clip(t - self.obs_stamp, 0.0, None)
+        start = t - np.minimum(age, self.nom.max_prediction_s)
+        start = np.where(np.isfinite(start), start, t)
+        x, v = self.obs_x.copy(), self.obs_v.copy()
+        n_back = int(np.ceil(self.nom.max_prediction_s / CONTROL_DT_S)) + 1
+        for j in range(self.tick - n_back, self.tick):
+            if j < 0:
+                continue
+            seg0 = np.maximum(j * CONTROL_DT_S, start)
+            seg1 = np.full(self.b, (j + 1) * CONTROL_DT_S)
+            h = np.clip(seg1 - seg0, 0.0, None)[:, None]
+            a = -self.nom.k_g * self.cmd_hist[:, :, j % self.hist_len]
+            x = x + v * h + 0.5 * a * h * h
+            v = v + a * h
+        return x, v, age
+
+    def _observe(self) -> np.ndarray:
+        self._camera()
+        have = np.isfinite(self.obs_stamp)
+        if self.t_engaged is None and have.any():
+            self.t_engaged = self.tick
+        self.engaged = have & self.alive
+        x, v, age = self._predicted_state()
+        ref = self._ref(0)
+        self.e, self.ve = x - ref[:, 0], v - ref[:, 1]
+        self.a_ref = ref[:, 2]
+        self.u_pid = self.pid.step(self.e, self.ve, self.a_ref, CONTROL_DT_S)
+        self.u_pid = np.where(self.engaged[:, None], self.u_pid, 0.0)
+        self.age = np.where(have, age, 0.0)
+        return self.builder.build(self.e, self.ve, -self.a_ref / self.nom.k_g, self.u_pid, self.age)
+
+    def _ref(self, ahead_ticks) -> np.ndarray:
+        """(b, 3, 2) reference p, v, a at this tick + ahead_ticks (per env array or int)."""
+        n = self.tick - (self.t_engaged if self.t_engaged is not None else self.tick)
+        idx = np.clip(n + np.asarray(ahead_ticks, dtype=int), 0, self.refs.shape[1] - 1)
+        idx = np.broadcast_to(idx, (self.b,))
+        return self.refs[self.ref_kind, idx]
+
+    # ---- the label -------------------------------------------------------------------
+    def teacher_tilt(self) -> np.ndarray:
+        """Tilt (b, 2) of a PD law on the true state predicted exactly to when this tick's
+        command reaches the plate (latency + servo lag), with the true k g and plate bias."""
+        horizon = self.latency + self.servo_lag
+        k_max = int(np.ceil(horizon.max() / SUBSTEP_S)) + 1
+        k_each = np.round(horizon / SUBSTEP_S).astype(int)
+        x, v, th = self.x.copy(), self.v.copy(), self.theta.copy()
+        px, pv = x.copy(), v.copy()
+        for k in range(1, k_max + 1):
+            tau = self.time_s + (k - 1) * SUBSTEP_S
+            x, v, th = self._substep(x, v, th, tau, include_now=False)
+            hit = (k_each == k)[:, None]
+            px, pv = np.where(hit, x, px), np.where(hit, v, pv)
+        ref = self._ref(np.round(horizon / CONTROL_DT_S))
+        e, ve = px - ref[:, 0], pv - ref[:, 1]
+        acc = -self.wn ** 2 * e - 2 * self.zeta * self.wn * ve + ref[:, 2]
+        u = -acc / self.k_g_true - self.bias
+        return np.clip(u, -self.nom.u_max_rad, self.nom.u_max_rad)
+
+    def residual_label(self, tilt: np.ndarray) -> np.ndarray:
+        """The action in [-1, 1] that makes the law command `tilt`."""
+        return np.clip((tilt - self.u_pid) / self.action_scale, -1.0, 1.0)
+
+    # ---- dynamics --------------------------------------------------------------------
+    def _target(self, tau, include_now=True):
+        """Plate target at time tau: the command issued at the last tick <= tau - latency."""
+        n = np.floor((tau - self.latency) / CONTROL_DT_S + 1e-9).astype(int)
+        n = np.minimum(n, self.tick if include_now else self.tick - 1)
+        idx = (np.maximum(n, 0) % self.hist_len)[:, None, None]
+        tgt = np.take_along_axis(self.cmd_hist, np.broadcast_to(idx, (self.b, 2, 1)), axis=2)[..., 0]
+        return np.where((n >= 0)[:, None], tgt, 0.0)
+
+    def _substep(self, x, v, th, tau, include_now=True):
+        h = SUBSTEP_S
+        target = self._target(tau, include_now)
+        th = th + (target - th) * np.minimum(1.0, h / self.servo_lag)[:, None]
+        a = -self.k_g_true * np.sin(th + self.bias)
+        v = v + a * h
+        x = x + v * h
+        return x, v, th
+
+    def step(self, action: Optional[np.ndarray] = None, tilt: Optional[np.ndarray] = None) -> np.ndarray:
+        """Apply the law: PID + action * scale (or an explicit `tilt`), shape, advance one tick."""
+        if tilt is None:
+            a = np.zeros((self.b, 2)) if action is None else np.clip(action, -1.0, 1.0)
+            tilt = self.u_pid + self.action_scale * a
+        u = np.clip(tilt, -self.nom.u_max_rad, self.nom.u_max_rad)
+        u = np.where(self.engaged[:, None], u, 0.0)
+        self.u_law = u
+        self.builder.record_tilt(u)
+        # shaping: tilt change per tick limited (the joint-step limit), total tilt limited
+        du = u - self.cmd
+        norm = np.linalg.norm(du, axis=1, keepdims=True)
+        du = du * np.minimum(1.0, self.tilt_step[:, None] * 1.1 / np.maximum(norm, 1e-12))
+        du = np.clip(du, -self.tilt_step[:, None], self.tilt_step[:, None])
+        cmd = self.cmd + du
+        total = np.linalg.norm(cmd, axis=1, keepdims=True)
+        cmd = cmd * np.minimum(1.0, self.nom.max_total_tilt_rad / np.maximum(total, 1e-12))
+        self.cmd = cmd
+        self.cmd_hist[:, :, self.tick % self.hist_len] = cmd
+        t0 = self.time_s
+        for k in range(SUBSTEPS):
+            self.x, self.v, self.theta = self._substep(self.x, self.v, self.theta, t0 + k * SUBSTEP_S)
+        # random pushes
+        r = self.ranges
+        push = self.rng.random(self.b) < r.push_prob_per_s * CONTROL_DT_S
+        if push.any():
+            speed = self.rng.uniform(*r.push_speed_m_s, self.b)
+            ang = self.rng.uniform(0, 2 * np.pi, self.b)
+            self.v += (push * speed)[:, None] * np.stack([np.cos(ang), np.sin(ang)], 1)
+        self.tick += 1
+        half = PLATE_SIDE_M / 2.0
+        self.alive &= np.all(np.abs(self.x) <= half, axis=1)
+        if self.tick * CONTROL_DT_S > 5.0:
+            ref = self._ref(0)[:, 0]
+            err = np.sum((self.x - ref) ** 2, axis=1)
+            self.sq_err += np.where(self.alive, err, 0.0)
+            self.n_err += self.alive
+        return self._observe()
+
+    def rmse_steady_m(self) -> np.ndarray:
+        """Per episode: RMS distance to the reference after 5 s (nan for a dropped episode)."""
+        out = np.sqrt(self.sq_err / np.maximum(self.n_err, 1))
+        return np.where(self.alive, out, np.nan)

@@ -1,0 +1,84 @@
+"""The policy's observation: one layout, built by the same code in training and at run time.
+
+The plant is two decoupled axes (x'' = -k g sin(u) per axis), so the policy is one small
+network shared by both axes; the model file still takes one flat vector (axis x's features,
+then axis y's) and returns one action per axis, so a runtime needs no axis knowledge.
+
+Per axis, newest first, everything in the plate frame and in SI units:
+
+    error_m[HISTORY]      position error x - r of the (latency-predicted) state, this tick and before
+    tilt_rad[HISTORY]     the tilts this law commanded on the previous ticks
+    vel_error_m_s         v - v_ref of the (latency-predicted) state
+    ff_tilt_rad           reference feed-forward -a_ref / (k g_nominal)
+    pid_tilt_rad          what the PID alone would command this tick (the residual's base)
+    age_s                 age of the ball state (capture -> this tick)
+
+The history lets the network see how the ball answered earlier tilts (the plant's gain and
+the command-to-plate delay it lives with), which the PID cannot. The action per axis is a
+correction in [-1, 1]; times `action_scale_rad` it is added to the PID tilt.
+"""
+from __future__ import annotations
+
+from typing import List, Tuple
+
+import numpy as np
+
+HISTORY = 16
+AXES = ("x", "y")
+
+
+def layout(history: int = HISTORY) -> List[Tuple[str, int, str]]:
+    """(name, size, unit) of each field of one axis, in order."""
+    return [("error_m", history, "m"), ("tilt_rad", history, "rad"), ("vel_error_m_s", 1, "m/s"),
+            ("ff_tilt_rad", 1, "rad"), ("pid_tilt_rad", 1, "rad"), ("age_s", 1, "s")]
+
+
+def axis_size(history: int = HISTORY) -> int:
+    return sum(size for _, size, _ in layout(history))
+
+
+def flat_names(history: int = HISTORY) -> List[str]:
+    """One name per element of the flat observation vector (both axes)."""
+    out = []
+    for axis in AXES:
+        for name, size, _ in layout(history):
+            out += [f"{axis}.{name}"] if size == 1 else [f"{axis}.{name}[{k}]" for k in range(size)]
+    return out
+
+
+class ObservationBuilder:
+    """Keeps the histories of `batch` independent plates and builds their observations.
+
+    Arrays are (batch, 2): one row per plate, one column per axis. Run time uses batch 1.
+    """
+
+    def __init__(self, batch: int = 1, history: int = HISTORY):
+        self.batch, self.history = batch, history
+        self.errors = np.zeros((batch, 2, history))
+        self.tilts = np.zeros((batch, 2, history))
+
+    def reset(self, which=None) -> None:
+        """Forget the history (all plates, or those where the boolean mask `which` is set)."""
+        if which is None:
+            self.errors[:] = 0.0
+            self.tilts[:] = 0.0
+        else:
+            self.errors[which] = 0.0
+            self.tilts[which] = 0.0
+
+    def build(self, error_m, vel_error_m_s, ff_tilt_rad, pid_tilt_rad, age_s) -> np.ndarray:
+        """Push this tick's errors and return the raw observations, shape (batch, 2 * axis_size).
+        age_s is (batch,) or a scalar; the others (batch, 2)."""
+        self.errors[:, :, 1:] = self.errors[:, :, :-1]
+        self.errors[:, :, 0] = error_m
+        b = self.batch
+        age = np.broadcast_to(np.asarray(age_s, dtype=float).reshape(-1, 1), (b, 2))
+        per_axis = np.concatenate([self.errors, self.tilts, np.asarray(vel_error_m_s).reshape(b, 2, 1),
+                                   np.asarray(ff_tilt_rad).reshape(b, 2, 1), np.asarray(pid_tilt_rad).reshape(b, 2, 1),
+                                   age.reshape(b, 2, 1)], axis=2)
+        return per_axis.reshape(b, -1)
+
+    def record_tilt(self, tilt_rad) -> None:
+        """The tilt pair commanded this tick (batch, 2): the newest entry of the next observation."""
+        self.tilts[:, :, 1:] = self.tilts[:, :, :-1]
+        self.tilts[:, :, 0] = tilt_rad

@@ -1,0 +1,29 @@
+"""Parameters of the learned policy's tilt law (added to the PID's: the policy is a residual on it)."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from controller_manager_py.parameters import Param
+
+PACKAGE = "ball_balance"
+DEFAULT_MODEL = "policies/residual_tilt.onnx"
+
+POLICY_PARAMS = [
+    Param("policy_model", DEFAULT_MODEL, "ONNX policy model: absolute, or relative to the package's config/ "
+          "folder", read_only=True),
+    Param("policy_blend_s", 1.0, "after every engagement, ramp the policy's correction in from 0 over this "
+          "long (0: at once)", "s", 0.0, 30.0, read_only=True),
+]
+
+
+def model_path(value: str) -> Path:
+    """policy_model as a file: absolute as given; relative under config/ of the installed share
+    directory, else of the source tree (as the robot description is found)."""
+    path = Path(value).expanduser()
+    if path.is_absolute():
+        return path
+    for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
+        if prefix and (Path(prefix) / "share" / PACKAGE / "config" / path).is_file():
+            return Path(prefix) / "share" / PACKAGE / "config" / path
+    return Path(__file__).resolve().parents[2] / "config" / path

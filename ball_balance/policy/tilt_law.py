@@ -1,0 +1,102 @@
+"""The learned tilt law: the PID plus the policy's bounded correction, one control tick at a time.
+
+    u = clamp(u_pid + blend(t) * scale * policy(observation), low, high)
+
+`blend` ramps from 0 to 1 over `blend_s` after every (re-)engagement, so switching the policy
+in never jumps the plate. A non-finite observation or model output never reaches the
+command: the law holds its last tilt and counts it (`held_count`).
+"""
+from __future__ import annotations
+
+import math
+from typing import Mapping, Optional
+
+import numpy as np
+
+from ball_balance.control.pid import PidGains, PlatePid
+from ball_balance.policy.observation import ObservationBuilder, flat_names
+from ball_balance.policy.params import model_path
+from controller_manager_py.controllers.policy_model import PolicyModelError, PolicyRunner
+
+ACTION_KIND = "residual_tilt"
+
+
+class PolicyTiltLaw:
+    """A pipeline tilt law (ball_balance.control.pipeline.TiltLaw): `reset()`, `tilt(ctx)`."""
+
+    def __init__(self, runner: PolicyRunner, gains: PidGains, k_g: float, blend_s: float = 1.0):
+        self.runner, self.k_g, self.blend_s = runner, k_g, blend_s
+        self.pid = PlatePid(gains, k_g)
+        self.builder = ObservationBuilder(1, runner.metadata.observation.history)
+        self.u = np.zeros(2)
+        self.t_active_s = 0.0
+        self.held_count = 0          # ticks that held the last tilt (non-finite input or output)
+        self.inferences = 0
+        self.last_inference_s = 0.0
+        self.last_correction = np.zeros(2)
+
+    def reset(self) -> None:
+        """A new engagement: forget the history, start the blend again."""
+        self.pid.reset()
+        self.builder.reset()
+        self.u = np.zeros(2)
+        self.t_active_s = 0.0
+
+    @property
+    def blend(self) -> float:
+        return 1.0 if self.blend_s <= 0.0 else min(1.0, self.t_active_s / self.blend_s)
+
+    def tilt(self, ctx):
+        """One tick of the pipeline (TiltContext): the PID's tilt plus the policy's correction."""
+        age = ctx.obs.age_s if ctx.obs is not None else 0.0
+        return self.step(ctx.pos_m, ctx.vel_m_s, ctx.ref, ctx.dt_s, age)
+
+    def step(self, pos_m, vel_m_s, ref, dt_s: float, age_s: float = 0.0):
+        """(u_x, u_y) [rad] for the (latency-predicted) ball state and the reference sample."""
+        pos, vel = np.asarray(pos_m, dtype=float), np.asarray(vel_m_s, dtype=float)
+        u_pid = np.asarray(self.pid.step(pos, vel, ref, dt_s), dtype=float)
+        obs = self.builder.build((pos - ref.p)[None], (vel - ref.v)[None], (-np.asarray(ref.a) / self.k_g)[None],
+                                 u_pid[None], age_s)
+        action = self.runner.infer(obs[0])
+        self.last_inference_s = self.runner.last_inference_s
+        if action is None or not np.all(np.isfinite(u_pid)):
+            self.held_count += 1
+            self.builder.record_tilt(self.u)
+            return float(self.u[0]), float(self.u[1])
+        self.inferences += 1
+        self.last_correction = self.blend * action * self.runner.scale
+        self.u = self.runner.command(self.blend * action, base=u_pid)
+        self.builder.record_tilt(self.u)
+        self.t_active_s += dt_s
+        return float(self.u[0]), float(self.u[1])
+
+
+def base_pid_mismatch(training: Mapping, values: Mapping) -> Optional[str]:
+    """The first PID parameter the configuration sets differently from the one the residual was
+    trained on top of, as 'name: model X, configured Y', or None."""
+    for name, trained in (training.get("base_pid") or {}).items():
+        if name in values and not math.isclose(float(values[name]), float(trained), rel_tol=1e-9, abs_tol=1e-12):
+            return f"{name}: model {trained}, configured {values[name]}"
+    return None
+
+
+def load_tilt_law(values: Mapping) -> PolicyTiltLaw:
+    """The law for validated controller parameters (POLICY_SCHEMA); PolicyModelError, one line,
+    when the model does not fit them."""
+    from ball_balance.control import config as control_config
+
+    runner = PolicyRunner.load(model_path(values["policy_model"]), observation_names=flat_names(),
+                               action_kind=ACTION_KIND, action_count=2, rate_hz=values["control_rate_hz"])
+    mismatch = base_pid_mismatch(runner.metadata.training, values)
+    if mismatch:
+        raise PolicyModelError(f"policy model {runner.where}: trained on a different PID ({mismatch})")
+    return PolicyTiltLaw(runner, control_config.pid_gains(values), control_config.k_g(values),
+                         values["policy_blend_s"])
+
+
+def make_tilt_law(cfg) -> PolicyTiltLaw:
+    """The pipeline's factory (TILT_LAWS["policy"]): the node's parameters are cfg.law_params."""
+    if "policy_model" not in cfg.law_params:
+        raise PolicyModelError("controller 'policy' needs the policy parameters (POLICY_SCHEMA: policy_model, "
+                               "policy_blend_s)")
+    return load_tilt_law(cfg.law_params)

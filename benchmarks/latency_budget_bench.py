@@ -1,0 +1,258 @@
+"""Camera-to-command latency budget of the live simulated graph, stage by stage.
+
+Starts the graph as scripts/sim_balance.sh does, on a private ROS domain with the project's
+DDS settings: ros2_control_node hosting MujocoSystem (camera at --rate Hz, --width x
+--height, latency_trace on), ball_tracker and the PID (or MPC) balance controller, all on simulated
+time; optionally --busy N processes that each keep a core busy. After --warmup-s (homing,
+engaging) it follows every camera frame for --seconds through:
+
+  render            frame captured (sim loop) -> rendered (camera thread)      /sim/latency_trace
+  image publish     rendered -> image written to DDS (its camera_info follows)  source timestamps
+  image transport   DDS write -> DDS receipt in the tracker                     tracker ~/statistics
+  decode            receipt -> callback -> tracking thread -> numpy array       tracker ~/statistics
+  track             markers, homography, ball, Kalman                            tracker ~/statistics
+  state publish     /plate_pose + /ball_state                                   tracker ~/statistics
+  controller        /ball_state written -> joint command written: state transport, the
+                    controller's wake-up and compute                            source timestamps
+  command -> hw     joint command written -> the manager's next cycle reads it -> written to
+                    the hardware (MujocoSystem.write sets a new joint target)   /sim/latency_trace
+
+The stages add up to the whole chain, camera capture -> joint command written to the
+hardware; each is printed as median and p95 (ms). Times are wall-clock DDS source/receipt
+timestamps of each message (one host, one clock), matched by the frame's stamp; a
+controller command is matched to the first one written after the frame's /ball_state.
+For reference (not part of the sum), the two DDS hops inside "controller" and
+"command -> hw", measured to this process: a stand-in for the hops to the controller and
+to the manager, which do not report their receipt times.
+
+usage: python benchmarks/latency_budget_bench.py [--rate 60] [--width 640 --height 480]
+           [--seconds 20] [--warmup-s 8] [--busy 1] [--controller pid] [--camera-thread]
+"""
+from __future__ import annotations
+
+import argparse
+import bisect
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "test"))
+from harness import DomainLease, executable, ros_env  # noqa: E402
+
+STAGES = ("render", "image publish", "image transport", "decode", "track", "state publish", "controller",
+          "command -> hw")
+REFERENCE = ("(state transport, to this process)", "(command transport, to this process)")
+BUSY = "while True:\n    pass\n"
+CONTROLLER_EXECUTABLES = {"pid": "ball_balance_controller", "mpc": "ball_balance_mpc"}
+COMMAND_CONTROLLERS = {"pid": "forward_position_controller", "mpc": "scaled_joint_trajectory_controller"}
+
+
+def start_graph(args, env, workdir: Path) -> list:
+    from ball_balance import robot
+
+    urdf = workdir / "sim.urdf"
+    params = {"camera_rate_hz": args.rate, "camera_width": args.width, "camera_height": args.height,
+              "latency_trace": True, "robot_description_file": str(urdf),
+              "camera_process": not args.camera_thread}
+    urdf.write_text(robot.robot_description("mujoco", params))
+    config = ROOT / "config"
+    # PID: forward position commands; MPC: single-point trajectories (as scripts/sim_balance.sh)
+    active, inactive = COMMAND_CONTROLLERS[args.controller], COMMAND_CONTROLLERS["mpc" if args.controller == "pid"
+                                                                                  else "pid"]
+    commands = [
+        [executable("ros2_control_node"), "--ros-args", "--params-file", str(config / "ur_controllers.yaml"),
+         "--params-file", str(config / "sim_manager.yaml"),  # scheduling as scripts/sim_arm.sh
+         "-p", f"robot_description_file:={urdf}",
+         "-p", f"activate_controllers:=[joint_state_broadcaster, {active}]",
+         "-p", f"inactive_controllers:=[{inactive}]"],
+        [executable("ball_tracker"), "--ros-args", "--params-file", str(config / "ball_tracker.yaml"),
+         "-p", "use_sim_time:=true"],
+        [executable(CONTROLLER_EXECUTABLES[args.controller]), "--ros-args", "--params-file",
+         str(config / f"{args.controller}.yaml"), "-p", "use_sim_time:=true"],
+    ]
+    commands += [[sys.executable, "-c", BUSY]] * args.busy
+    logs = [open(workdir / f"process{i}.log", "wb") for i in range(len(commands))]
+    return [subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+            for cmd, log in zip(commands, logs)]
+
+
+class Recorder:
+    """Every message's wall-clock source (write) and receipt times, keyed by frame stamp."""
+
+    def __init__(self, node, controller: str):
+        from ball_tracker_msgs.msg import BallState
+        from pal_statistics_msgs.msg import Statistics
+        from rclpy.qos import QoSProfile, qos_profile_sensor_data
+        from sensor_msgs.msg import CameraInfo
+        from std_msgs.msg import Float64MultiArray, Header
+        from trajectory_msgs.msg import JointTrajectory
+
+        self.recording = False
+        self.commands_seen = 0                # before recording too: the graph is up
+        self.trace = defaultdict(dict)        # event -> frame stamp (ns) -> wall ns
+        self.hardware_writes = []             # wall ns of each new joint target
+        self.image_written = {}               # stamp -> wall ns (its camera_info, written right after)
+        self.state = {}                       # stamp -> (written wall ns, received wall ns)
+        self.commands = []                    # (written wall ns, received wall ns), in order
+        self.tracker = {}                     # stamp -> {stage: ms}
+        node.create_subscription(Header, "/sim/latency_trace", self.on_trace, QoSProfile(depth=100))
+        node.create_subscription(CameraInfo, "/camera/camera_info", self.on_camera_info, qos_profile_sensor_data)
+        node.create_subscription(BallState, "/ball_state", self.on_state, qos_profile_sensor_data)
+        if controller == "pid":
+            node.create_subscription(Float64MultiArray, "/forward_position_controller/commands", self.on_command, 10)
+        else:
+            node.create_subscription(JointTrajectory, "/scaled_joint_trajectory_controller/joint_trajectory",
+                                     self.on_command, 10)
+        node.create_subscription(Statistics, "/ball_tracker/statistics/full", self.on_statistics, 100)
+
+    @staticmethod
+    def stamp_ns(stamp) -> int:
+        return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+    def on_trace(self, msg, info):
+        if not self.recording:
+            return
+        if msg.frame_id == "command":
+            self.hardware_writes.append(info["source_timestamp"])
+        else:
+            self.trace[msg.frame_id][self.stamp_ns(msg.stamp)] = info["source_timestamp"]
+
+    def on_camera_info(self, msg, info):
+        if self.recording:
+            self.image_written[self.stamp_ns(msg.header.stamp)] = info["source_timestamp"]
+
+    def on_state(self, msg, info):
+        if self.recording:
+            self.state[self.stamp_ns(msg.header.stamp)] = (info["source_timestamp"], info["received_timestamp"])
+
+    def on_command(self, msg, info):
+        self.commands_seen += 1
+        if self.recording:
+            self.commands.append((info["source_timestamp"], info["received_timestamp"]))
+
+    def on_statistics(self, msg):
+        if not self.recording:
+            return
+        values = {s.name: s.value for s in msg.statistics}
+        if "stamp_s" in values:
+            self.tracker[int(round(values["stamp_s"] * 1e9))] = values
+
+    def chains(self):
+        """Per frame: {stage: ms} and the whole chain, for frames followed end to end."""
+        command_writes = [c[0] for c in self.commands]
+        hardware = sorted(self.hardware_writes)
+        rows = []
+        for stamp, captured in self.trace["capture"].items():
+            rendered = self.trace["rendered"].get(stamp)
+            image = self.image_written.get(stamp)
+            stats = self.tracker.get(stamp)
+            state = self.state.get(stamp)
+            if None in (rendered, image, stats, state):
+                continue
+            i = bisect.bisect_right(command_writes, state[0])
+            if i == len(command_writes):
+                continue
+            command_written, command_received = self.commands[i]
+            j = bisect.bisect_right(hardware, command_written)
+            if j == len(hardware):
+                continue
+            ms = 1e-6
+            row = {"render": (rendered - captured) * ms, "image publish": (image - rendered) * ms,
+                   "image transport": stats["transport_ms"],
+                   "decode": stats["take_ms"] + stats["queue_ms"] + stats["decode_ms"],
+                   "track": stats["total_ms"], "state publish": stats["publish_ms"],
+                   "controller": (command_written - state[0]) * ms,
+                   "command -> hw": (hardware[j] - command_written) * ms,
+                   REFERENCE[0]: (state[1] - state[0]) * ms,
+                   REFERENCE[1]: (command_received - command_written) * ms,
+                   "capture -> hardware write": (hardware[j] - captured) * ms,
+                   "capture -> /ball_state written": (state[0] - captured) * ms}
+            rows.append(row)
+        return rows
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rate", type=float, default=60.0, help="camera rate (Hz)")
+    parser.add_argument("--width", type=int, default=640)
+    parser.add_argument("--height", type=int, default=480)
+    parser.add_argument("--seconds", type=float, default=20.0)
+    parser.add_argument("--warmup-s", type=float, default=8.0,
+                        help="after the first joint command: homing and engaging before recording")
+    parser.add_argument("--busy", type=int, default=1, help="extra processes each keeping a core busy")
+    parser.add_argument("--controller", default="pid", choices=("pid", "mpc"))
+    parser.add_argument("--camera-thread", action="store_true",
+                        help="render in a thread of the manager (camera_process:=false) instead of a child process")
+    args = parser.parse_args()
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    lease = DomainLease()
+    env = ros_env(lease.domain_id)
+    load_before = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory() as workdir:
+        processes = start_graph(args, env, Path(workdir))
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=lease.domain_id)
+        node = rclpy.create_node("latency_budget_bench", context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        recorder = Recorder(node, args.controller)
+        try:
+            deadline = time.monotonic() + 120.0      # start-up on a busy machine
+            while recorder.commands_seen == 0 and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+            end = time.monotonic() + args.warmup_s
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.05)
+            recorder.recording = True
+            end = time.monotonic() + args.seconds
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.05)
+            load = os.getloadavg()[0]
+        finally:
+            executor.shutdown()
+            node.destroy_node()
+            context.try_shutdown()
+            for process in processes:
+                try:
+                    os.killpg(process.pid, signal.SIGINT)
+                except ProcessLookupError:
+                    pass
+            for process in processes:
+                try:
+                    process.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    os.killpg(process.pid, signal.SIGKILL)
+            lease.release()
+        rows = recorder.chains()
+    frames = len(recorder.trace["capture"])
+    where = "a thread of the manager" if args.camera_thread else "a child process"
+    print(f"camera {args.rate:.0f} Hz {args.width}x{args.height} rendered in {where}, {args.controller}, "
+          f"{args.seconds:.0f} s, "
+          f"{args.busy} busy process(es); load average {load_before:.1f} before, {load:.1f} at the end")
+    print(f"frames captured {frames}, rendered {len(recorder.trace['rendered'])}, tracked "
+          f"{len(recorder.tracker)}, /ball_state {len(recorder.state)}, followed to the hardware {len(rows)}")
+    if not rows:
+        print("no frame followed end to end (is the controller engaged? see the process logs)")
+        return 1
+    print(f"\n{'stage':<38}{'median ms':>10}{'p95 ms':>9}")
+    for stage in (*STAGES, "capture -> /ball_state written", "capture -> hardware write", *REFERENCE):
+        values = np.array([r[stage] for r in rows])
+        if stage in ("capture -> /ball_state written", REFERENCE[0]):
+            print("-" * 57)
+        print(f"{stage:<38}{np.median(values):>10.2f}{np.percentile(values, 95):>9.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,116 @@
+"""Real-time helpers for the calling thread (the room of ros2_control's realtime_tools).
+
+Used by the manager's loop thread, async controllers and hardware, and any node that runs
+a thread with a deadline. Linux applies scheduling policy, CPU affinity and timer slack
+per thread, so each helper changes the thread that calls it. None of them raises: each
+returns False (or a reason) when the system refuses, and the caller decides how loudly
+to say so (`configure_thread` logs one warning line).
+
+realtime_tools equivalents: `configure_sched_fifo` (ours: `set_realtime_priority`),
+`set_current_thread_affinity` (ours: `set_cpu_affinity`, taking a set of CPUs),
+`lock_memory`, `has_realtime_kernel`.
+"""
+from __future__ import annotations
+
+import ctypes
+import os
+from pathlib import Path
+from typing import Optional, Sequence
+
+_PR_SET_TIMERSLACK = 29
+_MCL_CURRENT, _MCL_FUTURE = 1, 2
+_CLOCK_MONOTONIC, _TIMER_ABSTIME = 1, 1
+
+
+def _libc():
+    return ctypes.CDLL(None, use_errno=True)
+
+
+class _Timespec(ctypes.Structure):
+    _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
+
+
+# ctypes.CDLL releases the interpreter lock around a call, ctypes.PyDLL keeps it
+_nanosleep_releasing = _libc().clock_nanosleep
+_nanosleep_holding = ctypes.PyDLL(None).clock_nanosleep
+for _f in (_nanosleep_releasing, _nanosleep_holding):
+    _f.argtypes = (ctypes.c_int, ctypes.c_int, ctypes.POINTER(_Timespec), ctypes.c_void_p)
+    _f.restype = ctypes.c_int
+
+
+def sleep_until(deadline: float, hold_interpreter: bool = False) -> None:
+    """Sleep until `deadline` on the time.monotonic() clock (CLOCK_MONOTONIC, absolute, so
+    the time spent computing the delay does not add up). hold_interpreter=True keeps
+    Python's interpreter lock while sleeping: no other Python thread runs meanwhile, and the
+    caller continues at the deadline without waiting for the lock (use for short tails only)."""
+    ns = int(deadline * 1e9)
+    ts = _Timespec(ns // 1_000_000_000, ns % 1_000_000_000)
+    call = _nanosleep_holding if hold_interpreter else _nanosleep_releasing
+    while call(_CLOCK_MONOTONIC, _TIMER_ABSTIME, ctypes.byref(ts), None) == 4:  # EINTR: a signal
+        pass
+
+
+def set_realtime_priority(priority: int) -> bool:
+    """SCHED_FIFO at `priority` (1..99) for the calling thread; False when refused
+    (needs CAP_SYS_NICE or an `rtprio` limit, see `ulimit -r`)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        return True
+    except (OSError, AttributeError, ValueError):
+        return False
+
+
+def set_cpu_affinity(cpus: Sequence[int]) -> bool:
+    """Pin the calling thread to `cpus`; False when refused or a CPU does not exist."""
+    try:
+        os.sched_setaffinity(0, set(cpus))
+        return True
+    except (OSError, AttributeError, ValueError):
+        return False
+
+
+def set_timer_slack_ns(ns: int) -> bool:
+    """prctl(PR_SET_TIMERSLACK) for the calling thread: how late the kernel may end its
+    sleeps to batch wake-ups (default 50 us; SCHED_FIFO threads get none anyway)."""
+    try:
+        return _libc().prctl(_PR_SET_TIMERSLACK, ctypes.c_ulong(ns), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def lock_memory() -> Optional[str]:
+    """mlockall(current and future pages) for the process, so no page fault delays a
+    cycle; None on success, else the reason (usually RLIMIT_MEMLOCK)."""
+    try:
+        libc = _libc()
+        if libc.mlockall(_MCL_CURRENT | _MCL_FUTURE) == 0:
+            return None
+        return os.strerror(ctypes.get_errno())
+    except (OSError, AttributeError) as error:
+        return str(error)
+
+
+def has_realtime_kernel() -> bool:
+    """True on a PREEMPT_RT kernel (/sys/kernel/realtime reads 1)."""
+    try:
+        return Path("/sys/kernel/realtime").read_text().strip() == "1"
+    except OSError:
+        return False
+
+
+def configure_thread(logger, what: str, priority: int = 0, cpus: Sequence[int] = (),
+                     timer_slack_ns: Optional[int] = None) -> bool:
+    """Apply priority (0: leave normal), affinity (empty: any CPU) and timer slack to the
+    calling thread; one warning line per refusal naming `what`. True when the SCHED_FIFO
+    priority was granted."""
+    if timer_slack_ns is not None:
+        set_timer_slack_ns(timer_slack_ns)
+    realtime = False
+    if priority > 0:
+        realtime = set_realtime_priority(priority)
+        if not realtime and logger is not None:
+            logger.warning(f"could not give {what} SCHED_FIFO priority {priority} (needs CAP_SYS_NICE or an "
+                           "rtprio limit); running at normal priority, expect more jitter under load")
+    if cpus and not set_cpu_affinity(cpus) and logger is not None:
+        logger.warning(f"could not pin {what} to CPUs {list(cpus)}; running on any CPU")
+    return realtime

@@ -1,0 +1,98 @@
+#!/usr/bin/env bash
+# The ball balanced inside the simulated arm's controller manager: MuJoCo UR arm in
+# ros2_control_node (scripts/sim_arm.sh) + ball_tracker on the simulated camera, and
+# ball_balance_controller (ball_balance_controllers/BallBalanceController, the learned policy by
+# default, config/ur_controllers_policy.yaml) active in the manager instead of
+# forward_position_controller (both claim the six joints' position commands). No balance node:
+# /ball_state goes straight into the manager. A monitor prints progress once a second.
+#
+#   scripts/sim_policy_in_manager.sh
+#   scripts/sim_policy_in_manager.sh --ball 0.08 -0.05 --domain full_dr --seed 2 --duration 30
+#   scripts/sim_policy_in_manager.sh --tilt-law mpc --params-file my_values.yaml   # another law, its values
+#   scripts/sim_policy_in_manager.sh --truth-fed           # no camera/tracker: /ball_state from truth
+#
+# Exit code: the monitor's (0: the ball stayed on the plate, 1: it dropped), 3 when a process of
+# the graph (or the controller's spawning) failed first, 2 for bad arguments.
+# See the controller: ros2py control list_controllers; its counters on
+# /controller_manager/introspection_data (ball_balance_controller.refused_*) and /diagnostics.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+if [[ -z "${BALL_BALANCE_ROOT:-}" ]]; then
+  # shellcheck disable=SC1091
+  source "$ROOT/env.sh"
+fi
+
+CONTROLLER=ball_balance_controller
+PARAMS_FILE="$ROOT/config/ur_controllers_policy.yaml"
+TILT_LAW=""
+BALL_X=0.08
+BALL_Y=-0.05
+DOMAIN=standard
+SEED=0
+DURATION=0
+OUT=""
+TRUTH_FED=0
+usage() { sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; }
+while (($#)); do
+  case "$1" in
+    --tilt-law) TILT_LAW="$2"; shift 2 ;;
+    --params-file) PARAMS_FILE="$(realpath "$2")"; shift 2 ;;
+    --ball) BALL_X="$2"; BALL_Y="$3"; shift 3 ;;
+    --domain) DOMAIN="$2"; shift 2 ;;
+    --seed) SEED="$2"; shift 2 ;;
+    --duration) DURATION="$2"; shift 2 ;;
+    --out) OUT="$2"; shift 2 ;;
+    --truth-fed) TRUTH_FED=1; shift ;;
+    -h|--help) usage; exit 0 ;;
+    *) echo "sim_policy_in_manager.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
+  esac
+done
+case "${TILT_LAW:-policy}" in
+  policy|pid|mpc) ;;
+  *) echo "sim_policy_in_manager.sh: --tilt-law must be policy, pid or mpc, got '$TILT_LAW'" >&2; exit 2 ;;
+esac
+
+SIM_CONFIG="$ROOT/config/sim.yaml"
+((TRUTH_FED)) && SIM_CONFIG="$ROOT/config/sim_truth_fed.yaml"
+LOGS="$(mktemp -d /tmp/ball_balance_graph.XXXXXX)"
+if [[ -n "$TILT_LAW" ]]; then
+  # the controller's node takes one parameter file: the chosen one with tilt_law replaced
+  python - "$PARAMS_FILE" "$CONTROLLER" "$TILT_LAW" >"$LOGS/controller_params.yaml" <<'EOF'
+import sys, yaml
+path, name, law = sys.argv[1:]
+values = yaml.safe_load(open(path))
+values[name]["ros__parameters"]["tilt_law"] = law
+yaml.safe_dump(values, sys.stdout)
+EOF
+  PARAMS_FILE="$LOGS/controller_params.yaml"
+fi
+source "$ROOT/scripts/lib/stop_all.sh"
+source "$ROOT/scripts/lib/graph.sh"
+on_stopped() { echo "sim_policy_in_manager.sh: stopped (logs in $LOGS)" >&2; }
+trap stop_all INT TERM EXIT
+
+echo "sim_policy_in_manager.sh: ${TILT_LAW:-policy} tilt law in the controller manager, domain $DOMAIN seed $SEED," \
+  "ball released at ($BALL_X, $BALL_Y) m; logs in $LOGS" >&2
+start sim "$ROOT/scripts/sim_arm.sh" --sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" \
+  --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y"
+if ((! TRUTH_FED)); then
+  start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true
+fi
+# load and configure (the model is checked here: a misfit fails with one line), then take over
+# the joints from forward_position_controller in one switch
+if ! spawner "$CONTROLLER" -t ball_balance_controllers/BallBalanceController -p "$PARAMS_FILE" --inactive \
+    --controller-manager-timeout 120 --service-call-timeout 60 >"$LOGS/spawner.log" 2>&1 \
+  || ! ros2py control switch_controllers --spin-time 30 --activate "$CONTROLLER" \
+    --deactivate forward_position_controller --strict >>"$LOGS/spawner.log" 2>&1; then
+  echo "sim_policy_in_manager.sh: could not start $CONTROLLER:" >&2
+  tail -n 5 "$LOGS/spawner.log" >&2
+  grep -h "$CONTROLLER" "$LOGS/sim.log" | tail -n 5 >&2 || true
+  exit 3
+fi
+echo "sim_policy_in_manager.sh: $CONTROLLER active (forward_position_controller inactive)" >&2
+
+MONITOR=(python -m ball_balance.benchmark.live --sim-time --duration "$DURATION"
+         --title "${TILT_LAW:-policy} in the manager, $DOMAIN")
+[[ -n "$OUT" ]] && MONITOR+=(--out "$OUT")
+run_monitor "${MONITOR[@]}"

@@ -1,0 +1,256 @@
+"""`ros2py bag record` and `bag play` on the simulated graph: what a ROS user needs from a bag.
+
+One recording of the simulated arm's camera (60 Hz, sensor-data QoS) and the tracker serves
+every check: frames kept, QoS and type hash of every topic, readable by rosbags and by the
+MCAP ROS 2 decoder, and replayed into a fresh tracker that answers as the live one did.
+"""
+import json
+import os
+import signal
+import struct
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+import yaml
+
+from harness import ROOT, executable, ros_env
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
+
+RECORD_S = 20.0
+REPLAY_S = 8.0
+DDS_PROFILE = ROOT / "config" / "dds" / "fastdds.xml"  # whole camera frames at full rate
+
+
+# A plain best-effort subscriber beside the recorder: which camera frames reach any reader.
+REFERENCE_READER = textwrap.dedent("""
+    import json, sys, time
+    import rclpy
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import CameraInfo, Image
+    rclpy.init()
+    node = rclpy.create_node('reference_reader')
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
+    got = {'frames': [], 'infos': []}
+    stamp = lambda m: m.header.stamp.sec * 1000000000 + m.header.stamp.nanosec
+    node.create_subscription(Image, '/camera/image_raw', lambda m: got['frames'].append(stamp(m)), qos)
+    node.create_subscription(CameraInfo, '/camera/camera_info', lambda m: got['infos'].append(stamp(m)), qos)
+    end = time.monotonic() + float(sys.argv[1])
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.1)
+    print(json.dumps(got))
+""")
+
+
+def env(ros_domain):
+    extra = {}
+    if DDS_PROFILE.exists():
+        extra = {"FASTRTPS_DEFAULT_PROFILES_FILE": str(DDS_PROFILE), "FASTDDS_DEFAULT_PROFILES_FILE": str(DDS_PROFILE)}
+    return ros_env(ros_domain, **extra)
+
+
+def header_stamp_ns(cdr: bytes) -> int:
+    """std_msgs/Header.stamp of a message that starts with a header (after the 4-byte CDR preamble)."""
+    sec, nanosec = struct.unpack_from("<iI", cdr, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+def read_topics(bag: Path, topics):
+    from mcap.reader import make_reader
+
+    found = {t: [] for t in topics}
+    with open(bag / f"{bag.name}_0.mcap", "rb") as stream:
+        for _, channel, message in make_reader(stream).iter_messages(topics=list(topics)):
+            found[channel.topic].append(message.data)
+    return found
+
+
+def record_the_simulated_graph(launcher, graph, ros_domain, tmp_path):
+    """A RECORD_S recording (-a) of the simulated arm with its camera and the tracker."""
+    from ball_tracker_msgs.msg import BallState
+    from rclpy.qos import qos_profile_sensor_data
+
+    environment = env(ros_domain)
+    sim = launcher.start([str(ROOT / "scripts" / "sim_arm.sh"), "--param", "camera_rate_hz=60",
+                          "--param", "image_reliable=false"], name="sim_arm", env=environment)
+    tracker = launcher.start([executable("ball_tracker"), "--ros-args", "--params-file",
+                              str(ROOT / "config" / "ball_tracker.yaml"), "-p", "use_sim_time:=true"],
+                             name="ball_tracker", env=environment)
+    graph.collect(BallState, "/ball_state", timeout=90, qos=qos_profile_sensor_data,
+                  predicate=lambda m: m.tracking_valid)
+    bag = tmp_path / "sim_bag"
+    reference = launcher.start([sys.executable, "-c", REFERENCE_READER, str(RECORD_S + 3)], name="reference",
+                               env=environment)
+    result = launcher.run([executable("ros2py"), "bag", "record", "-a", "-o", str(bag), "--duration", str(RECORD_S)],
+                          timeout=RECORD_S + 90, env=environment)
+    assert result.returncode == 0, result.stderr
+    assert reference.wait(timeout=60) == 0, reference.output()
+    received = json.loads(reference.output().strip().splitlines()[-1])
+    return bag, environment, (sim, tracker), received
+
+
+def stop(process) -> None:
+    os.killpg(process.popen.pid, signal.SIGINT)
+    try:
+        process.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.popen.pid, signal.SIGKILL)
+        process.wait(timeout=5)
+
+
+def test_a_recording_of_the_simulated_graph_keeps_its_frames_reads_everywhere_and_replays(
+        launcher, graph, ros_domain, tmp_path):
+    bag, environment, live, received = record_the_simulated_graph(launcher, graph, ros_domain, tmp_path)
+    check_frames_qos_and_type_hashes(bag, received)
+    check_readable_by_rosbags_and_the_mcap_ros2_decoder(bag)
+    for process in live:  # the live graph is gone: only the bag speaks now
+        stop(process)
+    check_replay_drives_a_fresh_tracker_to_the_recorded_ball_state(bag, environment, launcher, graph)
+
+
+def check_frames_qos_and_type_hashes(bag: Path, received: dict) -> None:
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["version"] == 9 and info["storage_identifier"] == "mcap" and info["ros_distro"] == "jazzy"
+    topics = {t["topic_metadata"]["name"]: t for t in info["topics_with_message_count"]}
+    assert {"/camera/image_raw", "/camera/camera_info", "/ball_state", "/joint_states", "/clock"} <= set(topics)
+    for name, entry in topics.items():
+        meta = entry["topic_metadata"]
+        assert meta["type_description_hash"].startswith("RIHS01_"), name
+        assert meta["offered_qos_profiles"], name
+        assert all(p["reliability"] in ("reliable", "best_effort") for p in meta["offered_qos_profiles"]), name
+    assert topics["/camera/image_raw"]["topic_metadata"]["offered_qos_profiles"][0]["reliability"] == "best_effort"
+
+    # Every camera frame comes with a camera_info of the same stamp: the frames published
+    # while both were recorded are the camera_info stamps between the first and the last frame.
+    data = read_topics(bag, ["/camera/image_raw", "/camera/camera_info"])
+    recorded = kept_frames({header_stamp_ns(d) for d in data["/camera/image_raw"]},
+                           [header_stamp_ns(d) for d in data["/camera/camera_info"]])
+    reference = kept_frames(set(received["frames"]), received["infos"])
+    print(f"camera frames kept: bag {recorded[0]} of {recorded[1]}, "
+          f"a plain subscriber beside it {reference[0]} of {reference[1]}")
+    assert recorded[1] >= 60, recorded  # the sim runs below real time on a loaded machine
+    # On an overloaded machine every best-effort reader loses frames alike (a plain rclpy
+    # subscriber lost 11 of 385 where the recorder lost 13 at load 10-15): the recorder must
+    # keep 99 % of what the camera published, or be no worse than that plain subscriber.
+    fraction = recorded[0] / recorded[1]
+    assert fraction >= 0.99 or fraction >= reference[0] / reference[1] - 0.01, (recorded, reference)
+
+
+def kept_frames(frames: set, infos: list) -> tuple:
+    """(frames kept, frames published) between the first and the last frame received."""
+    published = [s for s in infos if min(frames) <= s <= max(frames)]
+    return sum(1 for s in published if s in frames), len(published)
+
+
+def check_readable_by_rosbags_and_the_mcap_ros2_decoder(bag: Path) -> None:
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(bag) as reader:
+        connections = {c.topic: c for c in reader.connections}
+        assert connections["/camera/image_raw"].msgtype == "sensor_msgs/msg/Image"
+        assert connections["/camera/image_raw"].ext.offered_qos_profiles
+        image = next(store.deserialize_cdr(raw, c.msgtype) for c, _, raw in
+                     reader.messages(connections=[connections["/camera/image_raw"]]))
+        assert (image.width, image.height, image.encoding) == (640, 480, "bgr8")
+        assert len(image.data) == 640 * 480 * 3
+    seen = {}
+    with open(bag / f"{bag.name}_0.mcap", "rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for _, channel, _, decoded in reader.iter_decoded_messages(topics=["/ball_state", "/joint_states"]):
+            seen.setdefault(channel.topic, decoded)
+            if len(seen) == 2:
+                break
+    assert seen["/ball_state"].header.frame_id == "plate_center"
+    assert len(seen["/joint_states"].name) == 6
+
+
+def check_replay_drives_a_fresh_tracker_to_the_recorded_ball_state(bag: Path, environment, launcher, graph) -> None:
+    from ball_tracker_msgs.msg import BallState
+    from rclpy.qos import qos_profile_sensor_data
+    from rclpy.serialization import deserialize_message
+
+    recorded = {header_stamp_ns(d): deserialize_message(d, BallState)
+                for d in read_topics(bag, ["/ball_state"])["/ball_state"]}
+    tracker = launcher.start([executable("ball_tracker"), "--ros-args", "--params-file",
+                              str(ROOT / "config" / "ball_tracker.yaml"), "-p", "use_sim_time:=true"],
+                             name="replay_tracker", env=environment)
+    # the tracker subscribes to the images once it sees their publisher (the player's, within
+    # its --delay): wait for its node
+    graph.spin_until(lambda: "ball_tracker" in graph.node.get_node_names(), 60, "the replay tracker")
+    replayed = []
+    graph.node.create_subscription(BallState, "/ball_state", replayed.append, qos_profile_sensor_data)
+    player = launcher.start([executable("ros2py"), "bag", "play", str(bag), "--topics", "/camera/image_raw",
+                             "/camera/camera_info", "/clock", "--delay", "3", "--playback-duration", str(REPLAY_S)],
+                            name="bag_play", env=environment)
+    graph.spin_until(lambda: not player.running, REPLAY_S + 60, "bag play to finish")
+    assert player.wait(timeout=5) == 0, player.output()
+    graph.spin_until(lambda: len(replayed) >= 10, 20, "replayed ball states")
+    assert tracker.running, tracker.output()
+    matched = [(recorded[header_stamp_ns_of(m)], m) for m in replayed if header_stamp_ns_of(m) in recorded]
+    matched = [(a, b) for a, b in matched if a.tracking_valid and b.tracking_valid][5:]  # the filter settles
+    assert len(matched) >= 20, f"{len(matched)} replayed ball states matched recorded ones of {len(replayed)}"
+    worst = max(max(abs(a.x - b.x), abs(a.y - b.y)) for a, b in matched)
+    assert worst <= 0.001, f"replayed /ball_state differs by up to {worst * 1000:.2f} mm"
+
+
+def header_stamp_ns_of(msg) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+TALKER = textwrap.dedent("""
+    import sys
+    import rclpy
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import String
+    rclpy.init()
+    node = rclpy.create_node('talker_' + sys.argv[1])
+    pub = node.create_publisher(String, '/mixed', QoSProfile(depth=10, reliability=ReliabilityPolicy[sys.argv[1]]))
+    node.create_timer(0.05, lambda: pub.publish(String(data=sys.argv[1])))
+    rclpy.spin(node)
+""")
+
+
+def test_record_rematches_when_a_best_effort_publisher_joins_a_reliable_topic(launcher, graph, tmp_path):
+    from std_msgs.msg import String
+
+    launcher.start([sys.executable, "-c", TALKER, "RELIABLE"], name="reliable_talker")
+    graph.wait_for_topic("/mixed", timeout=30)
+    bag = tmp_path / "mixed"
+    recorder = launcher.start([executable("ros2py"), "bag", "record", "-o", str(bag), "/mixed", "/not_published"],
+                              name="record")
+    # the second publisher joins only once the recorder has matched the first (on a loaded
+    # machine its discovery of the first can otherwise take long enough to see both at once)
+    graph.spin_until(lambda: "Subscribed to topic '/mixed' (reliable/volatile)" in recorder.output(), 30,
+                     "the recorder to subscribe")
+    graph.collect(String, "/mixed", timeout=30)
+    launcher.start([sys.executable, "-c", TALKER, "BEST_EFFORT"], name="best_effort_talker")
+    graph.spin_until(lambda: "re-matched the QoS of /mixed: reliable/volatile -> best_effort/volatile"
+                     in recorder.output(), 30, "the recorder to re-match")
+    graph.collect(String, "/mixed", timeout=30, qos=_best_effort(), predicate=lambda m: m.data == "BEST_EFFORT")
+
+    def progress_lines_since_rematch() -> int:
+        return recorder.output().split("re-matched the QoS", 1)[-1].count(" msgs in ")
+
+    graph.spin_until(lambda: progress_lines_since_rematch() >= 2, 40, "the recorder's progress (every 5 s)")
+    stop(recorder)  # SIGINT: the recorder finishes the file
+    assert recorder.wait(timeout=5) == 0, recorder.output()
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    (topic,) = info["topics_with_message_count"]  # /not_published has no publisher: skipped
+    meta = topic["topic_metadata"]
+    assert meta["name"] == "/mixed" and meta["type_description_hash"].startswith("RIHS01_")
+    assert sorted(p["reliability"] for p in meta["offered_qos_profiles"]) == ["best_effort", "reliable"]
+    texts = {d[-12:] for d in read_topics(bag, ["/mixed"])["/mixed"]}
+    assert any(b"BEST_EFFORT" in t for t in texts) and any(b"RELIABLE" in t for t in texts)
+
+
+def _best_effort():
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    return QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)

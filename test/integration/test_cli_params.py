@@ -1,0 +1,48 @@
+"""Parameters given by name mistakes: unknown keys in a file are reported, undeclared names named."""
+import time
+
+import pytest
+
+from harness import executable
+
+pytestmark = pytest.mark.integration
+
+TYPO_FILE = "ball_balance_visualizer:\n  ros__parameters:\n    rate_hzz: 5.0\n"
+
+
+def wait_for_output(process, text, timeout=30.0):
+    deadline = time.monotonic() + timeout
+    while text not in process.output():
+        assert process.running or text in process.output(), process.output()
+        assert time.monotonic() < deadline, f"no '{text}' within {timeout} s:\n{process.output()}"
+        time.sleep(0.1)
+
+
+def test_a_typo_in_a_parameter_file_is_warned_about_naming_the_key(launcher, tmp_path):
+    params = tmp_path / "vis.yaml"
+    params.write_text(TYPO_FILE)
+    node = launcher.start([executable("ball_balance_visualizer"), "--ros-args", "--params-file", str(params)])
+    wait_for_output(node, "unknown parameter(s) given to /ball_balance_visualizer: rate_hzz (did you mean rate_hz?)")
+    assert node.running
+
+
+def test_unknown_parameters_error_refuses_to_start_with_one_line(launcher, tmp_path):
+    params = tmp_path / "vis.yaml"
+    params.write_text(TYPO_FILE)
+    result = launcher.run([executable("ball_balance_visualizer"), "--ros-args", "--params-file", str(params),
+                           "-p", "unknown_parameters:=error"], timeout=60)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("ball_balance_visualizer: cannot start: "), result.stderr
+    assert "rate_hzz" in lines[0]
+
+
+def test_param_set_of_an_undeclared_name_names_it(launcher, graph):
+    launcher.start([executable("ball_balance_visualizer")])
+    graph.wait_for_service("/ball_balance_visualizer/set_parameters", timeout=30)
+    result = launcher.run([executable("ros2py"), "param", "set", "/ball_balance_visualizer", "rate_hzz", "5.0"],
+                          timeout=40)
+    assert result.returncode == 1 and result.stdout == ""
+    assert result.stderr.strip() == (
+        "ros2py: Setting parameter failed: 'rate_hzz' is not declared by /ball_balance_visualizer "
+        "(did you mean rate_hz? `ros2py param list /ball_balance_visualizer` shows its parameters)")

@@ -1,0 +1,27 @@
+"""closed_loop_bench's lists: comma-separated names, groups expanded, unknown names refused
+with one line; the controller list is whatever the control pipeline declares."""
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+PATH = Path(__file__).resolve().parents[3] / "benchmarks" / "closed_loop_bench.py"
+spec = importlib.util.spec_from_file_location("closed_loop_bench", PATH)
+bench = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(bench)
+
+
+def test_names_are_comma_separated_and_groups_expand():
+    assert bench.names("pid,mpc policy", None, "controller") == ["pid", "mpc", "policy"]
+    domains = bench.names("standard,harsh", set(bench.DOMAINS), "domain", bench.DOMAIN_GROUPS)
+    assert domains[0] == "standard" and "extreme_dr" in domains and len(domains) == len(set(domains))
+
+
+def test_unknown_names_are_refused_naming_them():
+    with pytest.raises(SystemExit, match="unknown domain 'moon'"):
+        bench.names("standard,moon", set(bench.DOMAINS), "domain", bench.DOMAIN_GROUPS)
+
+
+def test_the_controller_list_comes_from_the_pipeline():
+    known = bench.known_controllers()
+    assert known is None or {"pid", "mpc"} <= known

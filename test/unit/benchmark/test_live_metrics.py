@@ -1,0 +1,23 @@
+"""Live-graph metrics: time the controller is not engaged (no /ball_reference coming) counts
+as error against the last reference, and shows in engaged_frac."""
+import numpy as np
+
+from ball_balance.benchmark.live import LiveRecorder
+
+
+def recorder(ref_times):
+    rec = LiveRecorder.__new__(LiveRecorder)    # no ROS node: feed the lists directly
+    t = np.arange(0.0, 4.0, 0.01)
+    rec.truth = [(ti, 0.02, 0.0) for ti in t]   # ball 20 mm off the target throughout
+    rec.ref = [(ti, 0.0, 0.0) for ti in ref_times]
+    rec.cmd, rec.est, rec.latency, rec.dropped, rec.t0 = [], [], [], False, 0.0
+    return rec
+
+
+def test_a_pause_in_the_reference_counts_as_not_engaged_and_as_error():
+    steady = np.arange(0.5, 4.0, 0.02)
+    gap = steady[(steady < 2.0) | (steady > 3.0)]    # controller went home for 1 s
+    full, paused = recorder(steady).metrics(), recorder(gap).metrics()
+    assert full["engaged_frac"] == 1.0
+    assert 0.6 < paused["engaged_frac"] < 0.75
+    assert paused["rmse_m"] == full["rmse_m"] == 0.02

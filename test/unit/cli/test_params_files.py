@@ -1,0 +1,36 @@
+"""Parameter files checked before a node starts, and unknown parameter names named."""
+import pytest
+
+from ball_balance.ros.params_files import ParamsFileError, check_params_files, params_files_in
+from controller_manager_py.parameters import describe_unknown, unknown_parameter_names
+
+
+def test_only_params_files_inside_ros_args_are_checked():
+    argv = ["--params-file", "a.yaml", "--ros-args", "-p", "x:=1", "--params-file", "b.yaml", "--",
+            "--params-file", "c.yaml", "--ros-args", "--params-file", "d.yaml"]
+    assert params_files_in(argv) == ["b.yaml", "d.yaml"]
+
+
+@pytest.mark.parametrize("text, error", [
+    ("node:\n  ros__parameters:\n    gain: [1\n", "not valid YAML"),
+    ("- a list\n", "must map node names"),
+])
+def test_a_malformed_params_file_is_one_line_naming_the_file(tmp_path, text, error):
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(ParamsFileError, match=error) as raised:
+        check_params_files(["--ros-args", "--params-file", str(path)])
+    assert "\n" not in str(raised.value) and str(path) in str(raised.value)
+
+
+def test_a_missing_params_file_names_the_file(tmp_path):
+    with pytest.raises(ParamsFileError, match="cannot read parameter file .*nope.yaml"):
+        check_params_files(["--ros-args", "--params-file", str(tmp_path / "nope.yaml")])
+
+
+def test_unknown_parameter_names_suggest_the_closest_declared_one():
+    declared = ["kp", "kd", "ki", "max_tilt_rad", "use_sim_time"]
+    unknown = unknown_parameter_names(["kp", "kp_typo", "max_tilt", "zzz"], declared)
+    assert unknown == ["kp_typo", "max_tilt", "zzz"]
+    assert describe_unknown(unknown, declared) == \
+        "kp_typo (did you mean kp?), max_tilt (did you mean max_tilt_rad?), zzz"

@@ -1,0 +1,131 @@
+"""The ball balance controller inside the controller manager (mock UR arm with the plate, synthetic
+time, no ROS): the learned policy tilts the plate against the ball through the six position
+command interfaces; bad ball states and a model that does not fit never reach the arm."""
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from ball_balance.control.safety import Mode
+from ball_balance.controllers.ball_balance_controller import NODE_ONLY, BallSample
+from ball_balance.robot import JOINT_NAMES, robot_description
+from controller_manager_py.manager.controller_manager import ControllerError, ControllerManager
+
+ROOT = Path(__file__).resolve().parents[3]
+PLUGIN = "ball_balance_controllers/BallBalanceController"
+MANAGER_HZ, CONTROL_HZ = 500, 50
+COMMANDS = [f"{j}/position" for j in JOINT_NAMES]
+
+
+def section(path: str, name: str) -> dict:
+    values = yaml.safe_load((ROOT / path).read_text())[name]["ros__parameters"]
+    return {k: v for k, v in values.items() if k not in NODE_ONLY}
+
+
+def policy_values(**kw) -> dict:
+    """What config/ur_controllers_policy.yaml runs (the policy's trained values), synchronous."""
+    values = section("config/ur_controllers_policy.yaml", "ball_balance_controller")
+    values.update(is_async=False)
+    values.update(kw)
+    return values
+
+
+def spawn(**kw):
+    cm = ControllerManager(MANAGER_HZ)
+    cm.load_robot_description(robot_description("mock"))
+    cm.load_controller("ball", PLUGIN, policy_values(**kw))
+    cm.configure_controller("ball")
+    cm.switch_controller(["ball"], [], 2)
+    return cm, cm.controllers["ball"].c
+
+
+class Run:
+    """Synthetic time; a fresh ball state offered before every control step (as a 50 Hz camera)."""
+
+    def __init__(self, cm, ctrl):
+        self.cm, self.ctrl, self.t = cm, ctrl, 0.0
+
+    def run(self, seconds: float, ball=None):
+        for _ in range(int(round(seconds * MANAGER_HZ))):
+            self.t += 1.0 / MANAGER_HZ
+            if ball is not None and int(round(self.t * MANAGER_HZ)) % (MANAGER_HZ // CONTROL_HZ) == 0:
+                self.ctrl.offer_ball_state(BallSample(*ball, self.t), self.t)
+            self.cm.cycle(self.t, 1.0 / MANAGER_HZ)
+
+    def commands(self):
+        return np.array([self.cm.rm.command_interfaces[name].value for name in COMMANDS])
+
+
+def test_the_policy_tilts_the_plate_to_roll_the_ball_back_to_the_centre():
+    cm, ctrl = spawn()
+    run = Run(cm, ctrl)
+    run.run(1.0)                                         # homing, then ready: no ball yet
+    assert ctrl.mode == Mode.READY
+    run.run(1.0, ball=(0.06, -0.04, 0.0, 0.0, True, 4))   # the ball sits off centre, +x and -y
+    assert ctrl.mode == Mode.ENGAGED
+    u_x, u_y = ctrl.kinematics.tilt_of(run.commands())
+    # positive u drives the ball toward negative x / y: the plate leans the ball back to the centre
+    assert u_x > 0.005 and u_y < -0.003
+    assert ctrl.pipeline.law.inferences > 0 and ctrl.pipeline.refused_count == 0
+
+
+def test_a_non_finite_ball_state_never_reaches_the_arm_it_is_held_and_counted():
+    cm, ctrl = spawn()
+    run = Run(cm, ctrl)
+    run.run(1.0)
+    run.run(1.0, ball=(0.06, -0.04, 0.0, 0.0, True, 4))
+    held = run.commands()
+    run.run(0.1, ball=(math.nan, 0.0, 0.0, 0.0, True, 4))   # 5 NaN states in a row
+    run.run(0.1, ball=(0.0, 0.0, math.inf, 0.0, True, 4))
+    assert ctrl.refusals["non_finite"] == 10 and ctrl.refused_ball_states == 10
+    assert ctrl._ball.x == pytest.approx(0.06)              # the good state is still the one in use
+    commands = run.commands()
+    assert np.all(np.isfinite(commands))
+    assert np.max(np.abs(commands - held)) < 0.1            # the arm stayed where it was (shaping steps)
+    counters = dict((name, getter()) for name, getter in ctrl.introspection)
+    assert counters["refused_ball_states_non_finite"] == 10.0   # reaches /diagnostics (refused_*)
+    run.run(1.0)                                            # no state at all: holding, then home
+    assert ctrl.mode in (Mode.HOLDING, Mode.RETURNING, Mode.READY)
+    assert np.all(np.isfinite(run.commands()))
+
+
+def test_reactivation_starts_over_from_homing_at_the_measured_joints():
+    cm, ctrl = spawn()
+    run = Run(cm, ctrl)
+    run.run(1.0)
+    run.run(1.0, ball=(0.06, -0.04, 0.0, 0.0, True, 4))
+    cm.switch_controller([], ["ball"], 2)
+    cm.switch_controller(["ball"], [], 2)
+    run.run(0.02)
+    assert ctrl.mode == Mode.HOMING
+
+
+@pytest.mark.parametrize("law", ["pid", "mpc"])
+def test_the_pid_and_the_mpc_run_in_the_manager_as_well(law):
+    cm, ctrl = spawn(tilt_law=law)
+    run = Run(cm, ctrl)
+    run.run(1.0)
+    run.run(1.0, ball=(0.06, -0.04, 0.0, 0.0, True, 4))
+    assert ctrl.mode == Mode.ENGAGED
+    u_x, u_y = ctrl.kinematics.tilt_of(run.commands())
+    assert u_x > 0.0 and u_y < 0.0
+
+
+def test_a_model_trained_on_another_pid_is_refused_at_configure_with_one_line(caplog):
+    cm = ControllerManager(MANAGER_HZ)
+    cm.load_robot_description(robot_description("mock"))
+    cm.load_controller("ball", PLUGIN, policy_values(kp=1.0))
+    with pytest.raises(ControllerError, match="on_configure failed"):
+        cm.configure_controller("ball")
+    assert any("trained on a different PID (kp" in r.getMessage() for r in caplog.records)
+
+
+def test_a_robot_description_without_the_plate_is_refused_at_configure(caplog):
+    cm = ControllerManager(MANAGER_HZ)
+    cm.load_robot_description((ROOT / "config" / "mock_ur.urdf").read_text())
+    cm.load_controller("ball", PLUGIN, policy_values())
+    with pytest.raises(ControllerError):
+        cm.configure_controller("ball")
+    assert any("plate_center" in r.getMessage() for r in caplog.records)

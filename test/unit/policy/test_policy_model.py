@@ -1,0 +1,131 @@
+"""The shipped policy model and what the runtime accepts: exported == trained, metadata
+complete, models that do not fit refused with one line."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ball_balance.control import config as control_config
+from ball_balance.control.references import RefSample
+from ball_balance.policy.observation import HISTORY, ObservationBuilder, axis_size, flat_names
+from ball_balance.policy.tilt_law import ACTION_KIND, base_pid_mismatch, load_tilt_law
+from controller_manager_py.controllers.policy_model import PolicyModelError, PolicyRunner, read_model
+from controller_manager_py.parameters import validate
+
+ROOT = Path(__file__).resolve().parents[3]
+DATA = Path(__file__).resolve().parent / "data"
+SHIPPED = ROOT / "config" / "policies" / "residual_tilt.onnx"   # the file in the repository
+
+
+def policy_values(**overrides):
+    import yaml
+
+    values = yaml.safe_load((ROOT / "config" / "policy.yaml").read_text())["ball_balance_policy"]["ros__parameters"]
+    values.update(overrides)
+    return dict(validate(control_config.POLICY_SCHEMA, values))
+
+
+def load_ball_runner(path):
+    return PolicyRunner.load(path, observation_names=flat_names(), action_kind=ACTION_KIND, action_count=2,
+                             rate_hz=50.0)
+
+
+def test_exported_model_gives_the_training_time_actions_on_recorded_observations():
+    recorded = np.load(SHIPPED.with_suffix(".check.npz"))
+    runner = load_ball_runner(SHIPPED)
+    got = np.array([runner.infer(obs) for obs in recorded["observations"]])
+    assert got.shape == recorded["actions"].shape
+    np.testing.assert_allclose(got, recorded["actions"], atol=1e-5, rtol=0)
+
+
+def test_shipped_model_metadata_says_how_it_was_made_and_how_to_run_it():
+    _, md = read_model(SHIPPED)
+    assert md.observation.names == flat_names() and md.observation.history == HISTORY
+    assert len(md.observation.mean) == len(md.observation.std) == 2 * axis_size()
+    assert md.action.kind == ACTION_KIND and md.action.size == 2
+    assert all(s > 0 for s in md.action.scale) and md.action.low == [-0.15, -0.15]
+    assert md.rate_hz == 50.0
+    training = md.training
+    for key in ("seed", "commit", "domains", "method", "wall_time_s", "base_pid"):
+        assert key in training, key
+    assert training["domains"]["latency_s"][1] >= 0.2 and training["domains"]["gravity_scale"][0] <= 0.5
+    assert SHIPPED.stat().st_size < 100_000
+
+
+def test_configured_pid_matches_the_one_the_model_was_trained_on():
+    _, md = read_model(SHIPPED)
+    assert base_pid_mismatch(md.training, policy_values()) is None
+    law = load_tilt_law(policy_values())
+    assert law.runner.where.endswith("residual_tilt.onnx")
+
+
+def test_model_trained_on_another_pid_is_refused():
+    with pytest.raises(PolicyModelError, match="trained on a different PID .*kp"):
+        load_tilt_law(policy_values(kp=3.0))
+
+
+def test_model_at_another_rate_is_refused():
+    with pytest.raises(PolicyModelError, match="trained at 50 Hz, configured at 100 Hz"):
+        load_tilt_law(policy_values(control_rate_hz=100.0))
+
+
+def test_model_whose_graph_width_differs_from_its_metadata_is_refused():
+    with pytest.raises(PolicyModelError, match="input width 70 but the metadata names 72"):
+        read_model(DATA / "wrong_width.onnx")
+
+
+def test_model_with_another_observation_layout_is_refused():
+    with pytest.raises(PolicyModelError, match="takes 68 observations, this controller gives 72"):
+        load_ball_runner(DATA / "other_layout.onnx")
+
+
+def test_model_without_metadata_is_refused():
+    with pytest.raises(PolicyModelError, match="metadata lacks"):
+        load_ball_runner(DATA / "no_metadata.onnx")
+
+
+def test_missing_model_file_is_refused_with_its_path(tmp_path):
+    with pytest.raises(PolicyModelError, match="no such file"):
+        load_ball_runner(tmp_path / "absent.onnx")
+
+
+def test_model_with_another_action_kind_is_refused():
+    with pytest.raises(PolicyModelError, match="action kind 'absolute'"):
+        PolicyRunner.load(DATA / "absolute_joint.onnx", action_kind=ACTION_KIND)
+
+
+def _ref():
+    return RefSample(np.zeros(2), np.zeros(2), np.zeros(2))
+
+
+def test_non_finite_observation_holds_the_last_tilt_and_is_counted():
+    law = load_tilt_law(policy_values())
+    for _ in range(60):
+        u = law.step((0.03, -0.02), (0.0, 0.0), _ref(), 0.02, 0.03)
+    held = law.held_count
+    for bad in (np.nan, np.inf):
+        assert law.step((bad, 0.0), (0.0, 0.0), _ref(), 0.02, 0.03) == u
+    assert law.step((0.0, 0.0), (0.0, 0.0), _ref(), 0.02, np.nan) == u
+    assert law.held_count == held + 3
+
+
+def test_correction_blends_in_after_engagement():
+    law = load_tilt_law(policy_values(policy_blend_s=1.0))
+    law.step((0.05, 0.05), (0.0, 0.0), _ref(), 0.02, 0.03)
+    assert law.blend == pytest.approx(0.02)
+    first = np.abs(law.last_correction).max()
+    assert first <= 0.02 * 0.1 + 1e-12
+    law.reset()
+    assert law.blend == 0.0
+
+
+def test_observation_layout_puts_the_newest_sample_first():
+    b = ObservationBuilder(1)
+    b.record_tilt(np.array([[0.01, 0.02]]))
+    b.build(np.array([[0.1, 0.2]]), np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2)), 0.0)
+    obs = b.build(np.array([[0.3, 0.4]]), np.array([[5.0, 6.0]]), np.zeros((1, 2)), np.zeros((1, 2)), 0.04)[0]
+    named = dict(zip(flat_names(), obs))
+    assert len(obs) == len(flat_names())
+    assert named["x.error_m[0]"] == 0.3 and named["x.error_m[1]"] == 0.1 and named["y.error_m[0]"] == 0.4
+    assert named["x.tilt_rad[0]"] == 0.01 and named["y.tilt_rad[0]"] == 0.02
+    assert named["y.vel_error_m_s"] == 6.0 and named["x.age_s"] == 0.04
