@@ -6,7 +6,8 @@ States (`Mode`):
   ENGAGED    controlling the ball.
   HOLDING    ENGAGED but the state went unhealthy, for at most `grace_s`: a state that is
              only late is still used through its prediction; anything else holds the last tilt.
-  RETURNING  unhealthy beyond the grace period: go back to home smoothly, then READY.
+  RETURNING  unhealthy beyond the grace period: go back to home smoothly, then READY; a state
+             healthy again for `recover_s` on the way re-engages from where the plate is.
 
 A ball state is healthy when tracking_valid, its plate pose is good enough, all numbers are
 finite, the ball is on the plate, and its age is within stale_after_s. "Good enough": when
@@ -115,7 +116,19 @@ class SafetySupervisor:
         ok, why = self.healthy(obs)
         self.reset_requested = False
         mode = self.mode
-        if mode in (Mode.HOMING, Mode.RETURNING):
+        if mode == Mode.RETURNING and ok:
+            # the ball is seen again on its way home (a stall, a hand lifted): take it up from
+            # where the plate is once the state has stayed healthy for recover_s, instead of
+            # levelling a plate that still carries the ball
+            if self._healthy_since is None:
+                self._healthy_since = now_s
+            if now_s - self._healthy_since >= self.cfg.recover_s:
+                self._go(Mode.ENGAGED, f"re-acquired while returning (healthy for {now_s - self._healthy_since:.2f} s)")
+                self.reset_requested = True
+            elif at_home:
+                self._go(Mode.READY, "at home")
+        elif mode in (Mode.HOMING, Mode.RETURNING):
+            self._healthy_since = None
             if at_home:
                 self._go(Mode.READY, "at home")
         elif mode == Mode.READY:

@@ -77,9 +77,20 @@ def test_loss_beyond_grace_returns_home_and_resets_integrators():
     s.update(1.0, obs(markers_found=0), False)
     assert s.update(1.31, obs(markers_found=0), False) == Mode.RETURNING
     assert s.reset_requested
-    assert s.update(1.4, obs(), False) == Mode.RETURNING   # not until home
-    assert s.update(2.0, obs(), True) == Mode.READY
+    assert s.update(1.4, obs(markers_found=0), False) == Mode.RETURNING
+    assert s.update(2.0, obs(markers_found=0), True) == Mode.READY
     assert s.update(2.1, obs(), True) == Mode.ENGAGED
+
+
+def test_a_ball_seen_again_on_the_way_home_is_taken_up_after_a_healthy_run():
+    s = _engaged()
+    s.update(1.0, obs(markers_found=0), False)
+    assert s.update(1.31, obs(markers_found=0), False) == Mode.RETURNING
+    assert s.update(1.40, obs(), False) == Mode.RETURNING     # healthy, not yet for recover_s
+    assert s.update(1.45, obs(age_s=0.4), False) == Mode.RETURNING   # a break restarts the run
+    assert s.update(1.50, obs(), False) == Mode.RETURNING
+    assert s.update(1.61, obs(), False) == Mode.ENGAGED
+    assert s.reset_requested and "re-acquired" in s.reason
 
 
 def test_stale_nan_and_off_plate_states_are_unhealthy():
