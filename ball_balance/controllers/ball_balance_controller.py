@@ -8,12 +8,29 @@ targets. No /joint_states round trip and no separate node between the ball and t
 
 Parameters: every parameter of the balance nodes (ball_balance/control/config.py, the one
 schema: reference, PID gains, MPC weights, policy model, safety, shaping) except the nodes'
-own timing ones: the control rate is this controller's `update_rate` (0: the manager's), a
-step runs every update, and joint states never go missing here. Run it as an async
-controller (`is_async: true`): the manager's loop hands the step to a worker thread and never
-waits for the policy's inference or the MPC's solve. The pipeline (and the policy model) is
-built at configure, where a model that does not fit is refused with one line; it starts over
-from the measured joints on every activation and when the clock goes back (a simulation reset).
+own triggering (control_trigger, peer_timeout_s: joint states never go missing here), plus
+`async_step`. Two rates:
+  - `control_rate_hz` (50): a pipeline step (safety, prediction, tilt law, IK, shaping) every
+    1/control_rate_hz of the manager's time, as the nodes' timer; the policy's history and
+    the shaping's step limit are per step, and the model's rate is checked against it.
+  - `update_rate` (0: the manager's, 500 Hz): every update writes the newest step's joint
+    target to the six command interfaces, moved towards it within the URDF joint velocity
+    limits for that update's period (manager/joint_limits.JointLimiter). Why every update: the
+    manager's limits stage writes the saturated value back into the command interface (as
+    ros2_control's does), so a target written only once per step was cut to one manager
+    cycle's worth of joint motion (3.14 rad/s x 2 ms = 6.3 mrad of a step of up to 20 mrad)
+    and the rest was lost; the plate lagged the pipeline's commands and the ball swung
+    (tilt-rate RMS 5.2 rad/s against 0.5 for the same loop written every cycle, lock-stepped).
+    The nodes never met it: forward_position_controller writes its held target every cycle.
+With `async_step` (default) each step runs in a worker thread (manager/async_handler): update()
+hands over the measured joints and the newest ball state and never waits for the policy's
+inference or the MPC's solve; the step's target is written from the first update after it is
+ready. A step due while the previous one still runs is missed (`missed_steps`, the target is
+kept). Leave the manager's `is_async` false: update() itself is a few microseconds.
+The pipeline (and the policy model) is built at configure, where a model that does not fit
+(or an update rate that is not a multiple of control_rate_hz) is refused with one line; it
+starts over from the measured joints on every activation and when the clock goes back (a
+simulation reset).
 
 Inputs (controller node, non-real-time executor):
   /ball_state  ball_tracker_msgs/BallState (sensor-data QoS, newest only). Each message is
@@ -36,11 +53,13 @@ Outputs:
 Reported: introspection `refused_ball_states` and `refused_ball_states_<kind>` (gate
 refusals), `refused_commands` (the pipeline's guard: non-finite/out-of-limit joint targets
 held), `refused_policy_ticks` (policy: non-finite observation or output, last tilt held),
+`missed_steps` (a step due while the previous one still ran),
 `mode` (0 homing, 1 ready, 2 engaged, 3 holding, 4 returning), `tilt_x_rad`, `tilt_y_rad`,
-`step_time_us`; the refused_* counters also show in /diagnostics (WARN while they grow).
+`step_time_us`; the refused_* and missed_* counters also show in /diagnostics (WARN while they grow).
 """
 from __future__ import annotations
 
+import math
 import time as _time
 from collections import Counter, OrderedDict
 from typing import NamedTuple, Optional
@@ -63,11 +82,13 @@ from controller_manager_py.controller_interface.base import (
 )
 from controller_manager_py.controllers.policy_model import PolicyModelError
 from controller_manager_py.hardware_interface.types import CallbackReturn, State, return_type
+from controller_manager_py.manager.async_handler import AsyncHandler
+from controller_manager_py.manager.joint_limits import JointLimiter, limits_from_description
 from controller_manager_py.manager.throttle import Throttle
 from controller_manager_py.parameters import Param
 
-# the nodes' own timing: here the control rate is update_rate and the joints are state interfaces
-NODE_ONLY = {"control_rate_hz", "control_trigger", "peer_timeout_s"}
+# the nodes' own triggering: here steps follow the manager's clock and the joints are state interfaces
+NODE_ONLY = {"control_trigger", "peer_timeout_s"}
 GATE_KINDS = ("non_finite", "future", "stale", "old", "off_plate", "too_fast", "jump")
 MODE_CODE = {Mode.HOMING: 0.0, Mode.READY: 1.0, Mode.ENGAGED: 2.0, Mode.HOLDING: 3.0, Mode.RETURNING: 4.0}
 
@@ -75,7 +96,9 @@ MODE_CODE = {Mode.HOMING: 0.0, Mode.READY: 1.0, Mode.ENGAGED: 2.0, Mode.HOLDING:
 def _schema() -> tuple:
     """The balance nodes' parameters (PID, MPC and policy schemas: one source), once each."""
     seen, params = set(), [Param("tilt_law", "policy", "the tilt law: the learned policy (PID + ONNX "
-                                 "correction), the PID or the MPC", choices=CONTROLLERS)]
+                                 "correction), the PID or the MPC", choices=CONTROLLERS),
+                           Param("async_step", True, "run each control step in a worker thread (update() "
+                                 "never waits for it; a step due while the last one runs is missed)")]
     for p in (control_config.PID_SCHEMA + control_config.MPC_SCHEMA + POLICY_PARAMS):
         if p.name not in seen and p.name not in NODE_ONLY:
             seen.add(p.name)
@@ -102,14 +125,21 @@ class BallBalanceController(ControllerInterface):
     # ---- configuration (executor thread) -----------------------------------------------
     def on_configure(self, previous_state: State) -> CallbackReturn:
         values = dict(self.params)
-        rate = self.update_rate or self.manager_update_rate
-        values["control_rate_hz"] = float(rate)
         self.values = values
         self.throttle = Throttle(self.get_logger())
+        control_hz, update_hz = values["control_rate_hz"], self.update_rate or self.manager_update_rate
+        if update_hz and (update_hz < control_hz or abs(update_hz / control_hz - round(update_hz / control_hz)) > 1e-9):
+            self.get_logger().error(f"{self.name}: update_rate {update_hz} Hz must be a whole multiple of "
+                                    f"control_rate_hz {control_hz:g} Hz (the joint targets are written every update)")
+            return CallbackReturn.ERROR
+        self._control_period_s = 1.0 / control_hz
         try:
-            chain = Chain.from_urdf(self.get_robot_description(), JOINT_NAMES)
+            urdf = self.get_robot_description()
+            chain = Chain.from_urdf(urdf, JOINT_NAMES)
             self.kinematics = control_config.plate_kinematics(chain, values)
             self.pipeline = self.make_pipeline()
+            # the URDF limits the manager's limits stage applies: the written commands stay within them
+            self.limiter = JointLimiter(JOINT_NAMES, limits_from_description(urdf))   # (a ramp: not logged)
         except KinematicsError as error:
             self.get_logger().error(f"{self.name}: the manager's robot description has no usable base_link -> "
                                     f"plate_center chain: {error}")
@@ -128,6 +158,11 @@ class BallBalanceController(ControllerInterface):
         self._restart_pending = False
         self._clock_seen = None                      # (time, steady) of the last update, for the callbacks
         self._last_time_s: Optional[float] = None
+        self._next_step_s = -math.inf                # manager time the next pipeline step is due
+        self._step_in = None                         # (q measured, ball observation): update() -> step
+        self._target: Optional[np.ndarray] = None    # the newest step's joint target: step -> update()
+        self._worker: Optional[AsyncHandler] = None
+        self.missed_steps = 0
         self.mode: Optional[Mode] = None
         self.u = (0.0, 0.0)
         self.step_time_us = 0.0
@@ -138,13 +173,15 @@ class BallBalanceController(ControllerInterface):
         self.register_introspection("refused_commands", lambda: float(self.pipeline.refused_count))
         self.register_introspection("refused_policy_ticks",
                                     lambda: float(getattr(self.pipeline.law, "held_count", 0)))
+        self.register_introspection("missed_steps", lambda: float(self.missed_steps))
         self.register_introspection("mode", lambda: MODE_CODE.get(self.mode, -1.0))
         self.register_introspection("tilt_x_rad", lambda: self.u[0])
         self.register_introspection("tilt_y_rad", lambda: self.u[1])
         self.register_introspection("step_time_us", lambda: self.step_time_us)
-        self._create_ros_entities(rate)
-        self.get_logger().info(f"{self.name}: {values['tilt_law']} tilt law at {rate} Hz"
-                               f"{' (async)' if self.is_async else ''}, reference {values['reference_kind']}")
+        self._create_ros_entities(control_hz)
+        self.get_logger().info(f"{self.name}: {values['tilt_law']} tilt law, a step at {control_hz:g} Hz"
+                               f"{' (worker thread)' if values['async_step'] else ''}, joint targets written at "
+                               f"{update_hz} Hz, reference {values['reference_kind']}")
         return CallbackReturn.SUCCESS
 
     def make_pipeline(self) -> ControlPipeline:
@@ -200,7 +237,7 @@ class BallBalanceController(ControllerInterface):
         if seen is None:
             return stamp_s
         time_s, steady_s = seen
-        return time_s + min(_time.monotonic() - steady_s, self.pipeline.cfg.control_period_s)
+        return time_s + min(_time.monotonic() - steady_s, self._control_period_s)
 
     def on_ball_state(self, msg) -> None:
         # (the controller node's own clock is not the manager's: the manager does not use /clock)
@@ -260,34 +297,69 @@ class BallBalanceController(ControllerInterface):
     # ---- activation (loop thread, between cycles): no heavy work ------------------------
     def on_activate(self, previous_state: State) -> CallbackReturn:
         self._last_time_s = None
-        self._restart_pending = not self._fresh    # a new pipeline in the first update (worker thread)
+        self._next_step_s = -math.inf
+        self._target = None
+        self._restart_pending = not self._fresh    # a new pipeline in the first step (worker thread)
+        # ramp from what the command interfaces hold (the limits stage's last value), else the measured joints
+        held = [c.value for c in self.command_interfaces]
+        measured = [s.value for s in self.state_interfaces]
+        self.limiter.reset([h if math.isfinite(h) else m for h, m in zip(held, measured)])
+        if self.values["async_step"]:
+            self._worker = AsyncHandler(f"{self.name}.step", self._step)
         return CallbackReturn.SUCCESS
 
     def on_deactivate(self, previous_state: State) -> CallbackReturn:
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            worker.wait_idle()
+            worker.stop()
         self._tilt_out = None
         return CallbackReturn.SUCCESS
 
-    # ---- the control step (real-time loop, or the async worker) -------------------------
+    # ---- the loop: every update writes the target; a step every control period ----------
     def update(self, time: float, period: float) -> return_type:
-        started = _time.perf_counter()
         if self._last_time_s is not None and time < self._last_time_s - 1e-3:
             self.get_logger().warning(f"{self.name}: time went back {self._last_time_s - time:.2f} s (a simulation "
                                       "reset?): starting over from homing")
-            self._restart_pending = True
-        if self._restart_pending:
-            self.pipeline, self._restart_pending, self.mode = self.make_pipeline(), False, None
+            self._restart_pending, self._next_step_s, self._target = True, -math.inf, None
+            self.limiter.reset([s.value for s in self.state_interfaces])
         self._last_time_s = time
         self._clock_seen = (time, _time.monotonic())   # one reference assignment, for the callbacks
-        q = np.array([h.value for h in self.state_interfaces], dtype=float)
-        ball = self._ball
-        obs = None
-        if ball is not None:
-            obs = BallObservation(ball.x, ball.y, ball.vx, ball.vy, ball.valid, ball.markers,
-                                  max(0.0, time - ball.stamp_s), position_std_m=ball.position_std_m)
-        result = self.pipeline.step(time, obs, q if np.all(np.isfinite(q)) else None)
+        if time >= self._next_step_s - 1e-6:
+            # on the grid of control periods; after a gap (a missed step, a slow start) from now
+            self._next_step_s = max(self._next_step_s + self._control_period_s, time + 0.5 * self._control_period_s)
+            worker = self._worker
+            if worker is not None and worker.busy:
+                self.missed_steps += 1
+                self.throttle.warn("missed", f"{self.name}: a control step was due while the last one still ran "
+                                             f"({self.missed_steps} missed so far): keeping its target")
+            else:
+                q = np.array([h.value for h in self.state_interfaces], dtype=float)
+                ball = self._ball
+                obs = None
+                if ball is not None:
+                    obs = BallObservation(ball.x, ball.y, ball.vx, ball.vy, ball.valid, ball.markers,
+                                          max(0.0, time - ball.stamp_s), position_std_m=ball.position_std_m)
+                self._step_in = (q if np.all(np.isfinite(q)) else None, obs)
+                if worker is not None:
+                    worker.trigger(time, period)
+                else:
+                    self._step(time, period)
+        target = self._target
+        if target is not None:
+            for handle, value in zip(self.command_interfaces, self.limiter.limit_positions(target, period)):
+                handle.value = value
+        return return_type.OK
+
+    def _step(self, time: float, period: float) -> return_type:
+        """One pipeline step on the inputs update() handed over (worker thread, or inline)."""
+        started = _time.perf_counter()
+        if self._restart_pending:
+            self.pipeline, self._restart_pending, self.mode = self.make_pipeline(), False, None
+        q, obs = self._step_in
+        result = self.pipeline.step(time, obs, q)
         self._fresh = False
-        for handle, value in zip(self.command_interfaces, result.q_cmd):
-            handle.value = float(value)
+        self._target = result.q_cmd                    # one reference assignment, for update()
         self.u = result.u
         self._tilt_out = (time, result.u, None if result.ref is None else (result.ref.p[0], result.ref.p[1]))
         if result.mode != self.mode:
@@ -299,4 +371,3 @@ class BallBalanceController(ControllerInterface):
                                           f"({self.pipeline.refused_count} so far): holding")
         self.step_time_us = (_time.perf_counter() - started) * 1e6
         return return_type.OK
-

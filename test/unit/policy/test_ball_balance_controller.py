@@ -2,6 +2,7 @@
 time, no ROS): the learned policy tilts the plate against the ball through the six position
 command interfaces; bad ball states and a model that does not fit never reach the arm."""
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -25,9 +26,9 @@ def section(path: str, name: str) -> dict:
 
 
 def policy_values(**kw) -> dict:
-    """What config/ur_controllers_policy.yaml runs (the policy's trained values), synchronous."""
+    """What config/ur_controllers_policy.yaml runs (the policy's trained values), the step inline."""
     values = section("config/ur_controllers_policy.yaml", "ball_balance_controller")
-    values.update(is_async=False)
+    values.update(is_async=False, async_step=False)
     values.update(kw)
     return values
 
@@ -129,3 +130,38 @@ def test_a_robot_description_without_the_plate_is_refused_at_configure(caplog):
     with pytest.raises(ControllerError):
         cm.configure_controller("ball")
     assert any("plate_center" in r.getMessage() for r in caplog.records)
+
+
+def test_with_async_step_a_slow_step_never_holds_up_the_loop_it_is_missed_and_counted():
+    cm, ctrl = spawn(async_step=True)
+    tilt = ctrl.pipeline.law.tilt
+
+    def slow_tilt(ctx):
+        time.sleep(0.05)                 # a policy far slower than the 20 ms control period
+        return tilt(ctx)
+    ctrl.pipeline.law.tilt = slow_tilt
+    t = 0.0
+    for k in range(1500):
+        t += 1.0 / MANAGER_HZ
+        if k % 10 == 0 and t > 0.5:
+            ctrl.offer_ball_state(BallSample(0.06, -0.04, 0.0, 0.0, True, 4, t), t)
+        cm.cycle(t, 1.0 / MANAGER_HZ)
+        time.sleep(0.0005)               # (a paced loop: the worker gets the interpreter)
+    ctrl._worker.wait_idle()
+    # update() did not wait: steps came due while the slow one ran, were missed and counted
+    assert ctrl.missed_steps > 0 and ctrl._worker.runs > 0
+    counters = dict((name, getter()) for name, getter in ctrl.introspection)
+    assert counters["missed_steps"] == float(ctrl.missed_steps)   # reaches /diagnostics (missed_*)
+    assert ctrl.mode == Mode.ENGAGED and ctrl.pipeline.law.inferences > 0
+    assert np.all(np.isfinite(Run(cm, ctrl).commands()))
+    cm.switch_controller([], ["ball"], 2)   # deactivation stops the worker
+    assert ctrl._worker is None
+
+
+def test_an_update_rate_that_is_not_a_multiple_of_the_control_rate_is_refused_at_configure(caplog):
+    cm = ControllerManager(MANAGER_HZ)
+    cm.load_robot_description(robot_description("mock"))
+    cm.load_controller("ball", PLUGIN, policy_values(update_rate=125))
+    with pytest.raises(ControllerError, match="on_configure failed"):
+        cm.configure_controller("ball")
+    assert any("whole multiple of control_rate_hz" in r.getMessage() for r in caplog.records)
