@@ -3,6 +3,7 @@ right sign; bad ball states (NaN, stale, no markers) hold and then return home, 
 second /ball_state publisher is named and ignored; a silent /joint_states stops the commands
 until it returns; a plate pose good enough keeps the controller acting with two markers."""
 import math
+import time
 
 import numpy as np
 import pytest
@@ -112,18 +113,26 @@ def test_pid_bad_ball_state_holds_then_returns_home_without_jumps(launcher, grap
     world = FakeWorld(graph)
     process = _start(launcher, "ball_balance_controller", "pid.yaml")
     graph.collect(Vector3Stamped, "/plate_cmd", timeout=30, predicate=lambda m: m.vector.x > 0.03)
-    engaged = graph.collect(Float64MultiArray, "/forward_position_controller/commands", timeout=20)[0]
-    if fault == "nan":
-        world.ball["x"] = float("nan")
-    elif fault == "stale":
-        world.stamp_offset_s = 2.0
-    else:
-        world.ball["markers_found"] = 0
-    commands = graph.collect(Float64MultiArray, "/forward_position_controller/commands", count=100, timeout=20)
-    q = np.array([engaged.data] + [c.data for c in commands])
+    # one subscription from before the fault until home: consecutive commands only (two
+    # collect() calls would miss the commands between them and see a double step)
+    commands = []
+    subscription = graph.node.create_subscription(Float64MultiArray, "/forward_position_controller/commands",
+                                                  lambda m: commands.append(list(m.data)), 100)
+    try:
+        graph.spin_until(lambda: len(commands) >= 5, 20, "commands while engaged")
+        if fault == "nan":
+            world.ball["x"] = float("nan")
+        elif fault == "stale":
+            world.stamp_offset_s = 2.0
+        else:
+            world.ball["markers_found"] = 0
+        graph.spin_until(lambda: np.allclose(commands[-1], HOME_POSITIONS_RAD, atol=1e-6), 30,
+                         "the commands to reach home")
+    finally:
+        graph.node.destroy_subscription(subscription)
+    q = np.array(commands)
     assert np.all(np.isfinite(q))
     assert np.max(np.abs(np.diff(q, axis=0))) <= MAX_STEP + 1e-9
-    np.testing.assert_allclose(q[-1], HOME_POSITIONS_RAD, atol=1e-6)
     graph.spin_until(lambda: "returning" in process.output(), 5, "a log line saying it returns home")
 
 
@@ -245,10 +254,20 @@ def test_silent_joint_states_stop_the_commands_until_they_return(launcher, graph
     graph.spin_until(lambda: "no /joint_states" in process.output(), 10, "a log line about /joint_states")
     with pytest.raises(TimeoutError):
         graph.collect(Float64MultiArray, "/forward_position_controller/commands", timeout=1.5)
-    world.joints_on = True
-    graph.spin_until(lambda: "resuming" in process.output(), 10, "a log line saying it resumes")
-    commands = graph.collect(Float64MultiArray, "/forward_position_controller/commands", count=20, timeout=10)
-    q = np.array([HOME_POSITIONS_RAD] + [c.data for c in commands])
+    # subscribed before the joint states return: the first command after resuming is seen
+    commands = []
+    subscription = graph.node.create_subscription(Float64MultiArray, "/forward_position_controller/commands",
+                                                  lambda m: commands.append(list(m.data)), 100)
+    try:
+        graph.spin_until(lambda: graph.node.count_publishers("/forward_position_controller/commands") > 0, 10,
+                         "the command publisher")
+        time.sleep(1.0)   # the new subscription's match with the known publisher (no API to wait on)
+        world.joints_on = True
+        graph.spin_until(lambda: "resuming" in process.output(), 10, "a log line saying it resumes")
+        graph.spin_until(lambda: len(commands) >= 20, 10, "20 commands after resuming")
+    finally:
+        graph.node.destroy_subscription(subscription)
+    q = np.array([HOME_POSITIONS_RAD] + commands)
     assert np.max(np.abs(np.diff(q, axis=0))) <= MAX_STEP + 1e-9   # from the measured joints: no jump
 
 
