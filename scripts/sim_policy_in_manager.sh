@@ -9,6 +9,7 @@
 #   scripts/sim_policy_in_manager.sh
 #   scripts/sim_policy_in_manager.sh --ball 0.08 -0.05 --domain full_dr --seed 2 --duration 30
 #   scripts/sim_policy_in_manager.sh --tilt-law mpc --params-file my_values.yaml   # another law, its values
+#   scripts/sim_policy_in_manager.sh --reference circle --radius 0.1 --period 10 --duration 20
 #   scripts/sim_policy_in_manager.sh --truth-fed           # no camera/tracker: /ball_state from truth
 #
 # Exit code: the monitor's (0: the ball stayed on the plate, 1: it dropped), 3 when a process of
@@ -33,11 +34,17 @@ SEED=0
 DURATION=0
 OUT=""
 TRUTH_FED=0
+REFERENCE=""
+RADIUS=""
+PERIOD=""
 usage() { sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; }
 while (($#)); do
   case "$1" in
     --tilt-law) TILT_LAW="$2"; shift 2 ;;
     --params-file) PARAMS_FILE="$(realpath "$2")"; shift 2 ;;
+    --reference) REFERENCE="$2"; shift 2 ;;
+    --radius) RADIUS="$2"; shift 2 ;;
+    --period) PERIOD="$2"; shift 2 ;;
     --ball) BALL_X="$2"; BALL_Y="$3"; shift 3 ;;
     --domain) DOMAIN="$2"; shift 2 ;;
     --seed) SEED="$2"; shift 2 ;;
@@ -56,13 +63,18 @@ esac
 SIM_CONFIG="$ROOT/config/sim.yaml"
 ((TRUTH_FED)) && SIM_CONFIG="$ROOT/config/sim_truth_fed.yaml"
 LOGS="$(mktemp -d /tmp/ball_balance_graph.XXXXXX)"
-if [[ -n "$TILT_LAW" ]]; then
-  # the controller's node takes one parameter file: the chosen one with tilt_law replaced
-  python - "$PARAMS_FILE" "$CONTROLLER" "$TILT_LAW" >"$LOGS/controller_params.yaml" <<'EOF'
+if [[ -n "$TILT_LAW$REFERENCE$RADIUS$PERIOD" ]]; then
+  # the controller's node takes one parameter file: the chosen one with these values replaced
+  # (checked by the controller's schema at configure)
+  python - "$PARAMS_FILE" "$CONTROLLER" "tilt_law=$TILT_LAW" "reference_kind=$REFERENCE" \
+    "reference_radius_m=$RADIUS" "reference_period_s=$PERIOD" >"$LOGS/controller_params.yaml" <<'EOF'
 import sys, yaml
-path, name, law = sys.argv[1:]
+path, name, *changes = sys.argv[1:]
 values = yaml.safe_load(open(path))
-values[name]["ros__parameters"]["tilt_law"] = law
+for change in changes:
+    key, _, text = change.partition("=")
+    if text:
+        values[name]["ros__parameters"][key] = text if key in ("tilt_law", "reference_kind") else float(text)
 yaml.safe_dump(values, sys.stdout)
 EOF
   PARAMS_FILE="$LOGS/controller_params.yaml"
@@ -93,6 +105,6 @@ fi
 echo "sim_policy_in_manager.sh: $CONTROLLER active (forward_position_controller inactive)" >&2
 
 MONITOR=(python -m ball_balance.benchmark.live --sim-time --duration "$DURATION"
-         --title "${TILT_LAW:-policy} in the manager, $DOMAIN")
+         --title "${TILT_LAW:-policy} in the manager, $DOMAIN${REFERENCE:+, $REFERENCE}")
 [[ -n "$OUT" ]] && MONITOR+=(--out "$OUT")
 run_monitor "${MONITOR[@]}"

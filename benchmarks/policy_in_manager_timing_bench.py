@@ -1,0 +1,173 @@
+"""Controller manager timing at 500 Hz with the ball balance policy controller active.
+
+Each case starts `ros2_control_node` on a private ROS domain with the mock UR arm carrying
+the plate (ball_balance.robot.robot_description("mock")), joint_state_broadcaster and the
+case's controller, while this process publishes a ball moving on the plate to /ball_state at
+60 Hz (wall-clock stamps, as a camera would) and `--busy` other processes each keep a core
+busy. Cases:
+
+  forward_position_controller   the node path's controller in the manager, fed at 50 Hz (baseline)
+  ball_balance_controller       config/ur_controllers_policy.yaml: the policy engaged, each step in
+                                the controller's worker thread (async_step, SCHED_FIFO 45), targets
+                                written every cycle
+  same, worker normal priority  step_thread_priority: 0
+  same, async_step: false       the step inline in the loop's update()
+
+The table is controller_manager_bench.py's (the node's cycle log, cycles that started in the
+window): periodicity std (Hz, ros2_control WARN above 5 Hz), execution time mean/std (us,
+WARN above a std of 100 us), the longest period and the periods over 1.5x / 2x nominal;
+beside it what the policy controller reported on ~/introspection_data at the end (mode,
+missed steps, step time).
+
+    source env.sh && python benchmarks/policy_in_manager_timing_bench.py [--seconds 8] [--busy 1]
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "test"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from controller_manager_bench import HEADER, Busy, Driver, row, timing  # noqa: E402
+
+from ball_balance.robot import HOME_POSITIONS_RAD, JOINT_NAMES, robot_description  # noqa: E402
+from harness import DomainLease, executable, ros_env  # noqa: E402
+
+POLICY = "ball_balance_controller"
+CASES = [
+    ("forward_position_controller (node path)", "forward_position_controller", {}),
+    ("ball_balance_controller, async_step", POLICY, {}),
+    ("same, worker at normal priority", POLICY, {"step_thread_priority": 0}),
+    ("ball_balance_controller, step inline", POLICY, {"async_step": False}),
+]
+
+
+def params_file(controller: str, overrides: dict) -> dict:
+    policy = yaml.safe_load((ROOT / "config" / "ur_controllers_policy.yaml").read_text())[POLICY]
+    policy["ros__parameters"].update(overrides)
+    return {
+        "controller_manager": {"ros__parameters": {
+            "update_rate": 500, "diagnostics.period": 1.0,
+            "joint_state_broadcaster": {"type": "joint_state_broadcaster/JointStateBroadcaster"},
+            "forward_position_controller": {"type": "position_controllers/JointGroupPositionController"},
+            POLICY: {"type": "ball_balance_controllers/BallBalanceController"},
+            "activate_controllers": ["joint_state_broadcaster", controller]}},
+        "forward_position_controller": {"ros__parameters": {"joints": list(JOINT_NAMES)}},
+        POLICY: policy,
+    }
+
+
+def drive(driver: Driver, controller: str, seconds: float) -> tuple:
+    """Ball states at 60 Hz (and forward commands at 50 Hz for the baseline); 3 s warm-up (the
+    policy homes, sees the ball and engages), then `seconds`. Returns the window and the policy
+    controller's last introspection values."""
+    from ball_tracker_msgs.msg import BallState
+    from controller_manager_msgs.srv import ListControllers
+    from pal_statistics_msgs.msg import Statistics
+    from rclpy.qos import qos_profile_sensor_data
+    from std_msgs.msg import Float64MultiArray
+
+    node = driver.node
+    balls = node.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
+    forward = node.create_publisher(Float64MultiArray, "/forward_position_controller/commands", 10)
+    seen = {}
+
+    def on_introspection(msg):
+        for item in msg.statistics:
+            if item.name.startswith(POLICY + "."):
+                seen[item.name[len(POLICY) + 1:]] = item.value
+    node.create_subscription(Statistics, "/controller_manager/introspection_data/full", on_introspection, 10)
+    client = node.create_client(ListControllers, "/controller_manager/list_controllers")
+    deadline = time.monotonic() + 90
+    while not client.service_is_ready() and time.monotonic() < deadline:
+        driver.spin_for(0.1)
+    if not client.service_is_ready():
+        raise RuntimeError("the manager did not come up within 90 s")
+    t0 = time.time()
+
+    def on_ball_timer():
+        t = time.time()
+        a = 0.8 * (t - t0)
+        msg = BallState(x=0.05 * math.cos(a), y=0.05 * math.sin(a), vx=-0.04 * math.sin(a), vy=0.04 * math.cos(a),
+                        ball_found=True, tracking_valid=True, markers_found=4)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = int(t), int((t % 1.0) * 1e9)
+        msg.header.frame_id = "plate_center"
+        balls.publish(msg)
+
+    def on_forward_timer():
+        a = 0.8 * (time.time() - t0)
+        forward.publish(Float64MultiArray(data=[q + 0.02 * math.sin(a + i) for i, q in enumerate(HOME_POSITIONS_RAD)]))
+    node.create_timer(1.0 / 60.0, on_ball_timer)
+    if controller == "forward_position_controller":
+        node.create_timer(1.0 / 50.0, on_forward_timer)
+    driver.spin_for(3.0)
+    start = time.monotonic()
+    driver.spin_for(seconds)
+    return (start, time.monotonic()), dict(seen)
+
+
+def run_case(controller: str, overrides: dict, seconds: float) -> tuple:
+    lease = DomainLease()
+    tmp = Path(tempfile.mkdtemp(prefix="policy_cm_bench_"))
+    (tmp / "params.yaml").write_text(yaml.safe_dump(params_file(controller, overrides)))
+    (tmp / "robot.urdf").write_text(robot_description("mock"))
+    cycle_log = tmp / "cycles.npz"
+    log = open(tmp / "node.log", "wb")
+    command = [executable("ros2_control_node"), "--ros-args", "--params-file", str(tmp / "params.yaml"),
+               "-p", f"cycle_log_file:={cycle_log}", "-p", f"robot_description_file:={tmp / 'robot.urdf'}"]
+    process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=ros_env(lease.domain_id),
+                               start_new_session=True)
+    driver = Driver(lease.domain_id)
+    try:
+        window, seen = drive(driver, controller, seconds)
+    finally:
+        driver.close()
+        process.send_signal(signal.SIGINT)  # a clean stop writes the cycle log
+        try:
+            process.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+        log.close()
+        lease.release()
+    if not cycle_log.exists():
+        raise RuntimeError(f"no cycle log (node log: {tmp / 'node.log'})")
+    return timing(np.load(cycle_log), *window), seen
+
+
+MODES = {0.0: "homing", 1.0: "ready", 2.0: "engaged", 3.0: "holding", 4.0: "returning"}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=8.0, help="measuring window per case")
+    parser.add_argument("--busy", type=int, default=1, help="busy processes beside the manager")
+    args = parser.parse_args()
+    print(f"load average at start: {os.getloadavg()[0]:.2f}; {os.cpu_count()} CPUs; window {args.seconds:g} s; "
+          f"{args.busy} busy process(es)")
+    print(f"{HEADER} | policy: mode, missed steps, step us")
+    with Busy(args.busy):
+        for label, controller, overrides in CASES:
+            result, seen = run_case(controller, overrides, args.seconds)
+            policy = ""
+            if controller == POLICY:
+                mode = MODES.get(seen.get("mode"), seen.get("mode"))
+                policy = (f" | {mode}, {seen.get('missed_steps', math.nan):.0f}, "
+                          f"{seen.get('step_time_us', math.nan):.0f}")
+            print(row(label, 500, result) + policy, flush=True)
+    print(f"load average at end: {os.getloadavg()[0]:.2f}")
+
+
+if __name__ == "__main__":
+    main()
