@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import threading
 from pathlib import Path
 from typing import Optional, Sequence
 
@@ -50,14 +51,41 @@ def sleep_until(deadline: float, hold_interpreter: bool = False) -> None:
         pass
 
 
-def set_realtime_priority(priority: int) -> bool:
-    """SCHED_FIFO at `priority` (1..99) for the calling thread; False when refused
-    (needs CAP_SYS_NICE or an `rtprio` limit, see `ulimit -r`)."""
+def set_realtime_priority(priority: int, thread_id: int = 0) -> bool:
+    """SCHED_FIFO at `priority` (1..99) for the calling thread (or the thread `thread_id` of
+    this process, a native id as in threading.get_native_id()); False when refused (needs
+    CAP_SYS_NICE or an `rtprio` limit, see `ulimit -r`)."""
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        os.sched_setscheduler(thread_id, os.SCHED_FIFO, os.sched_param(priority))
         return True
     except (OSError, AttributeError, ValueError):
         return False
+
+
+def process_thread_ids() -> list:
+    """Native ids of every thread of this process now (/proc/self/task), including threads
+    that Python did not start (a DDS library's receive threads)."""
+    try:
+        return sorted(int(tid) for tid in os.listdir("/proc/self/task"))
+    except OSError:
+        return [threading.get_native_id()]
+
+
+def set_process_realtime_priority(priority: int) -> bool:
+    """SCHED_FIFO at `priority` for every thread of this process that exists now; threads
+    started later inherit the policy of the thread that starts them. For a process whose
+    whole work is one short real-time chain (receive, compute, send): its middleware's
+    receive threads wake it, so they need the priority as much as its own threads. False
+    when refused for any thread."""
+    granted = True
+    for thread_id in process_thread_ids():
+        try:
+            os.sched_setscheduler(thread_id, os.SCHED_FIFO, os.sched_param(priority))
+        except ProcessLookupError:      # the thread ended meanwhile
+            pass
+        except (OSError, AttributeError, ValueError):
+            granted = False
+    return granted
 
 
 def set_cpu_affinity(cpus: Sequence[int]) -> bool:
