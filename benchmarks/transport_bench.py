@@ -15,7 +15,7 @@
    reliable QoS, receipt - send time.
 
 usage: python benchmarks/transport_bench.py [--seconds 5] [--image-rate 60]
-           [--cases cyclone-be-640,...] [--ball-state [--rate 100]]
+           [--cases cyclone-be-640,...] [--tracker-param thread_priority:=0] [--ball-state [--rate 100]]
 Cases: {cyclone,fastdds}-{be,rel}-{640,960}; default all eight.
 """
 import argparse
@@ -76,9 +76,11 @@ def quantile(sorted_values: list, q: float) -> float:
 
 
 # -- 1. images through the tracker -------------------------------------------------------------
-def image_case(case: str, seconds: float, rate: float, frame_dir: Path, dds_defaults: bool = False) -> dict:
+def image_case(case: str, seconds: float, rate: float, frame_dir: Path, dds_defaults: bool = False,
+               tracker_params: tuple = ()) -> dict:
     """One case: start the tracker and a publisher, count and time the answers.
-    `dds_defaults`: both without the project's DDS settings (what they fix)."""
+    `dds_defaults`: both without the project's DDS settings (what they fix); `tracker_params`:
+    "name:=value" overrides of config/ball_tracker.yaml."""
     from pal_statistics_msgs.msg import Statistics
     from rclpy.executors import SingleThreadedExecutor
 
@@ -96,11 +98,12 @@ def image_case(case: str, seconds: float, rate: float, frame_dir: Path, dds_defa
     if dds_defaults:
         env.update({name: "" for name in DDS_ENV})
     tracker = subprocess.Popen([executable("ball_tracker"), "--ros-args", "--params-file",
-                                str(ROOT / "config" / "ball_tracker.yaml"), "-p", "startup_frames:=3"],
+                                str(ROOT / "config" / "ball_tracker.yaml"), "-p", "startup_frames:=3",
+                                *(arg for param in tracker_params for arg in ("-p", param))],
                                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                                start_new_session=True)
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=lease.domain_id)
+    rclpy.init(args=[], context=context, domain_id=lease.domain_id)  # not our options
     node = rclpy.create_node("transport_bench", context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -144,15 +147,16 @@ def image_case(case: str, seconds: float, rate: float, frame_dir: Path, dds_defa
     return {"sent": sent, "latencies_ms": sorted(latencies_ms), "stages": stages, "skipped": skipped}
 
 
-def images(cases, seconds: float, rate: float, dds_defaults: bool) -> None:
+def images(cases, seconds: float, rate: float, dds_defaults: bool, tracker_params: tuple = ()) -> None:
     settings = "DDS defaults, without config/dds" if dds_defaults else "config/dds"
+    settings += "".join(f", {param}" for param in tracker_params)
     print(f"\n1. camera frames -> ball_tracker -> /ball_state in this process, {rate:.0f} Hz for {seconds:.0f} s "
           f"per case, {settings} (load average {os.getloadavg()[0]:.1f})")
     print(f"{'case':<18}{'answered':>16}{'median ms':>10}{'p95':>7}{'p99':>7}{'max':>7}{'stale':>6}{'gaps':>5}"
           f"   tracker stages, median ms: {' / '.join(s[:-3] for s in TRACKER_STAGES)}")
     with tempfile.TemporaryDirectory() as frame_dir:
         for case in cases:
-            r = image_case(case, seconds, rate, Path(frame_dir), dds_defaults)
+            r = image_case(case, seconds, rate, Path(frame_dir), dds_defaults, tracker_params)
             lat, sent = r["latencies_ms"], r["sent"]
             answered = f"{len(lat)}/{sent} ({100.0 * len(lat) / sent:.1f}%)" if sent else "publisher failed"
             medians = " / ".join(f"{np.nanmedian(r['stages'][s]):.2f}" if r["stages"][s] else "-"
@@ -231,11 +235,14 @@ def main():
     parser.add_argument("--no-images", action="store_true")
     parser.add_argument("--dds-defaults", action="store_true",
                         help="image cases without the project's DDS settings, for comparison")
+    parser.add_argument("--tracker-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="override a config/ball_tracker.yaml value (repeatable), e.g. thread_priority:=0")
     parser.add_argument("--ball-state", action="store_true", help="also the BallState one-hop section")
     parser.add_argument("--rate", type=float, default=100.0, help="BallState rate")
     args = parser.parse_args()
     if not args.no_images:
-        images([c for c in args.cases.split(",") if c], args.seconds, args.image_rate, args.dds_defaults)
+        images([c for c in args.cases.split(",") if c], args.seconds, args.image_rate, args.dds_defaults,
+               tuple(args.tracker_param))
     if args.ball_state:
         ball_state(args.rate, args.seconds)
 

@@ -69,6 +69,7 @@ from ball_balance.vision.pose_quality import UNUSABLE_COVARIANCE
 from ball_balance.vision.sources import CaptureSource, SourceError
 from ball_balance.vision.tracker import STAGES, BallTracker, TrackerResult
 from controller_manager_py.parameters import Param, declare_parameters
+from controller_manager_py.realtime import set_process_realtime_priority
 from controller_manager_py.ros.statistics_publisher import StatisticsRegistry
 
 NODE_SCHEMA = (
@@ -84,6 +85,10 @@ NODE_SCHEMA = (
           "s", 0.05, 3600.0),
     Param("opencv_threads", 1, "OpenCV worker threads (1: ~1.4 ms per 640x480 frame, leaves cores to others)",
           "", 1, 64),
+    Param("thread_priority", 0,
+          "SCHED_FIFO priority (1-99) of every thread of the tracker (its DDS receive threads, the executor "
+          "that takes frames, the tracking thread), so that a busy machine does not delay a frame; 0: normal "
+          "scheduling. Needs CAP_SYS_NICE or an rtprio limit (else one warning, normal scheduling)", "", 0, 99),
 )
 SCHEMA = SOURCE_SCHEMA + TRACKER_SCHEMA + NODE_SCHEMA
 
@@ -172,6 +177,11 @@ class BallTrackerNode(Node):
             self._thread.start()
             where = f"{p['source']} {p['camera_device'] if p['source'] == 'camera' else p['video_file']}"
         self.create_timer(min(0.5, p["camera_timeout_s"] / 2.0), self.watch_camera)
+        # last, once every thread exists (threads started later inherit the policy)
+        if p["thread_priority"] > 0 and not set_process_realtime_priority(p["thread_priority"]):
+            self.get_logger().warning(f"could not give the tracker's threads SCHED_FIFO priority "
+                                      f"{p['thread_priority']} (needs CAP_SYS_NICE or an rtprio limit); running at "
+                                      "normal priority, frames wait longer on a busy machine")
         self.get_logger().info(f"tracking the ball from {where} -> /ball_state, /plate_pose")
 
     # -- inputs ----------------------------------------------------------------------------------

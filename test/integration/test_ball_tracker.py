@@ -1,5 +1,6 @@
 """ball_tracker as a real process: synthetic frames in over DDS, /ball_state out."""
 import math
+import os
 import time
 from pathlib import Path
 
@@ -147,6 +148,21 @@ def test_best_effort_image_publisher_is_matched_too(launcher, graph, scene):
                            predicate=lambda m: m.ball_found)
     assert math.hypot(msg.x - BALL_XY[0], msg.y - BALL_XY[1]) < 0.002
     assert "(best_effort)" in tracker.output()
+
+
+def test_thread_priority_puts_every_tracker_thread_on_sched_fifo(launcher, graph, scene):
+    """DDS's receive threads, the executor and the tracking thread: a frame waits for none of
+    them on a busy machine."""
+    tracker = launcher.start(tracker_cmd("thread_priority:=1"), name="ball_tracker")
+    image, _ = scene.render(BALL_XY)
+    feeder = FrameFeeder(graph, [image_msg(image, 0)])
+    feeder.info = camera_info(scene)
+    graph.collect(BallState, "/ball_state", qos=qos_profile_sensor_data, timeout=40, predicate=lambda m: m.ball_found)
+    if "could not give the tracker's threads SCHED_FIFO" in tracker.output():
+        pytest.skip("SCHED_FIFO refused here (no CAP_SYS_NICE or rtprio limit)")
+    tasks = Path(f"/proc/{tracker.popen.pid}/task")
+    policies = {os.sched_getscheduler(int(tid.name)) for tid in tasks.iterdir()}
+    assert policies == {os.SCHED_FIFO}
 
 
 def test_ball_missing_published_every_frame_with_flags(launcher, graph, scene):
