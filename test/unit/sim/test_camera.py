@@ -88,3 +88,26 @@ def test_light_knob_changes_the_lighting():
     dim, _ = SimWorld(knobs=DomainKnobs(light_scale=0.5)).render()
     bright, _ = SimWorld(knobs=DomainKnobs(light_scale=1.4)).render()
     assert bright.mean() > dim.mean() + 10
+
+
+@pytest.mark.parametrize("light_scale", [0.4, 1.6])
+def test_plate_face_shows_no_seam_around_the_markers_under_any_light(light_scale):
+    """The markers are textured quads set into the plain face (cheaper to render): the face
+    around them must look the same as one texture would, whatever the light."""
+    from ball_balance.plate_geometry import MARKER_CENTRES_M, MARKER_SIDE_M, PLATE_SIDE_M
+
+    world = SimWorld(knobs=DomainKnobs(light_scale=light_scale))
+    image, _ = world.render()
+    gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY).astype(int)
+    half, reach = PLATE_SIDE_M / 2.0 - 0.003, MARKER_SIDE_M / 2.0 + 0.02
+    for marker_id, (x, y) in MARKER_CENTRES_M.items():
+        for offset in (0.004, 0.008, 0.012):       # lines through the quiet zone, across the quad's edge
+            d = MARKER_SIDE_M / 2.0 + offset
+            lines = [[(x + s, y + sign * d) for s in np.linspace(-reach, reach, 200)] for sign in (-1, 1)]
+            lines += [[(x + sign * d, y + s) for s in np.linspace(-reach, reach, 200)] for sign in (-1, 1)]
+            for line in lines:
+                pixels = [tuple(np.round(world.project_plate(px, py)).astype(int)) for px, py in line
+                          if abs(px) < half and abs(py) < half]
+                values = np.array([gray[v, u] for u, v in dict.fromkeys(pixels)])
+                assert np.abs(np.diff(values)).max() <= 2, (marker_id, offset, light_scale)
+    world.close()
