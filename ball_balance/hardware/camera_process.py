@@ -13,6 +13,8 @@ touches the manager's interpreter; the kernel schedules rendering like any other
   drops older ones still queued (counted in `frames_skipped`), so a frame is never rendered
   late while a newer one waits. `frames_rendered`, `frames_skipped`, `last_render_s` and
   `render_cpu_s` (the child's CPU time for all frames) are read from shared memory.
+- `priority` > 0: the child and all its threads (the renderer's, DDS's) run SCHED_FIFO at
+  that priority, so that a busy machine does not delay a frame (camera_priority).
 - `publish` (a `PublishSettings`, or None to render only): the child publishes
   /camera/image_raw and /camera/camera_info itself, stamped with the snapshot's time plus
   `stamp_offset_s`, and with `latency_trace` the "rendered" event on /sim/latency_trace.
@@ -53,10 +55,12 @@ class CameraProcess:
     """Renders (and publishes) submitted snapshots in a child process."""
 
     def __init__(self, model, camera: CameraConfig, exposure: float, publish: Optional[PublishSettings] = None,
-                 on_error: Optional[Callable[[BaseException], None]] = None):
+                 on_error: Optional[Callable[[BaseException], None]] = None, priority: int = 0):
+        """priority: SCHED_FIFO priority (1-99) of every thread of the child (the renderer's
+        worker threads included); 0: normal scheduling."""
         # `python -m` rather than multiprocessing's spawn, which re-imports the parent's main
         # module (a script without a __main__ guard would start again in the child)
-        self._init = pickle.dumps((model, camera, exposure, publish))
+        self._init = pickle.dumps((model, camera, exposure, publish, priority))
         stats_fd = os.memfd_create("sim_camera_stats")
         os.ftruncate(stats_fd, _STATS_BYTES)
         self._stats_map = mmap.mmap(stats_fd, _STATS_BYTES)
@@ -152,8 +156,14 @@ def _child_main(stats_fd: int, snapshots_fd: int, errors_fd: int) -> None:
     publisher = None
     renderer = None
     try:
-        model, camera, exposure, publish = pickle.loads(sys.stdin.buffer.read())
+        model, camera, exposure, publish, priority = pickle.loads(sys.stdin.buffer.read())
         from ball_balance.sim.camera import CameraRenderer
+        from controller_manager_py.realtime import set_process_realtime_priority
+
+        # before the renderer and DDS start their threads, which inherit it
+        if priority > 0 and not set_process_realtime_priority(priority):
+            print(f"sim camera: could not get SCHED_FIFO priority {priority} (needs CAP_SYS_NICE or an rtprio "
+                  "limit); rendering at normal priority", file=sys.stderr, flush=True)
 
         renderer = CameraRenderer(model, camera, exposure)
         if publish is not None:

@@ -75,6 +75,9 @@ SCHEMA = (
     Param("camera_frame_id", "camera_optical_frame", "frame_id of the image messages"),
     Param("camera_process", True, "render and publish the camera in a child process (never holds the "
           "manager's interpreter lock); false: a thread of the manager"),
+    Param("camera_priority", 0, "SCHED_FIFO priority (1-99) of the camera process (camera_process=true): "
+          "rendering and publishing are not delayed by other work on a busy machine; 0: normal scheduling",
+          "", 0, 99),
     Param("image_reliable", False, "publish images reliable (keep-last 2) instead of sensor-data QoS "
           "(best effort, keep-last 1)"),
     Param("truth_rate_hz", 100.0, "/sim/ball_truth rate (sim time)", "Hz", 0.1, 1000.0),
@@ -246,7 +249,7 @@ class MujocoSystem(SystemInterface):
                                           self.ros.stamp_offset_s, self.params["latency_trace"],
                                           node.context.get_domain_id())
             self.camera = CameraProcess(self.world.model, self.world.config.camera, self.world.knobs.exposure,
-                                        publish, self._on_camera_error)
+                                        publish, self._on_camera_error, self.params["camera_priority"])
             self.camera.start()
         elif self.params["camera_enabled"]:
             from ball_balance.sim.camera import CameraThread
@@ -326,9 +329,10 @@ class MujocoSystem(SystemInterface):
         if t >= self._next_frame_s:  # a camera frame (rendered, and/or a truth-fed detection)
             self._next_frame_s = max(self._next_frame_s + 1.0 / self.params["camera_rate_hz"], t)
             if camera is not None:
-                camera.submit(world.snapshot())
-                if ros is not None:
+                snapshot = world.snapshot()
+                if ros is not None:   # first: a camera process of higher priority renders at once
                     ros.trace("capture", t)
+                camera.submit(snapshot)
             if ros is not None and self.params["truth_fed"]:
                 ros.publish_detection(t, *world.detected_ball())
         if ros is not None:

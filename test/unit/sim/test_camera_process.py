@@ -1,4 +1,5 @@
 """The camera's child process: renders the newest snapshot, reports its failures to the parent."""
+import os
 import time
 
 import pytest
@@ -49,3 +50,21 @@ def test_child_failure_reaches_the_parent(world, monkeypatch):
         camera.stop()
     assert "camera process" in str(errors[0])
     camera.submit(world.snapshot())   # after the failure: nothing raised in the loop
+
+
+def test_camera_priority_puts_every_thread_of_the_child_on_sched_fifo(world):
+    errors = []
+    camera = CameraProcess(world.model, world.config.camera, 1.0, None, errors.append, priority=1)
+    camera.start()
+    try:
+        camera.submit(world.snapshot())
+        wait_for(lambda: camera.frames_rendered >= 1, 60.0, "the first rendered frame")
+        tasks = f"/proc/{camera._process.pid}/task"
+        policies = {os.sched_getscheduler(int(tid)) for tid in os.listdir(tasks)}
+    finally:
+        camera.stop()
+    assert errors == []
+    if policies == {os.SCHED_OTHER}:
+        pytest.skip("SCHED_FIFO refused here (no CAP_SYS_NICE or rtprio limit)")
+    # the renderer's worker threads too; Mesa's shader-cache thread puts itself on SCHED_BATCH
+    assert os.SCHED_FIFO in policies and os.SCHED_OTHER not in policies
