@@ -73,7 +73,8 @@ from ball_balance.plate_geometry import PLATE_FRAME, PLATE_SIDE_M
 from ball_balance.robot import JOINT_NAMES, RobotDescriptionError, robot_description_path
 from ball_balance.ros.node_main import StartupError
 from ball_balance.vision.pose_quality import ball_position_std_m
-from controller_manager_py.parameters import ParameterError, declare_parameters
+from controller_manager_py.parameters import Param, ParameterError, declare_parameters
+from controller_manager_py.realtime import set_process_realtime_priority
 
 NEWEST_ONLY_SENSOR = QoSProfile(depth=1, reliability=qos_profile_sensor_data.reliability,
                                 durability=qos_profile_sensor_data.durability)
@@ -84,6 +85,13 @@ WATCHDOG_PERIOD_S = 0.1        # steady-clock checks of the peers
 GRAPH_CHECK_PERIOD_S = 1.0     # publishers on /ball_state and /plate_pose
 UNNAMED = "(a node not yet named in the graph)"
 STATS_PERIOD_S = 10.0          # how often the step statistics are logged
+# parameters of the node itself, beside its controller's SCHEMA
+NODE_SCHEMA = [
+    Param("thread_priority", 0, "SCHED_FIFO priority (1-99) of every thread of the node (its DDS receive "
+          "threads, the executor): a new ball state is taken and acted on at once on a busy machine; 0: normal "
+          "scheduling. Needs CAP_SYS_NICE or an rtprio limit (else one warning, normal scheduling)", "", 0, 99,
+          read_only=True),
+]
 
 
 def _stamp_ns(stamp) -> int:
@@ -96,7 +104,7 @@ class BalanceControllerNode(Node):
 
     def __init__(self, name: str):
         super().__init__(name)
-        self.params = dict(declare_parameters(self, self.SCHEMA))
+        self.params = dict(declare_parameters(self, [*self.SCHEMA, *NODE_SCHEMA]))
         self._schema = {p.name: p for p in self.SCHEMA}
         try:
             urdf = robot_description_path().read_text()
@@ -148,6 +156,11 @@ class BalanceControllerNode(Node):
         self.timer = self.create_timer(self._period_s, self.on_tick)
         self.watchdog = self.create_timer(WATCHDOG_PERIOD_S, self.on_watchdog,
                                           clock=Clock(clock_type=ClockType.STEADY_TIME))
+        # last, once the node's threads exist (threads started later inherit the policy)
+        priority = self.params["thread_priority"]
+        if priority > 0 and not set_process_realtime_priority(priority):
+            self.get_logger().warning(f"could not give the node's threads SCHED_FIFO priority {priority} (needs "
+                                      "CAP_SYS_NICE or an rtprio limit); running at normal priority")
         trigger = "each new ball state" if self._event_driven else f"{self.params['control_rate_hz']:.0f} Hz"
         self.get_logger().info(
             f"{self.CONTROLLER.upper()} balance controller, a step per {trigger} (watchdog "

@@ -282,3 +282,20 @@ def test_two_markers_are_enough_while_the_plate_pose_is_good(launcher, graph, va
         graph.spin_until(lambda: "mode ready" in process.output(), 30, "the controller at home")
         commands = graph.collect(Vector3Stamped, "/plate_cmd", count=50, timeout=10)
         assert all(c.vector.x == 0.0 for c in commands) and "mode engaged" not in process.output()
+
+
+def test_thread_priority_puts_every_controller_thread_on_sched_fifo(launcher):
+    """Its DDS receive threads and the executor: a new ball state is acted on at once."""
+    import os
+    from pathlib import Path
+
+    process = launcher.start([executable("ball_balance_controller"), "--ros-args", "--params-file",
+                              str(ROOT / "config" / "pid.yaml"), "-p", "thread_priority:=1"])
+    deadline = time.monotonic() + 60
+    while "waiting for /joint_states" not in process.output():
+        assert process.running and time.monotonic() < deadline, process.output()
+        time.sleep(0.1)
+    if "could not give the node's threads SCHED_FIFO" in process.output():
+        pytest.skip("SCHED_FIFO refused here (no CAP_SYS_NICE or rtprio limit)")
+    tasks = Path(f"/proc/{process.popen.pid}/task")
+    assert {os.sched_getscheduler(int(tid.name)) for tid in tasks.iterdir()} == {os.SCHED_FIFO}
