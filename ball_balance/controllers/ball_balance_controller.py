@@ -59,6 +59,7 @@ held), `refused_policy_ticks` (policy: non-finite observation or output, last ti
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time as _time
 from collections import Counter, OrderedDict
@@ -95,6 +96,7 @@ GATE_KINDS = ("non_finite", "future", "stale", "old", "off_plate", "too_fast", "
 # long (measured at 500 Hz with one busy process: 100 periods over 2x nominal in 8 s at normal
 # priority). Below the loop, above the manager's executor thread (40).
 STEP_THREAD_PRIORITY = 45
+VELOCITY_MARGIN = 1e-6   # relative: the joint targets move this much slower than the URDF allows
 MODE_CODE = {Mode.HOMING: 0.0, Mode.READY: 1.0, Mode.ENGAGED: 2.0, Mode.HOLDING: 3.0, Mode.RETURNING: 4.0}
 
 
@@ -145,8 +147,12 @@ class BallBalanceController(ControllerInterface):
             chain = Chain.from_urdf(urdf, JOINT_NAMES)
             self.kinematics = control_config.plate_kinematics(chain, values)
             self.pipeline = self.make_pipeline()
-            # the URDF limits the manager's limits stage applies: the written commands stay within them
-            self.limiter = JointLimiter(JOINT_NAMES, limits_from_description(urdf))   # (a ramp: not logged)
+            # the URDF limits the manager's limits stage applies: the written commands stay within
+            # them, by a hair (its period is the same time difference computed elsewhere: one
+            # ulp more speed here would be a clamp there)
+            limits = {joint: dataclasses.replace(lim, max_velocity=lim.max_velocity * (1.0 - VELOCITY_MARGIN))
+                      for joint, lim in limits_from_description(urdf).items()}
+            self.limiter = JointLimiter(JOINT_NAMES, limits)   # (a ramp, not an anomaly: not logged)
         except KinematicsError as error:
             self.get_logger().error(f"{self.name}: the manager's robot description has no usable base_link -> "
                                     f"plate_center chain: {error}")
