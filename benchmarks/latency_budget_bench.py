@@ -1,9 +1,11 @@
 """Camera-to-command latency budget of the live simulated graph, stage by stage.
 
 Starts the graph as scripts/sim_balance.sh does, on a private ROS domain with the project's
-DDS settings: ros2_control_node hosting MujocoSystem (camera at --rate Hz, --width x
---height, latency_trace on), ball_tracker and the PID (or MPC) balance controller, all on simulated
-time; optionally --busy N processes that each keep a core busy. After --warmup-s (homing,
+DDS settings and configuration files (config/sim.yaml, sim_manager.yaml, ball_tracker.yaml,
+pid.yaml or mpc.yaml; --sim-param, --manager-param, --tracker-param and --controller-param
+override single values): ros2_control_node hosting MujocoSystem (camera at --rate Hz,
+--width x --height, latency_trace on), ball_tracker and the PID (or MPC) balance controller,
+all on simulated time; optionally --busy N processes that each keep a core busy. After --warmup-s (homing,
 engaging) it follows every camera frame for --seconds through:
 
   render            frame captured (sim loop) -> rendered (camera thread)      /sim/latency_trace
@@ -27,6 +29,8 @@ to the manager, which do not report their receipt times.
 
 usage: python benchmarks/latency_budget_bench.py [--rate 60] [--width 640 --height 480]
            [--seconds 20] [--warmup-s 8] [--busy 1] [--controller pid] [--camera-thread]
+           [--sim-param NAME=VALUE ...] [--manager-param NAME:=VALUE ...] [--tracker-param NAME:=VALUE ...]
+           [--controller-param NAME:=VALUE ...]
 """
 from __future__ import annotations
 
@@ -59,9 +63,13 @@ def start_graph(args, env, workdir: Path) -> list:
     from ball_balance import robot
 
     urdf = workdir / "sim.urdf"
-    params = {"camera_rate_hz": args.rate, "camera_width": args.width, "camera_height": args.height,
+    params = {"sim_config": str(ROOT / "config" / "sim.yaml"),   # as scripts/sim_balance.sh; these win
+              "camera_rate_hz": args.rate, "camera_width": args.width, "camera_height": args.height,
               "latency_trace": True, "robot_description_file": str(urdf),
               "camera_process": not args.camera_thread}
+    for param in args.sim_param:
+        name, _, value = param.partition("=")
+        params[name] = value
     urdf.write_text(robot.robot_description("mujoco", params))
     config = ROOT / "config"
     # PID: forward position commands; MPC: single-point trajectories (as scripts/sim_balance.sh)
@@ -72,16 +80,21 @@ def start_graph(args, env, workdir: Path) -> list:
          "--params-file", str(config / "sim_manager.yaml"),  # scheduling as scripts/sim_arm.sh
          "-p", f"robot_description_file:={urdf}",
          "-p", f"activate_controllers:=[joint_state_broadcaster, {active}]",
-         "-p", f"inactive_controllers:=[{inactive}]"],
+         "-p", f"inactive_controllers:=[{inactive}]", *overrides(args.manager_param)],
         [executable("ball_tracker"), "--ros-args", "--params-file", str(config / "ball_tracker.yaml"),
-         "-p", "use_sim_time:=true"],
+         "-p", "use_sim_time:=true", *overrides(args.tracker_param)],
         [executable(CONTROLLER_EXECUTABLES[args.controller]), "--ros-args", "--params-file",
-         str(config / f"{args.controller}.yaml"), "-p", "use_sim_time:=true"],
+         str(config / f"{args.controller}.yaml"), "-p", "use_sim_time:=true", *overrides(args.controller_param)],
     ]
     commands += [[sys.executable, "-c", BUSY]] * args.busy
     logs = [open(workdir / f"process{i}.log", "wb") for i in range(len(commands))]
     return [subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
             for cmd, log in zip(commands, logs)]
+
+
+def overrides(params) -> list:
+    """["name:=value", ...] -> ["-p", "name:=value", ...]"""
+    return [arg for param in params for arg in ("-p", param)]
 
 
 class Recorder:
@@ -191,6 +204,14 @@ def main() -> int:
     parser.add_argument("--controller", default="pid", choices=("pid", "mpc"))
     parser.add_argument("--camera-thread", action="store_true",
                         help="render in a thread of the manager (camera_process:=false) instead of a child process")
+    parser.add_argument("--sim-param", action="append", default=[], metavar="NAME=VALUE",
+                        help="a MujocoSystem hardware parameter (repeatable), e.g. camera_priority=30")
+    parser.add_argument("--manager-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="override a config/sim_manager.yaml value (repeatable), e.g. thread_priority:=50")
+    parser.add_argument("--tracker-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="override a config/ball_tracker.yaml value (repeatable)")
+    parser.add_argument("--controller-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="override a config/<controller>.yaml value (repeatable), e.g. control_trigger:=ball_state")
     args = parser.parse_args()
 
     import rclpy
@@ -202,7 +223,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as workdir:
         processes = start_graph(args, env, Path(workdir))
         context = rclpy.Context()
-        rclpy.init(context=context, domain_id=lease.domain_id)
+        rclpy.init(args=[], context=context, domain_id=lease.domain_id)  # not our options
         node = rclpy.create_node("latency_budget_bench", context=context)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
@@ -240,6 +261,9 @@ def main() -> int:
     print(f"camera {args.rate:.0f} Hz {args.width}x{args.height} rendered in {where}, {args.controller}, "
           f"{args.seconds:.0f} s, "
           f"{args.busy} busy process(es); load average {load_before:.1f} before, {load:.1f} at the end")
+    if args.sim_param or args.manager_param or args.tracker_param or args.controller_param:
+        print(f"overrides: sim {args.sim_param or '-'}, manager {args.manager_param or '-'}, "
+              f"tracker {args.tracker_param or '-'}, controller {args.controller_param or '-'}")
     print(f"frames captured {frames}, rendered {len(recorder.trace['rendered'])}, tracked "
           f"{len(recorder.tracker)}, /ball_state {len(recorder.state)}, followed to the hardware {len(rows)}")
     if not rows:

@@ -15,7 +15,8 @@
    reliable QoS, receipt - send time.
 
 usage: python benchmarks/transport_bench.py [--seconds 5] [--image-rate 60]
-           [--cases cyclone-be-640,...] [--tracker-param thread_priority:=0] [--ball-state [--rate 100]]
+           [--cases cyclone-be-640,...] [--tracker-param thread_priority:=0] [--realtime 30]
+           [--ball-state [--rate 100]]
 Cases: {cyclone,fastdds}-{be,rel}-{640,960}; default all eight.
 """
 import argparse
@@ -77,10 +78,11 @@ def quantile(sorted_values: list, q: float) -> float:
 
 # -- 1. images through the tracker -------------------------------------------------------------
 def image_case(case: str, seconds: float, rate: float, frame_dir: Path, dds_defaults: bool = False,
-               tracker_params: tuple = ()) -> dict:
+               tracker_params: tuple = (), realtime: int = 0) -> dict:
     """One case: start the tracker and a publisher, count and time the answers.
     `dds_defaults`: both without the project's DDS settings (what they fix); `tracker_params`:
-    "name:=value" overrides of config/ball_tracker.yaml."""
+    "name:=value" overrides of config/ball_tracker.yaml; `realtime` > 0: the publisher and
+    this receiving process run SCHED_FIFO at that priority."""
     from pal_statistics_msgs.msg import Statistics
     from rclpy.executors import SingleThreadedExecutor
 
@@ -97,7 +99,10 @@ def image_case(case: str, seconds: float, rate: float, frame_dir: Path, dds_defa
     env = ros_env(lease.domain_id)
     if dds_defaults:
         env.update({name: "" for name in DDS_ENV})
-    tracker = subprocess.Popen([executable("ball_tracker"), "--ros-args", "--params-file",
+    # a real-time receiver's children would inherit its policy: the tracker starts normal
+    # and takes its own (thread_priority)
+    normal = ["chrt", "-o", "0"] if realtime > 0 else []
+    tracker = subprocess.Popen([*normal, executable("ball_tracker"), "--ros-args", "--params-file",
                                 str(ROOT / "config" / "ball_tracker.yaml"), "-p", "startup_frames:=3",
                                 *(arg for param in tracker_params for arg in ("-p", param))],
                                env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
@@ -124,11 +129,15 @@ def image_case(case: str, seconds: float, rate: float, frame_dir: Path, dds_defa
     deadline = time.monotonic() + 30
     while node.count_publishers("/ball_state") == 0 and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.1)
+    if realtime > 0:
+        cmd = ["chrt", "-f", str(realtime)]
+    else:
+        cmd = []
     if vendor == "cyclone":
-        cmd = [sys.executable, str(CYCLONE_PUBLISHER), str(frame), "--rate", str(rate), "--count", str(count)]
+        cmd += [sys.executable, str(CYCLONE_PUBLISHER), str(frame), "--rate", str(rate), "--count", str(count)]
         cmd += ["--reliable"] if reliability == "rel" else []
     else:
-        cmd = [sys.executable, "-c", FASTDDS_PUBLISHER, str(frame), str(rate), str(count),
+        cmd += [sys.executable, "-c", FASTDDS_PUBLISHER, str(frame), str(rate), str(count),
                "reliable" if reliability == "rel" else "best_effort"]
     publisher = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, text=True)
     while publisher.poll() is None:
@@ -147,16 +156,23 @@ def image_case(case: str, seconds: float, rate: float, frame_dir: Path, dds_defa
     return {"sent": sent, "latencies_ms": sorted(latencies_ms), "stages": stages, "skipped": skipped}
 
 
-def images(cases, seconds: float, rate: float, dds_defaults: bool, tracker_params: tuple = ()) -> None:
+def images(cases, seconds: float, rate: float, dds_defaults: bool, tracker_params: tuple = (),
+           realtime: int = 0) -> None:
     settings = "DDS defaults, without config/dds" if dds_defaults else "config/dds"
     settings += "".join(f", {param}" for param in tracker_params)
+    if realtime > 0:
+        from controller_manager_py.realtime import set_process_realtime_priority
+
+        if not set_process_realtime_priority(realtime):   # rclpy's threads, started later, inherit it
+            sys.exit("--realtime: SCHED_FIFO refused (needs CAP_SYS_NICE or an rtprio limit)")
+        settings += f", publisher and receiver SCHED_FIFO {realtime}"
     print(f"\n1. camera frames -> ball_tracker -> /ball_state in this process, {rate:.0f} Hz for {seconds:.0f} s "
           f"per case, {settings} (load average {os.getloadavg()[0]:.1f})")
     print(f"{'case':<18}{'answered':>16}{'median ms':>10}{'p95':>7}{'p99':>7}{'max':>7}{'stale':>6}{'gaps':>5}"
           f"   tracker stages, median ms: {' / '.join(s[:-3] for s in TRACKER_STAGES)}")
     with tempfile.TemporaryDirectory() as frame_dir:
         for case in cases:
-            r = image_case(case, seconds, rate, Path(frame_dir), dds_defaults, tracker_params)
+            r = image_case(case, seconds, rate, Path(frame_dir), dds_defaults, tracker_params, realtime)
             lat, sent = r["latencies_ms"], r["sent"]
             answered = f"{len(lat)}/{sent} ({100.0 * len(lat) / sent:.1f}%)" if sent else "publisher failed"
             medians = " / ".join(f"{np.nanmedian(r['stages'][s]):.2f}" if r["stages"][s] else "-"
@@ -237,12 +253,15 @@ def main():
                         help="image cases without the project's DDS settings, for comparison")
     parser.add_argument("--tracker-param", action="append", default=[], metavar="NAME:=VALUE",
                         help="override a config/ball_tracker.yaml value (repeatable), e.g. thread_priority:=0")
+    parser.add_argument("--realtime", type=int, default=0, metavar="PRIORITY",
+                        help="the camera publisher and this receiving process run SCHED_FIFO at this priority, as "
+                             "a real-time graph runs its camera driver and controller (0: normal scheduling)")
     parser.add_argument("--ball-state", action="store_true", help="also the BallState one-hop section")
     parser.add_argument("--rate", type=float, default=100.0, help="BallState rate")
     args = parser.parse_args()
     if not args.no_images:
         images([c for c in args.cases.split(",") if c], args.seconds, args.image_rate, args.dds_defaults,
-               tuple(args.tracker_param))
+               tuple(args.tracker_param), args.realtime)
     if args.ball_state:
         ball_state(args.rate, args.seconds)
 

@@ -87,7 +87,9 @@ UNNAMED = "(a node not yet named in the graph)"
 STATS_PERIOD_S = 10.0          # how often the step statistics are logged
 # parameters of the node itself, beside its controller's SCHEMA
 NODE_SCHEMA = [
-    Param("thread_priority", 0, "SCHED_FIFO priority (1-99) of every thread of the node (its DDS receive "
+    # above the tracker (40) and the simulated camera (30): the newest frame's state is
+    # finished before the next frame is worked on
+    Param("thread_priority", 45, "SCHED_FIFO priority (1-99) of every thread of the node (its DDS receive "
           "threads, the executor): a new ball state is taken and acted on at once on a busy machine; 0: normal "
           "scheduling. Needs CAP_SYS_NICE or an rtprio limit (else one warning, normal scheduling)", "", 0, 99,
           read_only=True),
