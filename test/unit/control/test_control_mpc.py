@@ -1,6 +1,7 @@
 import time
 
 import numpy as np
+import pytest
 from control_plant import K_G, DelayedPlant
 
 from ball_balance.control.mpc import MpcConfig, PlateMpc, preview
@@ -56,3 +57,59 @@ def test_solve_is_warm_started_and_reports_solved():
     mpc.solve(np.zeros(2), np.zeros(2), p, v, a, np.zeros(2))
     assert mpc.last_status == "solved"
     assert time.perf_counter() - t0 < 0.05  # sanity only; timing is measured in the benchmark
+
+
+def _unconstrained_plan(cfg, x0, v0, p, v, a, u_prev):
+    """The cost of the module docstring minimised directly (one axis, least squares), for a
+    check of the precomputed per-tick vector q independent of its derivation."""
+    import scipy.linalg
+
+    n, dt, kg = cfg.horizon, cfg.dt_s, cfg.k_g
+    A = np.array([[1.0, dt], [0.0, 1.0]])
+    B = np.array([[-0.5 * kg * dt * dt], [-kg * dt]])
+    Q = np.diag([cfg.q_pos, cfg.q_vel])
+    P_N = scipy.linalg.solve_discrete_are(A, B, Q, np.array([[cfg.r_u]]))
+    rows, rhs = [], []
+    for k in range(n):  # x_{k+1} = A^(k+1) x0 + sum_j A^(k-j) B u_j
+        M = np.zeros((2, n))
+        for j in range(k + 1):
+            M[:, j] = (np.linalg.matrix_power(A, k - j) @ B)[:, 0]
+        free = np.linalg.matrix_power(A, k + 1) @ np.array([x0, v0])
+        W = scipy.linalg.sqrtm(P_N if k == n - 1 else Q).real
+        rows.append(W @ M)
+        rhs.append(W @ (np.array([p[k], v[k]]) - free))
+    eye = np.eye(n)
+    rows.append(np.sqrt(cfg.r_u) * eye)
+    rhs.append(np.sqrt(cfg.r_u) * (-a / kg))
+    D = eye - np.eye(n, k=-1)
+    rows.append(np.sqrt(cfg.r_du) * D)
+    rhs.append(np.sqrt(cfg.r_du) * np.concatenate([[u_prev], np.zeros(n - 1)]))
+    return np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
+
+
+def test_first_move_is_the_cost_minimum_when_no_constraint_is_active():
+    cfg = MpcConfig(k_g=K_G)
+    mpc = PlateMpc(cfg)
+    p, v, a = preview(Circle(0.02, 10.0), 0.3, cfg.dt_s, cfg.horizon)
+    x0, v0, u_prev = np.array([0.004, -0.003]), np.array([0.01, 0.02]), np.array([0.002, -0.001])
+    for _ in range(3):  # warm start: OSQP's tolerance is 1e-4
+        u = mpc.solve(x0, v0, p, v, a, u_prev)
+    for axis in range(2):
+        expected = _unconstrained_plan(cfg, x0[axis], v0[axis], p[:, axis], v[:, axis], a[:, axis], u_prev[axis])
+        assert abs(expected).max() < 0.5 * cfg.u_max_rad  # (the constraints are inactive)
+        assert u[axis] == pytest.approx(expected[0], abs=2e-4)
+
+
+def test_solver_core_and_public_interface_agree():
+    """The per-tick fast path (OSQP's extension object) and the osqp module's public API."""
+    cfg = MpcConfig(k_g=K_G)
+    fast, public = PlateMpc(cfg), PlateMpc(cfg)
+    public._core = None
+    u_fast = u_public = np.zeros(2)
+    for i, (gain, offset) in enumerate([(1.0, (0.0, 0.0)), (1.2, (0.01, -0.02)), (0.8, (0.0, 0.03))] * 3):
+        p, v, a = preview(Circle(0.1, 10.0), 0.02 * i, cfg.dt_s, cfg.horizon)
+        x0 = np.array([0.15, -0.1])
+        u_fast = np.array(fast.solve(x0, np.zeros(2), p, v, a, u_fast, gain_ratio=gain, offset_rad=offset))
+        u_public = np.array(public.solve(x0, np.zeros(2), p, v, a, u_public, gain_ratio=gain, offset_rad=offset))
+        assert np.allclose(u_fast, u_public, atol=1e-9)
+        assert fast.last_status == public.last_status == "solved"
