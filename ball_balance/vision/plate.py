@@ -46,25 +46,31 @@ class MarkerDetector:
         dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
         self._detector = cv2.aruco.ArucoDetector(dictionary, params)
 
-    def detect(self, gray: np.ndarray) -> Dict[int, np.ndarray]:
-        """Markers in the whole image: id -> corners (4, 2) float64 pixels, OpenCV order."""
-        corners, ids, _ = self._detector.detectMarkers(gray)
+    def detect(self, image: np.ndarray) -> Dict[int, np.ndarray]:
+        """Markers in the whole image (grey, or BGR converted here): id -> corners (4, 2)
+        float64 pixels, OpenCV order."""
+        corners, ids, _ = self._detector.detectMarkers(_gray(image))
         found: Dict[int, np.ndarray] = {}
         if ids is not None:
             for marker_id, c in zip(ids.ravel(), corners):
                 found.setdefault(int(marker_id), c.reshape(4, 2).astype(np.float64))
         return found
 
-    def detect_in_windows(self, gray: np.ndarray, windows: Dict[int, Window]) -> Dict[int, np.ndarray]:
-        """Look for each expected marker id only inside its window."""
+    def detect_in_windows(self, image: np.ndarray, windows: Dict[int, Window]) -> Dict[int, np.ndarray]:
+        """Look for each expected marker id only inside its window (a BGR image is converted
+        to grey window by window: a few percent of the frame instead of all of it)."""
         found: Dict[int, np.ndarray] = {}
         for marker_id, (x0, y0, x1, y1) in windows.items():
             if x1 - x0 < 8 or y1 - y0 < 8:
                 continue
-            corners = self.detect(gray[y0:y1, x0:x1]).get(marker_id)
+            corners = self.detect(image[y0:y1, x0:x1]).get(marker_id)
             if corners is not None:
                 found[marker_id] = corners + (x0, y0)
         return found
+
+
+def _gray(image: np.ndarray) -> np.ndarray:
+    return image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
 
 
 def apply_homography(H: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -181,19 +187,20 @@ class PlateLocator:
             stamp_s - self.last_seen_s <= self.plate_hold_s
 
     # -- marker search -----------------------------------------------------------------------
-    def find_markers(self, gray: np.ndarray) -> Dict[int, np.ndarray]:
-        """This frame's known markers: windows around predictions once locked, else full image."""
+    def find_markers(self, image: np.ndarray) -> Dict[int, np.ndarray]:
+        """This frame's known markers: windows around predictions once locked, else full image.
+        `image`: grey, or BGR (then only what is searched is converted to grey)."""
         if self.H_IP is None:
-            found = self.detector.detect(gray)
+            found = self.detector.detect(image)
         else:
-            found = self.detector.detect_in_windows(gray, self._windows(gray.shape))
+            found = self.detector.detect_in_windows(image, self._windows(image.shape))
             self._frames_since_full_scan += 1
             # none in their windows (the plate jumped, or all covered): look everywhere now;
             # some missing (covered by a hand or the ball): look everywhere now and then
             if not found or (len(found) < len(self.marker_ids)
                              and self._frames_since_full_scan >= self.full_scan_period):
                 self._frames_since_full_scan = 0
-                full = self.detector.detect(gray)
+                full = self.detector.detect(image)
                 if len(full) > len(found):
                     found = full
         return {m: c for m, c in found.items() if m in self.marker_corners_P}

@@ -21,7 +21,6 @@ import time
 from dataclasses import dataclass, field
 from typing import Dict, Optional, Tuple
 
-import cv2
 import numpy as np
 
 from ball_balance.plate_geometry import GRAVITY_M_S2
@@ -132,8 +131,7 @@ class BallTracker:
         t1 = clock()
         timings["undistort"] = t1 - t0
 
-        gray = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY)
-        markers = self.plate.find_markers(gray)
+        markers = self.plate.find_markers(image_bgr)   # grey only where it searches
         if self.undistorter is not None and markers:
             markers = {m: self.undistorter.points(c) for m, c in markers.items()}
         t2 = clock()
