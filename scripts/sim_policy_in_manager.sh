@@ -91,18 +91,31 @@ start sim "$ROOT/scripts/sim_arm.sh" --sim-config "$SIM_CONFIG" --domain "$DOMAI
 if ((! TRUTH_FED)); then
   start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true
 fi
-# load and configure (the model is checked here: a misfit fails with one line), then take over
-# the joints from forward_position_controller in one switch
+# load and configure (the model is checked here: a misfit fails with one line)
 if ! spawner "$CONTROLLER" -t ball_balance_controllers/BallBalanceController -p "$PARAMS_FILE" --inactive \
-    --controller-manager-timeout 120 --service-call-timeout 60 >"$LOGS/spawner.log" 2>&1 \
-  || ! ros2py control switch_controllers --spin-time 30 --activate "$CONTROLLER" \
-    --deactivate forward_position_controller --strict >>"$LOGS/spawner.log" 2>&1; then
-  echo "sim_policy_in_manager.sh: could not start $CONTROLLER:" >&2
+    --controller-manager-timeout 120 --service-call-timeout 60 >"$LOGS/spawner.log" 2>&1; then
+  echo "sim_policy_in_manager.sh: could not load $CONTROLLER:" >&2
   tail -n 5 "$LOGS/spawner.log" >&2
   grep -h "$CONTROLLER" "$LOGS/sim.log" | tail -n 5 >&2 || true
   exit 3
 fi
-echo "sim_policy_in_manager.sh: $CONTROLLER active (forward_position_controller inactive)" >&2
+# then take over the joints from forward_position_controller in one switch, once the monitor
+# listens: it counts from the engagement and must see the release. The hand-over stays a process
+# of the graph (a failed switch ends the graph with its log lines, exit code 3).
+exec 3>&2
+handover() {
+  local _ info
+  for _ in $(seq 120); do
+    info="$(ros2py topic info /ball_reference 2>/dev/null || true)"
+    [[ "$info" == *"Subscription count: "[1-9]* ]] && break
+    sleep 0.5
+  done
+  ros2py control switch_controllers --spin-time 30 --activate "$CONTROLLER" \
+    --deactivate forward_position_controller --strict || return 3
+  echo "sim_policy_in_manager.sh: $CONTROLLER active (forward_position_controller inactive)" >&3
+  exec sleep infinity
+}
+start handover handover
 
 MONITOR=(python -m ball_balance.benchmark.live --sim-time --duration "$DURATION"
          --title "${TILT_LAW:-policy} in the manager, $DOMAIN${REFERENCE:+, $REFERENCE}")
