@@ -92,12 +92,12 @@ def test_first_move_is_the_cost_minimum_when_no_constraint_is_active():
     mpc = PlateMpc(cfg)
     p, v, a = preview(Circle(0.02, 10.0), 0.3, cfg.dt_s, cfg.horizon)
     x0, v0, u_prev = np.array([0.004, -0.003]), np.array([0.01, 0.02]), np.array([0.002, -0.001])
-    for _ in range(3):  # warm start: OSQP's tolerance is 1e-4
-        u = mpc.solve(x0, v0, p, v, a, u_prev)
+    u = mpc.solve(x0, v0, p, v, a, u_prev)
+    assert mpc.unconstrained == 1  # (solved without OSQP: exact)
     for axis in range(2):
         expected = _unconstrained_plan(cfg, x0[axis], v0[axis], p[:, axis], v[:, axis], a[:, axis], u_prev[axis])
         assert abs(expected).max() < 0.5 * cfg.u_max_rad  # (the constraints are inactive)
-        assert u[axis] == pytest.approx(expected[0], abs=2e-4)
+        assert u[axis] == pytest.approx(expected[0], abs=1e-9)
 
 
 def test_solver_core_and_public_interface_agree():
@@ -113,3 +113,4 @@ def test_solver_core_and_public_interface_agree():
         u_public = np.array(public.solve(x0, np.zeros(2), p, v, a, u_public, gain_ratio=gain, offset_rad=offset))
         assert np.allclose(u_fast, u_public, atol=1e-9)
         assert fast.last_status == public.last_status == "solved"
+    assert fast.unconstrained < 9  # (OSQP ran in some ticks: a constraint was active)
