@@ -30,6 +30,14 @@ def _six(value) -> str | None:
     return None if len(value) == 6 else "must have 6 elements (one per joint)"
 
 
+def _adapt_time_constant(default_s: float) -> Param:
+    """Per controller: the PID's feed-forward needs the plant gain within seconds (5 s left it
+    at 0.8 of a half-gravity plant 5 s into a circle), the MPC's plan did better on full_dr
+    with the slower estimate (docs/control.md)."""
+    return Param("adapt_time_constant_s", default_s, "time constant with which fits move the plant estimate",
+                 "s", 0.05, 60.0, read_only=True)
+
+
 REFERENCE_SCHEMA = [
     Param("reference_kind", "stationary", "what the ball tracks", choices=KINDS),
     Param("reference_radius_m", 0.10, "circle/figure-eight radius, square half side, step amplitude", "m",
@@ -51,6 +59,8 @@ PID_GAINS_SCHEMA = [
     Param("i_zone_m", PidGains.i_zone_m, "integrate only while |error| below this", "m", 0.0, 1.0),
     Param("deadband_m", PidGains.deadband_m, "error deadband", "m", 0.0, 0.05),
     Param("antiwindup_time_s", PidGains.antiwindup_time_s, "back-calculation time constant", "s", 0.0, 10.0),
+    Param("derivative_filter_s", PidGains.derivative_filter_s, "time constant of a first-order low-pass on the "
+          "velocity error of the D term (0: off)", "s", 0.0, 1.0),
 ]
 
 MPC_SCHEMA = [
@@ -62,6 +72,7 @@ MPC_SCHEMA = [
     Param("mpc_r_du", MpcConfig.r_du, "weight on tilt change per step", "1/rad^2", 0.0, 1e6, read_only=True),
     Param("max_tilt_rate_rad_s", MpcConfig.du_max_rad_s, "tilt-rate constraint", "rad/s", 0.01, 20.0,
           read_only=True),
+    _adapt_time_constant(EstimatorConfig.tau_s),
 ]
 
 COMMON_SCHEMA = [
@@ -85,8 +96,6 @@ COMMON_SCHEMA = [
           "online (plate not level, tilt offset) and cancel it", read_only=True),
     Param("adapt_window_s", EstimatorConfig.window_s, "ball-state window of the plant estimate's least-squares "
           "fit", "s", 0.3, 10.0, read_only=True),
-    Param("adapt_time_constant_s", EstimatorConfig.tau_s, "time constant with which fits move the plant "
-          "estimate", "s", 0.05, 60.0, read_only=True),
     Param("adapt_gain_min_ratio", EstimatorConfig.gain_min_ratio, "lower bound of the estimated k*g, times "
           "rolling_factor * gravity_m_s2", "", 0.05, 1.0, read_only=True),
     Param("adapt_gain_max_ratio", EstimatorConfig.gain_max_ratio, "upper bound of the estimated k*g, times "
@@ -135,9 +144,11 @@ COMMON_SCHEMA = [
 ]
 
 PID_ADAPT_SCHEMA = [
-    Param("adapt_pid_feedback", False, "with adapt_plant_gain: scale the PID's feedback by the configured over "
-          "the estimated k*g (false: the estimate sets only the feed-forward and the disturbance tilt)",
+    Param("adapt_pid_feedback", True, "with adapt_plant_gain: on a plant stronger than configured, scale the "
+          "PID's feedback down by the configured over the estimated k*g (never up: on a weaker plant it keeps "
+          "its tuned gains); false: the estimate sets only the feed-forward and the disturbance tilt",
           read_only=True),
+    _adapt_time_constant(2.0),
 ]
 
 PID_SCHEMA = COMMON_SCHEMA + REFERENCE_SCHEMA + PID_GAINS_SCHEMA + PID_ADAPT_SCHEMA
@@ -154,7 +165,8 @@ def k_g(values: Mapping[str, Any]) -> float:
 def pid_gains(values: Mapping[str, Any]) -> PidGains:
     return PidGains(kp=values["kp"], ki=values["ki"], kd=values["kd"], u_max_rad=values["max_tilt_cmd_rad"],
                     i_limit_rad=values["i_limit_rad"], deadband_m=values["deadband_m"],
-                    i_zone_m=values["i_zone_m"], antiwindup_time_s=values["antiwindup_time_s"])
+                    i_zone_m=values["i_zone_m"], antiwindup_time_s=values["antiwindup_time_s"],
+                    derivative_filter_s=values["derivative_filter_s"])
 
 
 def pipeline_config(values: Mapping[str, Any], controller: str) -> PipelineConfig:

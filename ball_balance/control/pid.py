@@ -16,6 +16,10 @@ its opposite clamp within ~0.1 s, leaving the ball 10-15 mm off target for secon
 deadband around zero error stops the integral from hunting on tracker noise, and the
 integral only changes inside an error zone (|e| < i_zone_m): outside it, large moves are
 left to P and D and the integral is held, by integration and back-calculation alike.
+The D term's velocity error passes a first-order low-pass (`derivative_filter_s`): the
+tracker's Kalman velocity is noisy enough that, unfiltered, it shook the plate (tilt-rate
+RMS 3x the MPC's), pulled the online plant estimate off through the loop and cost
+1-2 mm on the circle and 0.3-0.7 s of push recovery (docs/control.md).
 """
 from __future__ import annotations
 
@@ -25,14 +29,15 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class PidGains:
-    kp: float = 1.6                 # rad per m of error
+    kp: float = 2.0                 # rad per m of error
     ki: float = 0.4                 # rad per (m s)
-    kd: float = 0.9                 # rad per (m/s)
+    kd: float = 0.75                # rad per (m/s)
     u_max_rad: float = 0.15         # output clip (tilt)
     i_limit_rad: float = 0.03       # clamp on the integral's contribution ki*I
-    deadband_m: float = 0.001       # |e| below this counts as zero for P and I
+    deadband_m: float = 0.0         # |e| below this counts as zero for P and I (0: off)
     i_zone_m: float = 0.02          # integrate only while |e| < i_zone (no wind-up on big moves)
     antiwindup_time_s: float = 0.2  # back-calculation time constant t_aw
+    derivative_filter_s: float = 0.06  # first-order low-pass on v - v_ref for the D term (0: off)
 
 
 class AxisPid:
@@ -43,22 +48,29 @@ class AxisPid:
         self.k_g = k_g              # k * g [m/s^2 per rad], for acceleration feed-forward
         self.integral = 0.0         # integral of the error [m s]
         self.saturated = False      # last output was clipped
+        self.vel_error_filtered: float | None = None   # D term's input after the low-pass
 
     def reset(self) -> None:
         self.integral = 0.0
         self.saturated = False
+        self.vel_error_filtered = None
 
     def step(self, error_m: float, vel_error_m_s: float, acc_ref_m_s2: float, dt_s: float,
              gain_scale: float = 1.0, u_bias_rad: float = 0.0) -> float:
         """One update. error_m = x - r, vel_error_m_s = v - v_ref. Returns u [rad], clipped.
 
-        gain_scale = k_g (configured) / k_g (estimated) keeps the loop's acceleration per metre
-        of error when the plant gain is not the configured one; u_bias_rad = d / k_g cancels an
-        estimated constant disturbance (control/estimation.py). Both 1 and 0 without an estimate.
+        gain_scale multiplies the feedback (P, I, D) only, e.g. k_g (configured) / k_g (estimated)
+        to keep the loop's acceleration per metre of error on a stronger plant; u_bias_rad = d / k_g
+        cancels an estimated constant disturbance (control/estimation.py). The caller passes the
+        reference acceleration scaled to the plant gain it believes in. 1 and 0 without an estimate.
         """
         g = self.gains
         e = 0.0 if abs(error_m) < g.deadband_m else error_m - math.copysign(g.deadband_m, error_m)
-        u_ff = -acc_ref_m_s2 / self.k_g * gain_scale
+        u_ff = -acc_ref_m_s2 / self.k_g
+        if g.derivative_filter_s > 0.0 and self.vel_error_filtered is not None:
+            alpha = dt_s / (g.derivative_filter_s + dt_s)
+            vel_error_m_s = self.vel_error_filtered + alpha * (vel_error_m_s - self.vel_error_filtered)
+        self.vel_error_filtered = vel_error_m_s
         u_pd = gain_scale * (g.kp * e + g.kd * vel_error_m_s) + u_ff + u_bias_rad
         # Integrate unless the output is saturated and the error would push it further.
         candidate = self.integral + (e * dt_s if abs(e) < g.i_zone_m else 0.0)

@@ -91,14 +91,14 @@ class PidLaw:
         self.pid.reset()
 
     def tilt(self, ctx: TiltContext) -> Tuple[float, float]:
-        if not self.scale_feedback:
-            # the estimate sets the feed-forward (-a_ref / k_g) and cancels the disturbance; the
-            # feedback keeps its tuned tilt per metre (scaled up on a weak plant, the PID's
-            # derivative noise shook the plate hard enough to make the ball hop at half gravity)
-            ref = RefSample(ctx.ref.p, ctx.ref.v, np.asarray(ctx.ref.a) * (self.k_g / ctx.k_g))
-            return self.pid.step(ctx.pos_m, ctx.vel_m_s, ref, ctx.dt_s, u_bias_rad=ctx.accel_offset_m_s2 / ctx.k_g)
-        # the gains were tuned for the configured k_g: keep the loop's acceleration per metre
-        return self.pid.step(ctx.pos_m, ctx.vel_m_s, ctx.ref, ctx.dt_s, gain_scale=self.k_g / ctx.k_g,
+        # the estimate sets the feed-forward (-a_ref / k_g) and cancels the disturbance (d / k_g)
+        ref = RefSample(ctx.ref.p, ctx.ref.v, np.asarray(ctx.ref.a) * (self.k_g / ctx.k_g))
+        # the feedback keeps its tuned tilt per metre on a weaker plant (scaled up, it moves the
+        # loop toward the plant's non-minimum-phase zero sqrt(g / h), which falls with g, and the
+        # plate shook hard enough to make the ball hop at half gravity); on a stronger plant
+        # (adapt_pid_feedback) it is scaled down to the acceleration per metre it was tuned for
+        scale = min(1.0, self.k_g / ctx.k_g) if self.scale_feedback else 1.0
+        return self.pid.step(ctx.pos_m, ctx.vel_m_s, ref, ctx.dt_s, gain_scale=scale,
                              u_bias_rad=ctx.accel_offset_m_s2 / ctx.k_g)
 
 

@@ -87,16 +87,22 @@ def reference_table(kind: str, n_ticks: int) -> np.ndarray:
 
 
 class BatchPid:
-    """ball_balance.control.pid.AxisPid over a batch (same rule: deadband, zone, anti-windup)."""
+    """ball_balance.control.pid.AxisPid over a batch (same rule: deadband, zone, anti-windup,
+    derivative filter)."""
 
     def __init__(self, shape, values: dict, k_g: float, u_max: float):
         self.kp, self.ki, self.kd = values["kp"], values["ki"], values["kd"]
         self.i_limit, self.deadband, self.i_zone = values["i_limit_rad"], values["deadband_m"], values["i_zone_m"]
         self.t_aw, self.k_g, self.u_max = values["antiwindup_time_s"], k_g, u_max
+        self.d_filter_s = values.get("derivative_filter_s", 0.0)
         self.integral = np.zeros(shape)
+        self.ve_filtered = None
 
     def step(self, e_raw, ve, a_ref, dt):
         e = np.where(np.abs(e_raw) < self.deadband, 0.0, e_raw - np.sign(e_raw) * self.deadband)
+        if self.d_filter_s > 0.0 and self.ve_filtered is not None:
+            ve = self.ve_filtered + dt / (self.d_filter_s + dt) * (ve - self.ve_filtered)
+        self.ve_filtered = np.array(ve, dtype=float)
         u_pd = self.kp * e + self.kd * ve - a_ref / self.k_g
         candidate = self.integral + np.where(np.abs(e) < self.i_zone, e * dt, 0.0)
         u_raw = u_pd + self.ki * candidate
@@ -132,7 +138,7 @@ class PlateBatch:
         self.wn, self.zeta = teacher_wn, teacher_zeta
         from ball_balance.benchmark.episode import controller_values
 
-        self.pid_values = controller_values("pid", "stationary")
+        self.pid_values = controller_values("policy", "stationary")   # the PID under the policy
         pad = int(0.5 / CONTROL_DT_S) + 2   # the teacher looks ahead up to its latency + lag
         self.refs = np.stack([reference_table(k, self.n_ticks + pad) for k in REFERENCES])   # (R, n, 3, 2)
         self.builder = ObservationBuilder(batch)

@@ -60,3 +60,40 @@ def test_a_push_does_not_throw_the_gain_off():
     est = PlantEstimator(EstimatorConfig(adapt_gain=True, adapt_offset=True), K_G)
     _run(est, DelayedPlant(k_g=k_true), 25.0, _wobble, noise_m=0.0005, push_at=15.0)
     assert abs(est.k_g - k_true) < 0.15 * k_true
+
+
+def test_half_gravity_is_found_while_a_pid_tracks_a_circle_in_closed_loop():
+    """The case the PID's feed-forward depends on: a circle on a half-gravity plant, the tilt
+    from the PID with its defaults (feed-forward from the estimate) reacting to noisy positions
+    and velocities, so the noise reaches the tilt through the loop. With the PID's time
+    constant (the schema's adapt_time_constant_s for the PID) the estimate must move steadily
+    to the true k g, not settle at a value biased by that feedback."""
+    from ball_balance.control import config as control_config
+    from ball_balance.control.pid import PidGains, PlatePid
+    from ball_balance.control.references import Circle
+    from controller_manager_py.parameters import validate
+
+    cfg = control_config.estimator_config(validate(control_config.PID_SCHEMA, {}))
+    k_true = 0.5 * K_G
+    rng = np.random.default_rng(3)
+    est = PlantEstimator(cfg, K_G)
+    pid = PlatePid(PidGains(), K_G)
+    plant = DelayedPlant(x0=(0.1, 0.0), v0=(0.0, 2 * math.pi * 0.1 / 10.0), delay_s=0.04, k_g=k_true)
+    circle = Circle(0.1, 10.0)
+    measured = plant.p.copy()
+    ratio_at = {}
+    for i in range(int(16.0 / DT)):
+        t = i * DT
+        ref = circle.sample(t)
+        scaled = type(ref)(ref.p, ref.v, np.asarray(ref.a) * (K_G / est.k_g))   # feed-forward -a / k_g
+        u = pid.step(measured, plant.v + rng.normal(0.0, 0.005, 2), scaled, DT)
+        est.add_tilt(t, u)
+        plant.advance(u, DT)
+        if i % 2 == 0:   # a new position every other tick (25 Hz)
+            measured = plant.p + rng.normal(0.0, 0.0005, 2)
+            est.add_state(t + DT, measured)
+        ratio_at[round(t + DT, 2)] = est.k_g / K_G
+    assert ratio_at[4.0] < 0.85                 # well on its way after 4 s (5 s constant: 0.91)
+    assert ratio_at[8.0] < 0.65
+    assert abs(ratio_at[16.0] - 0.5) < 0.04     # and there, not biased by the noise in the loop
+    assert min(ratio_at.values()) > 0.45        # without overshooting

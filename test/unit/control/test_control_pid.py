@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 from control_plant import K_G, DelayedPlant
 
 from ball_balance.control.pid import AxisPid, PidGains, PlatePid
@@ -30,6 +31,30 @@ def test_integral_does_not_wind_up_while_saturated():
     assert pid.step(-0.02, 0.0, 0.0, 0.02) < 0.1
 
 
+def test_derivative_filter_smooths_the_velocity_and_reset_forgets_it():
+    g = PidGains(kp=0.0, ki=0.0, kd=1.0, derivative_filter_s=0.06)
+    pid = AxisPid(g, K_G)
+    assert pid.step(0.0, 0.01, 0.0, 0.02) == pytest.approx(0.01)   # the first sample passes
+    # a velocity step: a quarter (0.02 / (0.06 + 0.02)) of it at once, then first-order
+    assert pid.step(0.0, 0.05, 0.0, 0.02) == pytest.approx(0.01 + 0.25 * 0.04)
+    for _ in range(50):
+        u = pid.step(0.0, 0.05, 0.0, 0.02)
+    assert u == pytest.approx(0.05, abs=1e-6)
+    # alternating noise is cut to a fraction of what the unfiltered D passes
+    noisy = [pid.step(0.0, 0.05 + (0.02 if k % 2 else -0.02), 0.0, 0.02) - 0.05 for k in range(20)]
+    assert max(abs(v) for v in noisy[5:]) < 0.3 * 0.02
+    pid.reset()
+    assert pid.step(0.0, -0.03, 0.0, 0.02) == pytest.approx(-0.03)
+
+
+def test_gain_scale_scales_the_feedback_but_not_the_feed_forward():
+    g = PidGains(kp=2.0, ki=0.0, kd=0.5, derivative_filter_s=0.0)
+    full = AxisPid(g, K_G).step(0.01, 0.02, 0.0, 0.02)
+    assert AxisPid(g, K_G).step(0.01, 0.02, 0.0, 0.02, gain_scale=0.5) == pytest.approx(0.5 * full)
+    ff = AxisPid(g, K_G).step(0.0, 0.0, -0.3, 0.02, gain_scale=0.5)
+    assert ff == pytest.approx(0.3 / K_G)
+
+
 def test_deadband_stops_integration_on_tiny_errors():
     pid = AxisPid(PidGains(deadband_m=0.002), K_G)
     for _ in range(100):
@@ -38,7 +63,7 @@ def test_deadband_stops_integration_on_tiny_errors():
 
 
 def test_derivative_uses_measured_velocity():
-    g = PidGains(kp=0.0, ki=0.0, kd=1.0)
+    g = PidGains(kp=0.0, ki=0.0, kd=1.0, derivative_filter_s=0.0)
     assert AxisPid(g, K_G).step(0.0, 0.3, 0.0, 0.02) == 0.15  # clipped at default u_max
     assert AxisPid(g, K_G).step(0.0, 0.1, 0.0, 0.02) == 0.1
 
@@ -57,7 +82,7 @@ def test_saturation_by_a_big_error_never_charges_the_integral_against_it():
     """A large error saturates through P and D: the integral must not swing to its opposite
     clamp (the bug left the ball 10-15 mm off target for seconds after a big move)."""
     gains = PidGains(kp=2.0, ki=0.4, kd=0.75, u_max_rad=0.15, i_limit_rad=0.03, i_zone_m=0.02,
-                     antiwindup_time_s=0.2)
+                     antiwindup_time_s=0.2, derivative_filter_s=0.0)
     pid = AxisPid(gains, K_G)
     pid.integral = 0.01                      # a little integral toward +u from before the move
     for _ in range(100):                     # 2 s saturated at +u_max by a 0.09 m error
