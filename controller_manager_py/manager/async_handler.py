@@ -7,12 +7,18 @@ and trigger() only reports the last result. Used for is_async controllers and ha
 """
 from __future__ import annotations
 
+import os
 import threading
 import time as _time
 from typing import Callable, Sequence
 
 from ..hardware_interface.types import return_type
 from ..realtime import configure_thread
+
+try:  # the CPUs the process may use, read before any thread is pinned (for "any CPU")
+    PROCESS_CPUS = tuple(sorted(os.sched_getaffinity(0)))
+except (AttributeError, OSError):
+    PROCESS_CPUS = ()
 
 
 class AsyncHandler:
@@ -77,7 +83,9 @@ class AsyncHandler:
         self.last_duration = _time.monotonic() - start
 
     def _run(self) -> None:
-        configure_thread(None, f"async thread '{self.name}'", self.thread_priority, self.affinity)
+        # empty affinity is any CPU, not the starting thread's: the executor thread, which
+        # activates controllers, may be pinned to the loop's CPU (executor_on_loop_cpu)
+        configure_thread(None, f"async thread '{self.name}'", self.thread_priority, self.affinity or PROCESS_CPUS)
         if self._detached:
             period = self._period or 0.01
             next_time = _time.monotonic()

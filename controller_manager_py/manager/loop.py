@@ -14,11 +14,18 @@ first cycle).
 
 Where the jitter of a Python loop comes from, and what each knob does about it (figures:
 benchmarks/controller_manager_bench.py):
-  - The interpreter lock, in the cycle. Python hands the lock to a waiting thread after
-    the switch interval, whatever the threads' priorities: the executor thread, woken by a
-    message, would take it from the loop mid-cycle and keep it until it blocks or the loop
-    asks back. With `hold_interpreter` the loop raises the switch interval to a period from
-    its wake-up until it sleeps: others get the lock when the loop sleeps, not mid-cycle.
+  - The interpreter lock while the loop is awake. Python hands the lock to a thread that
+    has waited for it longer than the switch interval, whatever the threads' priorities, and
+    a waiting thread's timeout is the interval in force when it began to wait. The executor
+    thread, pushed off the lock when the loop wakes, asks for it again at once with the short
+    interval: 20 us later it takes the lock from the spinning or cycling loop and keeps it
+    until it blocks (measured at 1 kHz: cycles starting 300-900 us late although the loop had
+    woken on time). With `hold_interpreter` the loop raises the switch interval from its
+    wake-up until it sleeps, which delays waits that begin meanwhile but not one already
+    begun. What stops it is the executor not running while the loop is awake: the node pins
+    the executor thread to the loop thread's CPU at a lower SCHED_FIFO priority
+    (`executor_on_loop_cpu`), so the kernel runs it only while the loop sleeps, and a thread
+    that does not run cannot ask for the lock.
   - The interpreter lock, at wake-up. After its sleep the loop needs the lock back; if the
     executor thread holds it (a service, a subscription callback, a message conversion in C)
     the loop waits, as long as that thread's burst of Python (a callback: up to ~0.2 ms) or,

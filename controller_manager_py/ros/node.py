@@ -4,8 +4,10 @@ ros2_control's services, ~/activity, statistics, introspection and /diagnostics.
 Threads: the read-update-write loop runs in its own thread (manager/loop.py); services,
 subscriptions and the diagnostics timer run in the executor, so a slow service never
 delays a cycle (the GIL switch interval is lowered so the loop gets the interpreter back
-quickly after its sleep). ~/statistics and ~/introspection_data are filled and published
-in the loop's idle time after a cycle (never when the cycle ran late), because building
+quickly after its sleep, and the executor thread shares the loop thread's CPU at a lower
+priority, so it never runs, and never asks for the interpreter, while a cycle runs).
+~/statistics and ~/introspection_data are filled and published in the loop's idle time
+after a cycle (never when the cycle ran late), because building
 a `full` message holds the interpreter for ~0.2 ms, which from another thread would
 delay the loop's wake-up.
 
@@ -42,7 +44,7 @@ from ..manager.loop import ControlLoop
 from ..manager.resource_manager import ResourceError
 from ..manager.switching import STRICT, SwitchError
 from ..parameters import Param, ParameterError, declare_parameters
-from ..realtime import lock_memory, set_realtime_priority
+from ..realtime import lock_memory, set_cpu_affinity, set_realtime_priority
 from .services import ControllerManagerServices
 from .statistics_publisher import StatisticsRegistry
 
@@ -69,7 +71,11 @@ SCHEMA = (
     Param("diagnostics.period", 1.0, "period of /diagnostics (statistics windows restart after each)", unit="s",
           min=0.05),
     Param("thread_priority", 50, "SCHED_FIFO priority of the loop thread (0 = normal scheduling)", min=0, max=99),
-    Param("cpu_affinity", [-1], "CPUs the loop thread may run on ([-1]: any)"),
+    Param("cpu_affinity", [-1], "CPUs the loop thread may run on ([-1]: any); with executor_on_loop_cpu only "
+          "the first (with [-1]: the last CPU the process may use)"),
+    Param("executor_on_loop_cpu", True, "the executor thread and the loop thread share one CPU (the first of "
+          "cpu_affinity; with [-1] the last CPU the process may use): at its lower priority the executor cannot "
+          "run, so cannot take Python's interpreter lock, while a cycle runs"),
     Param("executor_thread_priority", 40, "SCHED_FIFO priority of the executor thread (0 = normal): a "
           "preempted thread holding Python's interpreter lock would stall the loop", min=0, max=99),
     Param("gil_switch_interval", 2e-5, "Python's thread switch interval: how long the loop waits for the "
@@ -251,10 +257,15 @@ class ControllerManagerNode(Node):
             self.get_logger().error(f"cannot activate {activate}: {error}")
         if self.params["executor_thread_priority"] > 0:  # this callback runs in the executor thread
             set_realtime_priority(self.params["executor_thread_priority"])
+        loop_cpus = [cpu for cpu in self.params["cpu_affinity"] if cpu >= 0]
+        if self.params["executor_on_loop_cpu"]:
+            loop_cpus = [shared_loop_cpu(loop_cpus)]
+            if not set_cpu_affinity(loop_cpus):
+                self.get_logger().warning(f"executor_on_loop_cpu: cannot pin the executor thread to CPU {loop_cpus[0]}")
         blocking = self.params["hardware_synchronization.expect_blocking_read_write"]
         self.loop = ControlLoop(self.cm, blocking, self.params["hardware_synchronization.minimum_cycle_time"],
                                 self.params["thread_priority"],
-                                [cpu for cpu in self.params["cpu_affinity"] if cpu >= 0],
+                                loop_cpus,
                                 wake_tail=self.params["wake_tail"], spin_tail=self.params["spin_tail"],
                                 gc_mode=self.params["gc_mode"], hold_interpreter=self.params["hold_interpreter"],
                                 cycle_log=self.params["cycle_log_file"])
@@ -332,6 +343,14 @@ class ControllerManagerNode(Node):
                 if self.context.ok():
                     self.get_logger().error(f"shutdown: {error!r}")
             return super().destroy_node()
+
+
+def shared_loop_cpu(cpu_affinity) -> int:
+    """The one CPU of the loop and executor threads (executor_on_loop_cpu): the first of the
+    loop's `cpu_affinity`, or (none given) the last CPU this process may run on."""
+    if cpu_affinity:
+        return int(cpu_affinity[0])
+    return max(os.sched_getaffinity(0))
 
 
 def _tolerate_further_interrupts(name: str) -> None:
