@@ -11,6 +11,7 @@
 #   scripts/sim_balance.sh --duration 30 --out DIR --video-s 10 --debug-image   # + camera.mp4 with overlay
 #   scripts/sim_balance.sh --truth-fed                          # no camera/tracker: /ball_state from truth
 #   scripts/sim_balance.sh --param kp:=2.0                      # any controller parameter
+#   scripts/sim_balance.sh --sim-param camera_rate_hz=60        # any simulation parameter (config/sim.yaml)
 #
 # Exit code: the monitor's (0: the ball stayed on the plate, 1: it dropped), 3 when a node of
 # the graph exited before the monitor (e.g. the controller manager died), 2 for bad arguments.
@@ -41,7 +42,8 @@ VIDEO_S=0
 TRUTH_FED=0
 DEBUG_IMAGE=false
 CTRL_PARAMS=()
-usage() { sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; }
+SIM_PARAMS=()
+usage() { sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'; }
 while (($#)); do
   case "$1" in
     --controller) CONTROLLER="$2"; shift 2 ;;
@@ -58,6 +60,7 @@ while (($#)); do
     --truth-fed) TRUTH_FED=1; shift ;;
     --debug-image) DEBUG_IMAGE=true; shift ;;
     --param) CTRL_PARAMS+=(-p "$2"); shift 2 ;;
+    --sim-param) SIM_PARAMS+=(--param "$2"); shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "sim_balance.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
@@ -88,7 +91,8 @@ trap stop_all INT TERM EXIT
 
 echo "sim_balance.sh: $CONTROLLER controller, domain $DOMAIN seed $SEED, ball released at ($BALL_X, $BALL_Y) m; logs in $LOGS" >&2
 start sim "$ROOT/scripts/sim_arm.sh" --sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" \
-  --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y" ${ARM_FLAGS[@]+"${ARM_FLAGS[@]}"}
+  --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y" ${ARM_FLAGS[@]+"${ARM_FLAGS[@]}"} \
+  ${SIM_PARAMS[@]+"${SIM_PARAMS[@]}"}
 if ((! TRUTH_FED)); then
   start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
     -p "publish_debug_image:=$DEBUG_IMAGE"
