@@ -73,17 +73,28 @@ class DelayEstimator:
     cost(d) = mean |tilt_measured(t) - u_cmd(t - d)|^2 over the last `window_s`; the argmin
     is blended into the estimate (`blend`). Nothing changes while the commands barely move
     (std below `min_excitation_rad`): a still plate says nothing about delay.
+
+    The start value is a guess, not evidence: estimating begins as soon as `min_window_s` of
+    commands (plus the longest lag) are stored, over the window filled so far, and the first
+    alignment replaces the start value outright (`replace_start`). (Waiting for the full
+    window and blending from the start value left a 0.2 s delay estimated at 0.03 s for 3.3 s
+    and at 0.17 s after 4 s, and the MPC, planning for the wrong delay, dropped the ball;
+    docs/control.md.)
     """
 
     def __init__(self, initial_s: float, period_s: float, max_delay_s: float = 0.3, window_s: float = 3.0,
-                 update_every: int = 25, blend: float = 0.5, min_excitation_rad: float = 0.003):
+                 update_every: int = 25, blend: float = 0.5, min_excitation_rad: float = 0.003,
+                 min_window_s: float = 0.6, replace_start: bool = True):
         self.estimate_s = initial_s
+        self.converged = False          # True once a first alignment has been taken in
+        self.replace_start = replace_start
         self.period_s = period_s
         self.max_lag = int(round(max_delay_s / period_s))
         n = int(round(window_s / period_s)) + self.max_lag + 1
         self._cmd: Deque[np.ndarray] = deque(maxlen=n)
         self._meas: Deque[np.ndarray] = deque(maxlen=n)
         self.update_every, self.blend, self.min_excitation = update_every, blend, min_excitation_rad
+        self.min_window = max(2, int(round(min(min_window_s, window_s) / period_s)))
         self._count = 0
 
     def reset(self) -> None:
@@ -95,7 +106,7 @@ class DelayEstimator:
         self._cmd.append(np.asarray(u_cmd, dtype=float))
         self._meas.append(np.asarray(tilt_measured, dtype=float))
         self._count += 1
-        if self._count % self.update_every == 0 and len(self._cmd) == self._cmd.maxlen:
+        if self._count % self.update_every == 0 and len(self._cmd) - self.max_lag >= self.min_window:
             self._update()
         return self.estimate_s
 
@@ -115,4 +126,6 @@ class DelayEstimator:
             denom = c0 - 2 * c1 + c2
             frac = 0.5 * (c0 - c2) / denom if denom > 0 else 0.0
         measured = (best + frac) * self.period_s
-        self.estimate_s += self.blend * (measured - self.estimate_s)
+        weight = self.blend if self.converged or not self.replace_start else 1.0
+        self.estimate_s += weight * (measured - self.estimate_s)
+        self.converged = True
