@@ -230,6 +230,8 @@ def main(argv=None) -> int:
     from rclpy.executors import ExternalShutdownException
     from rclpy.parameter import Parameter
 
+    from ball_balance.ros.node_main import ignore_stop_signals
+
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--duration", type=float, default=0.0, help="stop after this much (sim) time; 0 = Ctrl-C")
     parser.add_argument("--out", default="", help="folder for plot.png, camera.mp4, metrics.txt")
@@ -280,6 +282,12 @@ def main(argv=None) -> int:
                 break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass  # Ctrl-C / SIGTERM: still report what was recorded
+    except Exception:
+        # the signal shut the context down between rclpy.ok() and the wait, which then
+        # raises "context is not valid": the same clean stop
+        if rclpy.ok():
+            raise
+    ignore_stop_signals()  # a second Ctrl-C must not cut the report (and the files) short
     metrics = rec.metrics()
     if metrics is None:
         print("[monitor] no /sim/ball_truth received, or the controller never engaged", file=sys.stderr)

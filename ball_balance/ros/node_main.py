@@ -57,7 +57,7 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
     finally:
         # A second Ctrl-C (or the TERM a launcher sends after the terminal's INT) must not
         # interrupt the shutdown half-way with a traceback: the first one already stops it.
-        _ignore_stop_signals()
+        ignore_stop_signals()
         if node is not None:
             try:
                 node.destroy_node()
@@ -68,7 +68,8 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
     return 0
 
 
-def _ignore_stop_signals() -> None:
+def ignore_stop_signals() -> None:
+    """From here on Ctrl-C and SIGTERM do nothing: a shutdown already under way finishes."""
     import signal
 
     for sig in (signal.SIGINT, signal.SIGTERM):
