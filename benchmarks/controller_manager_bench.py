@@ -167,23 +167,24 @@ def drive(driver: Driver, list_calls: bool, subscribe: bool, seconds: float) -> 
     return start, time.monotonic()
 
 
-def run_case(rate: int, params: dict, subscribe: bool, seconds: float, list_calls: bool = True) -> dict:
+def run_manager(params_yaml: str, overrides: dict, drive_with) -> tuple:
+    """Start ros2_control_node with params_yaml (+ `-p` overrides) and a cycle log, call
+    drive_with(driver) -> (window, result), stop the node; (cycle log data, window, result)."""
     lease = DomainLease()
     tmp = Path(tempfile.mkdtemp(prefix="cm_bench_"))
-    (tmp / "params.yaml").write_text(PARAMS.format(rate=rate, first=JOINTS[:3], second=JOINTS[3:]))
+    (tmp / "params.yaml").write_text(params_yaml)
     cycle_log = tmp / "cycles.npz"
-    overrides = []
-    for key, value in {**params, "cycle_log_file": str(cycle_log),
-                       "robot_description_file": str(ROOT / "config" / "mock_ur.urdf")}.items():
-        overrides += ["-p", f"{key}:={value}"]
+    arguments = []
+    for key, value in {**overrides, "cycle_log_file": str(cycle_log)}.items():
+        arguments += ["-p", f"{key}:={value}"]
     log = open(tmp / "node.log", "wb")
     process = subprocess.Popen([executable("ros2_control_node"), "--ros-args", "--params-file",
-                                str(tmp / "params.yaml"), *overrides],
+                                str(tmp / "params.yaml"), *arguments],
                                stdout=log, stderr=subprocess.STDOUT, env=ros_env(lease.domain_id),
                                start_new_session=True)
     driver = Driver(lease.domain_id)
     try:
-        window = drive(driver, list_calls, subscribe, seconds)
+        window, result = drive_with(driver)
     finally:
         driver.close()
         process.send_signal(signal.SIGINT)  # a clean stop writes the cycle log
@@ -195,7 +196,15 @@ def run_case(rate: int, params: dict, subscribe: bool, seconds: float, list_call
         lease.release()
     if not cycle_log.exists():
         raise RuntimeError(f"no cycle log (node log: {tmp / 'node.log'})")
-    return timing(np.load(cycle_log), *window)
+    return np.load(cycle_log), window, result
+
+
+def run_case(rate: int, params: dict, subscribe: bool, seconds: float, list_calls: bool = True) -> dict:
+    data, window, _ = run_manager(
+        PARAMS.format(rate=rate, first=JOINTS[:3], second=JOINTS[3:]),
+        {**params, "robot_description_file": str(ROOT / "config" / "mock_ur.urdf")},
+        lambda driver: (drive(driver, list_calls, subscribe, seconds), None))
+    return timing(data, *window)
 
 
 def timing(data, t0: float, t1: float) -> dict:

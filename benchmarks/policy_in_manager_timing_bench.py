@@ -26,24 +26,20 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import signal
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "test"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from controller_manager_bench import HEADER, Busy, Driver, row, timing  # noqa: E402
+from controller_manager_bench import HEADER, Busy, Driver, row, run_manager, timing  # noqa: E402
 
 from ball_balance.robot import HOME_POSITIONS_RAD, JOINT_NAMES, robot_description  # noqa: E402
-from harness import DomainLease, executable, ros_env  # noqa: E402
 
 POLICY = "ball_balance_controller"
 CASES = [
@@ -119,31 +115,12 @@ def drive(driver: Driver, controller: str, seconds: float) -> tuple:
 
 
 def run_case(controller: str, overrides: dict, seconds: float) -> tuple:
-    lease = DomainLease()
-    tmp = Path(tempfile.mkdtemp(prefix="policy_cm_bench_"))
-    (tmp / "params.yaml").write_text(yaml.safe_dump(params_file(controller, overrides)))
-    (tmp / "robot.urdf").write_text(robot_description("mock"))
-    cycle_log = tmp / "cycles.npz"
-    log = open(tmp / "node.log", "wb")
-    command = [executable("ros2_control_node"), "--ros-args", "--params-file", str(tmp / "params.yaml"),
-               "-p", f"cycle_log_file:={cycle_log}", "-p", f"robot_description_file:={tmp / 'robot.urdf'}"]
-    process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=ros_env(lease.domain_id),
-                               start_new_session=True)
-    driver = Driver(lease.domain_id)
-    try:
-        window, seen = drive(driver, controller, seconds)
-    finally:
-        driver.close()
-        process.send_signal(signal.SIGINT)  # a clean stop writes the cycle log
-        try:
-            process.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            os.killpg(process.pid, signal.SIGKILL)
-        log.close()
-        lease.release()
-    if not cycle_log.exists():
-        raise RuntimeError(f"no cycle log (node log: {tmp / 'node.log'})")
-    return timing(np.load(cycle_log), *window), seen
+    urdf = Path(tempfile.mkdtemp(prefix="policy_cm_bench_")) / "robot.urdf"
+    urdf.write_text(robot_description("mock"))
+    data, window, seen = run_manager(yaml.safe_dump(params_file(controller, overrides)),
+                                     {"robot_description_file": str(urdf)},
+                                     lambda driver: drive(driver, controller, seconds))
+    return timing(data, *window), seen
 
 
 MODES = {0.0: "homing", 1.0: "ready", 2.0: "engaged", 3.0: "holding", 4.0: "returning"}
