@@ -131,10 +131,10 @@ COMMON_SCHEMA = [
           "(until 3 in a row agree: a re-acquisition)", "m", 0.001, 1.0, read_only=True),
     Param("peer_timeout_s", 1.0, "no /joint_states (or, under use_sim_time, no /clock progress) for this long: "
           "stop commanding until they return", "s", 0.05, 60.0, read_only=True),
-    Param("control_trigger", "timer", "'timer': a control step every control_rate_hz tick on the newest state; "
-          "'ball_state': one step per new ball state as it arrives (no wait for a tick; best when the camera "
-          "rate equals control_rate_hz), the timer then steps only while states are missing",
-          choices=("ball_state", "timer"), read_only=True),
+    Param("control_trigger", "ball_state", "'ball_state': one step per new ball state as it arrives (no wait "
+          "for a tick; control_rate_hz must equal the camera rate, the pipeline assumes 1/control_rate_hz per "
+          "step), the timer then steps only while states are missing; 'timer': a step every control_rate_hz "
+          "tick on the newest state", choices=("ball_state", "timer"), read_only=True),
     Param("home_tolerance_rad", 0.01, "max joint error to count as at home", "rad", 1e-4, 0.5, read_only=True),
     Param("home_positions_rad", list(HOME_POSITIONS_RAD), "home joint positions (plate level)", "rad",
           check=_six, read_only=True),
@@ -157,8 +157,11 @@ PID_ADAPT_SCHEMA = [
 
 PID_SCHEMA = COMMON_SCHEMA + REFERENCE_SCHEMA + PID_GAINS_SCHEMA + PID_ADAPT_SCHEMA
 MPC_NODE_SCHEMA = COMMON_SCHEMA + REFERENCE_SCHEMA + MPC_SCHEMA
-# the learned policy: a correction on top of the PID, so the PID's parameters plus the model's
-POLICY_SCHEMA = PID_SCHEMA + POLICY_PARAMS
+# the learned policy: a correction on top of the PID, so the PID's parameters plus the model's;
+# its history is per tick of the model's rate, so it steps on the timer only
+POLICY_SCHEMA = [p for p in PID_SCHEMA if p.name != "control_trigger"] + [
+    Param("control_trigger", "timer", "the policy steps every control_rate_hz tick (its history is per tick)",
+          choices=("timer",), read_only=True)] + POLICY_PARAMS
 RUNTIME_PARAMETERS = {p.name for p in PID_GAINS_SCHEMA + REFERENCE_SCHEMA}
 
 

@@ -24,16 +24,15 @@ recent motion, and messages from a second publisher on /ball_state are refused, 
 logged (throttled; a second publisher is named from the ROS graph). A bad message therefore
 never displaces a good one, and the safety supervisor sees only the good state ageing.
 
-Control steps: control_trigger "timer" (default) steps every control_rate_hz tick on the
-newest accepted state (the pipeline's PID, MPC model, shaper and delay estimate all assume
-that fixed period); "ball_state" steps once per accepted new state, at once (no wait for a
-tick), and the control_rate_hz timer becomes the watchdog that steps only when no state has
-come for 1.5 state intervals, so holding, returning home and homing go on when states stop.
-Measured on the simulated graph (truth-fed, 60 Hz states, 50 Hz rate, heavily loaded
-machine), "ball_state" was rougher (tilt-rate RMS 2.7 vs 1.7 rad/s) and lost or nearly lost
-the ball in two of three runs, the timer in none of two; see docs/control.md. The subscriptions keep only the
-newest message: a node that falls behind drops old states instead of working through a
-queue of them.
+Control steps: control_trigger "ball_state" (default) steps once per accepted new state, at
+once (no wait for a tick), and the control_rate_hz timer becomes the watchdog that steps only
+when no state has come for 1.5 state intervals, so holding, returning home and homing go on
+when states stop. The pipeline's PID, MPC model, shaper and delay estimate assume
+1/control_rate_hz per step, so control_rate_hz must equal the camera rate. "timer" steps every
+control_rate_hz tick on the newest accepted state (a fresh state waits up to one period).
+Measured choice (rates matched, two busy processes): docs/control.md, "When it steps". The
+subscriptions keep only the newest message: a node that falls behind drops old states
+instead of working through a queue of them.
 
 Dead peers: no /joint_states for peer_timeout_s, or under use_sim_time no /clock progress for
 as long, stops all commands (the arm holds where it is, the node says why); when they return
