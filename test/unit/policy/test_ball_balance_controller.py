@@ -33,10 +33,16 @@ def policy_values(**kw) -> dict:
     return values
 
 
-def spawn(**kw):
+def loaded(robot_description_xml: str = "", **kw) -> ControllerManager:
+    """A manager on the mock arm (or the given description) with the controller loaded as "ball"."""
     cm = ControllerManager(MANAGER_HZ)
-    cm.load_robot_description(robot_description("mock"))
+    cm.load_robot_description(robot_description_xml or robot_description("mock"))
     cm.load_controller("ball", PLUGIN, policy_values(**kw))
+    return cm
+
+
+def spawn(**kw):
+    cm = loaded(**kw)
     cm.configure_controller("ball")
     cm.switch_controller(["ball"], [], 2)
     return cm, cm.controllers["ball"].c
@@ -115,18 +121,14 @@ def test_the_pid_and_the_mpc_run_in_the_manager_as_well(law):
 
 
 def test_a_model_trained_on_another_pid_is_refused_at_configure_with_one_line(caplog):
-    cm = ControllerManager(MANAGER_HZ)
-    cm.load_robot_description(robot_description("mock"))
-    cm.load_controller("ball", PLUGIN, policy_values(kp=1.0))
+    cm = loaded(kp=1.0)
     with pytest.raises(ControllerError, match="on_configure failed"):
         cm.configure_controller("ball")
     assert any("trained on a different PID (kp" in r.getMessage() for r in caplog.records)
 
 
 def test_a_robot_description_without_the_plate_is_refused_at_configure(caplog):
-    cm = ControllerManager(MANAGER_HZ)
-    cm.load_robot_description((ROOT / "config" / "mock_ur.urdf").read_text())
-    cm.load_controller("ball", PLUGIN, policy_values())
+    cm = loaded((ROOT / "config" / "mock_ur.urdf").read_text())
     with pytest.raises(ControllerError):
         cm.configure_controller("ball")
     assert any("plate_center" in r.getMessage() for r in caplog.records)
@@ -159,9 +161,7 @@ def test_with_async_step_a_slow_step_never_holds_up_the_loop_it_is_missed_and_co
 
 
 def test_an_update_rate_that_is_not_a_multiple_of_the_control_rate_is_refused_at_configure(caplog):
-    cm = ControllerManager(MANAGER_HZ)
-    cm.load_robot_description(robot_description("mock"))
-    cm.load_controller("ball", PLUGIN, policy_values(update_rate=125))
+    cm = loaded(update_rate=125)
     with pytest.raises(ControllerError, match="on_configure failed"):
         cm.configure_controller("ball")
     assert any("whole multiple of control_rate_hz" in r.getMessage() for r in caplog.records)

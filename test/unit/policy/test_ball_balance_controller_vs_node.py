@@ -44,6 +44,14 @@ def controller_values(**kw) -> dict:
     return values
 
 
+def activated(cm: ControllerManager, name: str, plugin: str, values: dict):
+    """Load, configure and activate a controller in cm; the controller instance."""
+    cm.load_controller(name, plugin, values)
+    cm.configure_controller(name)
+    cm.switch_controller([name], [], 2)
+    return cm.controllers[name].c
+
+
 def node_pipeline():
     """The pipeline ball_balance_policy builds: its schema's defaults, config/policy.yaml, its
     own make_pipeline() and the node's URDF."""
@@ -73,10 +81,7 @@ def ball_at(t: float) -> BallSample:
 def test_the_controller_and_the_node_give_the_policy_the_same_observations_tilts_and_targets():
     cm = ControllerManager(MANAGER_HZ)
     cm.load_robot_description(robot_description("mock"))
-    cm.load_controller("ball", PLUGIN, controller_values())
-    cm.configure_controller("ball")
-    cm.switch_controller(["ball"], [], 2)
-    ctrl = cm.controllers["ball"].c
+    ctrl = activated(cm, "ball", PLUGIN, controller_values())
     seen_by_controller, seen_by_node = [], []
     ctrl.pipeline.law.runner.infer = recording(ctrl.pipeline.law.runner, seen_by_controller)
     steps = []   # what each controller step was given and gave: (time, q measured, ball, u, target)
@@ -123,10 +128,7 @@ def test_the_controller_and_the_node_give_the_policy_the_same_observations_tilts
 def test_every_step_target_reaches_the_hardware_and_the_manager_stage_never_clamps():
     cm = ControllerManager(MANAGER_HZ)
     cm.load_robot_description(robot_description("mock"))
-    cm.load_controller("ball", PLUGIN, controller_values())
-    cm.configure_controller("ball")
-    cm.switch_controller(["ball"], [], 2)
-    ctrl = cm.controllers["ball"].c
+    ctrl = activated(cm, "ball", PLUGIN, controller_values())
     hardware = cm.rm.command_interfaces
     vmax = 3.14   # rad/s, the URDF velocity limit of every UR joint
     t, previous, reached, big_steps = 0.0, None, 0, 0
@@ -159,16 +161,11 @@ def test_in_the_mujoco_arm_the_controller_is_as_smooth_as_the_nodes_path():
         cm.load_robot_description(urdf)
         world = cm.rm.clock_component.plugin.world
         if in_manager:
-            cm.load_controller("ball", PLUGIN, controller_values())
-            cm.configure_controller("ball")
-            cm.switch_controller(["ball"], [], 2)
-            ctrl = cm.controllers["ball"].c
+            ctrl = activated(cm, "ball", PLUGIN, controller_values())
         else:
-            cm.load_controller("fwd", "position_controllers/JointGroupPositionController",
-                               {"joints": list(JOINT_NAMES)})
-            cm.configure_controller("fwd")
-            cm.switch_controller(["fwd"], [], 2)
-            fwd, pipeline = cm.controllers["fwd"].c, node_pipeline()
+            fwd = activated(cm, "fwd", "position_controllers/JointGroupPositionController",
+                            {"joints": list(JOINT_NAMES)})
+            pipeline = node_pipeline()
         ball, next_frame, next_tick, u, tilts, errors = None, 0.0, 0.0, (0.0, 0.0), [], []
         while world.time_s < seconds:
             cm.cycle(cm.now(), DT)
