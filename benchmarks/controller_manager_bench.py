@@ -119,6 +119,18 @@ class Driver:
         while time.monotonic() < end:
             self.executor.spin_once(timeout_sec=0.01)
 
+    def list_controllers_client(self, timeout_s: float):
+        """A client of the manager's list_controllers, once the manager is up (it answers)."""
+        from controller_manager_msgs.srv import ListControllers
+
+        client = self.node.create_client(ListControllers, "/controller_manager/list_controllers")
+        deadline = time.monotonic() + timeout_s
+        while not client.service_is_ready() and time.monotonic() < deadline:
+            self.spin_for(0.1)
+        if not client.service_is_ready():
+            raise RuntimeError(f"the manager did not come up within {timeout_s:.0f} s")
+        return client
+
     def close(self) -> None:
         self.executor.shutdown()
         self.node.destroy_node()
@@ -139,12 +151,7 @@ def drive(driver: Driver, list_calls: bool, subscribe: bool, seconds: float) -> 
             node.create_subscription(StatisticsValues, f"/controller_manager/{topic}/values", lambda m: None, 10)
     forward = node.create_publisher(Float64MultiArray, "/forward_position_controller/commands", 10)
     trajectory = node.create_publisher(JointTrajectory, "/scaled_joint_trajectory_controller/joint_trajectory", 10)
-    client = node.create_client(ListControllers, "/controller_manager/list_controllers")
-    deadline = time.monotonic() + 60
-    while not client.service_is_ready() and time.monotonic() < deadline:
-        driver.spin_for(0.1)
-    if not client.service_is_ready():
-        raise RuntimeError("the manager did not come up within 60 s")
+    client = driver.list_controllers_client(timeout_s=60)
     tick = {"k": 0}
 
     def on_command_timer():

@@ -70,7 +70,6 @@ def drive(driver: Driver, controller: str, seconds: float) -> tuple:
     policy homes, sees the ball and engages), then `seconds`. Returns the window and the policy
     controller's last introspection values."""
     from ball_tracker_msgs.msg import BallState
-    from controller_manager_msgs.srv import ListControllers
     from pal_statistics_msgs.msg import Statistics
     from rclpy.qos import qos_profile_sensor_data
     from std_msgs.msg import Float64MultiArray
@@ -85,12 +84,7 @@ def drive(driver: Driver, controller: str, seconds: float) -> tuple:
             if item.name.startswith(POLICY + "."):
                 seen[item.name[len(POLICY) + 1:]] = item.value
     node.create_subscription(Statistics, "/controller_manager/introspection_data/full", on_introspection, 10)
-    client = node.create_client(ListControllers, "/controller_manager/list_controllers")
-    deadline = time.monotonic() + 90
-    while not client.service_is_ready() and time.monotonic() < deadline:
-        driver.spin_for(0.1)
-    if not client.service_is_ready():
-        raise RuntimeError("the manager did not come up within 90 s")
+    driver.list_controllers_client(timeout_s=90)   # waits until the manager answers
     t0 = time.time()
 
     def on_ball_timer():
