@@ -81,6 +81,20 @@ class TiltLaw(Protocol):
         """(u_x, u_y) [rad] for this tick; non-finite values are ignored by the pipeline."""
 
 
+def adapted_pid_step(pid: PlatePid, k_g_tuned: float, scale_feedback: bool, pos_m, vel_m_s, ref: RefSample,
+                     dt_s: float, k_g: float, accel_offset_m_s2) -> Tuple[float, float]:
+    """One PID step with the plant estimate in use (k_g, accel_offset_m_s2): the PID law of the
+    pid node, and the base of the learned policy's correction (policy/tilt_law.py)."""
+    # the estimate sets the feed-forward (-a_ref / k_g) and cancels the disturbance (d / k_g)
+    ref = RefSample(ref.p, ref.v, np.asarray(ref.a) * (k_g_tuned / k_g))
+    # the feedback keeps its tuned tilt per metre on a weaker plant (scaled up, it moves the
+    # loop toward the plant's non-minimum-phase zero sqrt(g / h), which falls with g, and the
+    # plate shook hard enough to make the ball hop at half gravity); on a stronger plant
+    # (adapt_pid_feedback) it is scaled down to the acceleration per metre it was tuned for
+    scale = min(1.0, k_g_tuned / k_g) if scale_feedback else 1.0
+    return pid.step(pos_m, vel_m_s, ref, dt_s, gain_scale=scale, u_bias_rad=np.asarray(accel_offset_m_s2) / k_g)
+
+
 class PidLaw:
     """The per-axis PID (control/pid.py) as a tilt law."""
 
@@ -93,15 +107,8 @@ class PidLaw:
         self.pid.reset()
 
     def tilt(self, ctx: TiltContext) -> Tuple[float, float]:
-        # the estimate sets the feed-forward (-a_ref / k_g) and cancels the disturbance (d / k_g)
-        ref = RefSample(ctx.ref.p, ctx.ref.v, np.asarray(ctx.ref.a) * (self.k_g / ctx.k_g))
-        # the feedback keeps its tuned tilt per metre on a weaker plant (scaled up, it moves the
-        # loop toward the plant's non-minimum-phase zero sqrt(g / h), which falls with g, and the
-        # plate shook hard enough to make the ball hop at half gravity); on a stronger plant
-        # (adapt_pid_feedback) it is scaled down to the acceleration per metre it was tuned for
-        scale = min(1.0, self.k_g / ctx.k_g) if self.scale_feedback else 1.0
-        return self.pid.step(ctx.pos_m, ctx.vel_m_s, ref, ctx.dt_s, gain_scale=scale,
-                             u_bias_rad=ctx.accel_offset_m_s2 / ctx.k_g)
+        return adapted_pid_step(self.pid, self.k_g, self.scale_feedback, ctx.pos_m, ctx.vel_m_s, ctx.ref, ctx.dt_s,
+                                ctx.k_g, ctx.accel_offset_m_s2)
 
 
 class MpcLaw:

@@ -5,9 +5,12 @@ rates the closed-loop benchmark uses (ball_balance/benchmark/episode.py):
 
     camera 30 Hz (frames dropped with frame_drop_prob) -> detection noise -> per-axis
     constant-velocity Kalman (the tracker's parameters) -> visible vision_delay_s later ->
-    control tick 50 Hz: latency prediction over the state's age (the pipeline's, with the
-    nominal k g), PID + policy correction -> shaping (tilt-rate limit per tick, total tilt
-    limit) -> camera-to-command latency -> servo lag -> plate tilt -> x'' = -k g sin(tilt + bias)
+    control tick 50 Hz: online plant estimate (k g and a constant disturbance, the pipeline's
+    control/estimation.py, batched) -> latency prediction over the state's age with that
+    estimate -> the PID as the pid node runs it (schema defaults, the estimate in its
+    feed-forward, disturbance tilt and feedback scale) + policy correction -> shaping
+    (tilt-rate limit per tick, total tilt limit) -> camera-to-command latency -> servo lag ->
+    plate tilt -> x'' = -k g sin(tilt + bias)
 
 randomised per episode over `DomainRanges` (wider than the benchmark's extreme_dr). Each
 episode also knows the truth (`teacher_tilt`): the state predicted exactly over its own
@@ -23,6 +26,7 @@ from typing import Optional
 import numpy as np
 
 from ball_balance.control import config as control_config
+from ball_balance.control.estimation import EstimatorConfig
 from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
 from ball_balance.policy.observation import ObservationBuilder
 
@@ -33,7 +37,9 @@ CAMERA_RATE_HZ = 30.0
 REFERENCES = ("stationary", "circle", "figure_eight")
 # the PID parameters the residual is trained on top of (recorded in the model, checked at run time)
 BASE_PID_KEYS = ("kp", "ki", "kd", "i_limit_rad", "i_zone_m", "deadband_m", "antiwindup_time_s", "max_tilt_cmd_rad",
-                 "rolling_factor", "gravity_m_s2")
+                 "rolling_factor", "gravity_m_s2", "derivative_filter_s", "adapt_pid_feedback", "adapt_plant_gain",
+                 "adapt_disturbance", "adapt_time_constant_s", "adapt_window_s", "actuation_delay_s",
+                 "estimate_actuation_delay")
 
 
 @dataclass(frozen=True)
@@ -51,7 +57,8 @@ class DomainRanges:
     gain_error: tuple = (0.93, 1.07)       # unmodelled rolling losses, slip
     release_radius_m: tuple = (0.0, 0.11)
     release_speed_m_s: tuple = (0.0, 0.15)
-    push_prob_per_s: float = 0.05         # random pushes (disturbance rejection)
+    push_prob_per_s: float = 0.15         # random pushes (disturbance rejection; the benchmark's pushes
+    #                                       domain pushes every 4 s)
     push_speed_m_s: tuple = (0.05, 0.2)
 
     def as_dict(self) -> dict:
@@ -60,7 +67,8 @@ class DomainRanges:
 
 @dataclass(frozen=True)
 class Nominal:
-    """What the controllers assume (config/pid.yaml values, the tracker's Kalman)."""
+    """What the controllers and the tracker assume. `Nominal.from_config()` reads them where
+    they are set (the policy's parameters, config/ball_tracker.yaml over the tracker's schema)."""
 
     k_g: float = ROLLING_FACTOR_SHELL * GRAVITY_M_S2
     u_max_rad: float = 0.15
@@ -71,6 +79,18 @@ class Nominal:
     accel_noise_m_s2: float = 1.0
     init_vel_std_m_s: float = 0.5
     fast_noise_floor_m: float = 0.0005   # the benchmark's fast mode: never less (pixel quantisation)
+
+    @classmethod
+    def from_config(cls) -> Nominal:
+        from ball_balance.benchmark.episode import controller_values, tracker_values
+        from ball_balance.vision.config import TrackerConfig
+
+        values = controller_values("policy", "stationary")
+        tracker = TrackerConfig.from_values(tracker_values())
+        return cls(k_g=control_config.k_g(values), u_max_rad=values["max_tilt_cmd_rad"],
+                   max_total_tilt_rad=values["max_total_tilt_rad"], max_prediction_s=values["max_prediction_s"],
+                   meas_noise_m=tracker.meas_noise_m,
+                   accel_noise_m_s2=tracker.accel_noise_m_s2, init_vel_std_m_s=tracker.init_vel_std_m_s)
 
 
 def reference_table(kind: str, n_ticks: int) -> np.ndarray:
@@ -98,27 +118,155 @@ class BatchPid:
         self.integral = np.zeros(shape)
         self.ve_filtered = None
 
-    def step(self, e_raw, ve, a_ref, dt):
+    def step(self, e_raw, ve, a_ref, dt, gain_scale=1.0, u_bias=0.0):
+        """AxisPid.step for every element; gain_scale (batch, 1) and u_bias (batch, 2) as there."""
         e = np.where(np.abs(e_raw) < self.deadband, 0.0, e_raw - np.sign(e_raw) * self.deadband)
         if self.d_filter_s > 0.0 and self.ve_filtered is not None:
             ve = self.ve_filtered + dt / (self.d_filter_s + dt) * (ve - self.ve_filtered)
         self.ve_filtered = np.array(ve, dtype=float)
-        u_pd = self.kp * e + self.kd * ve - a_ref / self.k_g
+        u_pd = gain_scale * (self.kp * e + self.kd * ve) - a_ref / self.k_g + u_bias
         candidate = self.integral + np.where(np.abs(e) < self.i_zone, e * dt, 0.0)
-        u_raw = u_pd + self.ki * candidate
+        u_raw = u_pd + gain_scale * self.ki * candidate
         pushing = ((u_raw > self.u_max) & (e > 0)) | ((u_raw < -self.u_max) & (e < 0))
         self.integral = np.where(pushing, self.integral, candidate)
         i_max = self.i_limit / self.ki if self.ki > 0 else np.inf
         self.integral = np.clip(self.integral, -i_max, i_max)
-        u_raw = u_pd + self.ki * self.integral
+        u_raw = u_pd + gain_scale * self.ki * self.integral
         u = np.clip(u_raw, -self.u_max, self.u_max)
         if self.ki > 0 and self.t_aw > 0:
             # back-calculation: unwind only the integral pushing into the limit, to zero at most
             into = np.sign(u_raw - u)
             unwind = (u != u_raw) & (np.abs(e) < self.i_zone) & (self.integral * into > 0)
-            bleed = np.abs(u_raw - u) / (self.ki * self.t_aw) * dt
+            bleed = np.abs(u_raw - u) / (gain_scale * self.ki * self.t_aw) * dt
             self.integral = np.where(unwind, into * np.maximum(0.0, np.abs(self.integral) - bleed), self.integral)
         return u
+
+
+class BatchPlantEstimator:
+    """ball_balance.control.estimation.PlantEstimator over a batch of plates: the same
+    regularised sliding-window least-squares fit of x'' = -k_g u + d (k_g shared by both axes)
+    to the tracked positions and the double integral of the plate tilt reached, blended in
+    with the time constant tau_s and bounded; the same window restarts (a gap, two positions
+    in a row far off the last fit, a fit far above the running residual). Solved through the
+    normal equations, all plates at once."""
+
+    def __init__(self, batch: int, cfg: EstimatorConfig, k_g_nominal: float, capacity: int):
+        self.b, self.cfg, self.k_nom, self.cap = batch, cfg, k_g_nominal, capacity
+        self.k_g = np.full(batch, k_g_nominal)
+        self.offset = np.zeros((batch, 2))
+        self.t = np.full((batch, capacity), -np.inf)   # sample stamps (ring, -inf: empty)
+        self.rows = np.zeros((batch, capacity, 6))     # p_x, p_y, P_x, P_y, V_x, V_y
+        self.count = 0                                 # samples written (ring index = count % cap)
+        self.t_start = np.full(batch, -np.inf)         # samples before this are out of the window
+        self.last_t = np.full(batch, -np.inf)
+        self.residual = np.full(batch, np.nan)         # running RMS residual of accepted fits
+        self.fit0 = np.zeros((batch, 7))               # (t, row) of the last fit's first sample
+        self.theta = np.full((batch, 7), np.nan)       # the last fit's parameters (nan: none)
+        self.jumps = np.zeros(batch, int)
+
+    def _in_window(self, now) -> np.ndarray:
+        filled = np.isfinite(self.t)
+        age = np.where(filled, now[:, None] - np.where(filled, self.t, 0.0), np.inf)
+        return filled & (self.t >= self.t_start[:, None]) & (age <= self.cfg.window_s + 1e-9)
+
+    def add_state(self, stamp, pos, big_p, big_v, new) -> None:
+        """Per plate with `new` set: a ball position (b, 2) captured at stamp (b,), with the
+        double and single integrals (b, 2) of the tilt reached up to then (from any origin)."""
+        cfg = self.cfg
+        if not (cfg.adapt_gain or cfg.adapt_offset):
+            return
+        new = new & (stamp > self.last_t)
+        if not new.any():
+            return
+        gap = new & (stamp - self.last_t > cfg.max_gap_s)
+        self.t_start = np.where(gap, stamp, self.t_start)
+        self.theta[gap] = np.nan
+        # the new position against the last fit's prediction (a push: restart after it)
+        fitted = new & np.isfinite(self.theta[:, 0]) & np.isfinite(self.residual)
+        tau = stamp - self.fit0[:, 0]
+        off = np.zeros(self.b, bool)
+        for axis in range(2):
+            pi = big_p[:, axis] - self.fit0[:, 3 + axis] - self.fit0[:, 5 + axis] * tau
+            th = self.theta
+            predicted = th[:, 3 * axis] + th[:, 3 * axis + 1] * tau + 0.5 * th[:, 3 * axis + 2] * tau ** 2 \
+                - th[:, 6] * pi
+            limit = np.maximum(cfg.jump_sigma * np.nan_to_num(self.residual), cfg.jump_min_m)
+            off |= np.abs(pos[:, axis] - predicted) > limit
+        off &= fitted
+        self.jumps = np.where(new, np.where(off, self.jumps + 1, 0), self.jumps)
+        restart = new & (self.jumps >= 2)
+        self.t_start = np.where(restart, self.last_t, self.t_start)   # keep the last sample
+        self.theta[restart] = np.nan
+        self.jumps[restart] = 0
+        # write the sample (plates without a new one get an empty slot)
+        i = self.count % self.cap
+        self.count += 1
+        self.t[:, i] = np.where(new, stamp, -np.inf)
+        self.rows[:, i] = np.concatenate([pos, big_p, big_v], 1)
+        self.last_t = np.where(new, stamp, self.last_t)
+        now = np.where(new, stamp, -np.inf)
+        mask = self._in_window(now) & new[:, None]
+        m = mask.sum(1)
+        t_masked = np.where(mask, self.t, np.inf)
+        first = np.argmin(t_masked, 1)
+        t0 = self.t[np.arange(self.b), first]
+        due = new & (m >= 10) & (stamp - t0 >= 0.5 * cfg.window_s)
+        if due.any():
+            self._fit(np.flatnonzero(due), mask, first, t0, m, stamp)
+
+    def _fit(self, idx, mask, first, t0, m, stamp) -> None:
+        cfg = self.cfg
+        w = 1.0 / cfg.position_noise_m
+        mk = mask[idx].astype(float)                   # (n, C): 1 in the window, 0 else
+        rows, row0 = self.rows[idx], self.rows[idx, first[idx]]
+        tau = np.where(mask[idx], self.t[idx] - t0[idx, None], 0.0)
+        n, c = mk.shape
+        a = np.zeros((n, 2, c, 7))
+        bvec = np.zeros((n, 2, c))
+        for axis in range(2):
+            pi = rows[:, :, 2 + axis] - row0[:, None, 2 + axis] - row0[:, None, 4 + axis] * tau
+            a[:, axis, :, 3 * axis] = w
+            a[:, axis, :, 3 * axis + 1] = w * tau
+            a[:, axis, :, 3 * axis + 2] = w * 0.5 * tau ** 2
+            a[:, axis, :, 6] = -w * pi
+            bvec[:, axis] = w * rows[:, :, axis]
+        a *= mk[:, None, :, None]
+        bvec *= mk[:, None, :]
+        a, bvec = a.reshape(n, 2 * c, 7), bvec.reshape(n, 2 * c)
+        k_sigma = cfg.gain_prior_ratio * self.k_nom if cfg.adapt_gain else 1e-9
+        d_sigma = cfg.offset_prior_m_s2 if cfg.adapt_offset else 1e-9
+        ata = np.einsum("nri,nrj->nij", a, a)
+        atb = np.einsum("nri,nr->ni", a, bvec)
+        ata[:, 6, 6] += 1.0 / k_sigma ** 2
+        atb[:, 6] += self.k_g[idx] / k_sigma ** 2
+        for axis in range(2):
+            ata[:, 3 * axis + 2, 3 * axis + 2] += 1.0 / d_sigma ** 2
+            atb[:, 3 * axis + 2] += self.offset[idx, axis] / d_sigma ** 2
+        theta = np.linalg.solve(ata, atb[..., None])[..., 0]
+        err = np.einsum("nri,ni->nr", a, theta) - bvec
+        residual = np.sqrt(np.sum(err ** 2, 1) / (2 * m[idx])) * cfg.position_noise_m
+        run = self.residual[idx]
+        outlier = np.isfinite(run) & (residual > cfg.outlier_ratio * np.maximum(np.nan_to_num(run), 2e-4))
+        # an outlier fit (a push, a hand): skipped, the window restarts after its older half
+        sk = idx[outlier]
+        if len(sk):
+            t_sorted = np.sort(np.where(mask[sk], self.t[sk], np.inf), 1)
+            self.t_start[sk] = t_sorted[np.arange(len(sk)), m[sk] // 2]
+        ok, theta, residual = idx[~outlier], theta[~outlier], residual[~outlier]
+        run = self.residual[ok]
+        self.residual[ok] = np.where(np.isfinite(run), 0.9 * run + 0.1 * residual, residual)
+        self.fit0[ok] = np.concatenate([t0[ok, None], self.rows[ok, first[ok]]], 1)
+        self.theta[ok] = theta
+        # the time between the window's last two samples: here always the last two frames' gap
+        t_sorted = np.sort(np.where(mask[ok], self.t[ok], -np.inf), 1)
+        dt = t_sorted[:, -1] - t_sorted[:, -2]
+        alpha = np.minimum(1.0, dt / cfg.tau_s)
+        if cfg.adapt_gain:
+            k_new = self.k_g[ok] + alpha * (theta[:, 6] - self.k_g[ok])
+            self.k_g[ok] = np.clip(k_new, cfg.gain_min_ratio * self.k_nom, cfg.gain_max_ratio * self.k_nom)
+        if cfg.adapt_offset:
+            d_new = self.offset[ok] + alpha[:, None] * (theta[:, [2, 5]] - self.offset[ok])
+            self.offset[ok] = np.clip(d_new, -cfg.offset_max_m_s2, cfg.offset_max_m_s2)
 
 
 class PlateBatch:
@@ -128,10 +276,11 @@ class PlateBatch:
         while not env.finished: obs = env.step(action)   # action (batch, 2) in [-1, 1] or None
     """
 
-    def __init__(self, batch: int, seed: int, ranges: DomainRanges = DomainRanges(), nominal: Nominal = Nominal(),
-                 duration_s: float = 20.0, action_scale_rad: float = 0.1, teacher_wn: float = 4.0,
-                 teacher_zeta: float = 0.85):
-        self.b, self.ranges, self.nom = batch, ranges, nominal
+    def __init__(self, batch: int, seed: int, ranges: DomainRanges = DomainRanges(),
+                 nominal: Optional[Nominal] = None, duration_s: float = 20.0, action_scale_rad: float = 0.1,
+                 teacher_wn: float = 4.0, teacher_zeta: float = 0.85):
+        self.b, self.ranges = batch, ranges
+        self.nom = Nominal.from_config() if nominal is None else nominal
         self.rng = np.random.default_rng(seed)
         self.n_ticks = int(round(duration_s / CONTROL_DT_S))
         self.action_scale = action_scale_rad
@@ -139,6 +288,11 @@ class PlateBatch:
         from ball_balance.benchmark.episode import controller_values
 
         self.pid_values = controller_values("policy", "stationary")   # the PID under the policy
+        self.estimator_cfg = control_config.estimator_config(self.pid_values)
+        self.scale_feedback = bool(self.pid_values["adapt_pid_feedback"])
+        if self.pid_values["actuation_delay_s"] != 0.0 or self.pid_values["estimate_actuation_delay"]:
+            raise ValueError("the training plant predicts over the state's age only: the policy's parameters "
+                             "must set actuation_delay_s 0 and estimate_actuation_delay false")
         pad = int(0.5 / CONTROL_DT_S) + 2   # the teacher looks ahead up to its latency + lag
         self.refs = np.stack([reference_table(k, self.n_ticks + pad) for k in REFERENCES])   # (R, n, 3, 2)
         self.builder = ObservationBuilder(batch)
@@ -189,6 +343,10 @@ class PlateBatch:
         self.sq_err = np.zeros(b)
         self.n_err = np.zeros(b)
         self.pid = BatchPid((b, 2), self.pid_values, self.nom.k_g, self.nom.u_max_rad)
+        capacity = int(np.ceil(self.estimator_cfg.window_s * CAMERA_RATE_HZ)) + 8
+        self.estimator = BatchPlantEstimator(b, self.estimator_cfg, self.nom.k_g, capacity)
+        self.tilt_p = np.zeros((b, 2))         # double and single integral of the plate tilt reached
+        self.tilt_v = np.zeros((b, 2))
         self.builder.reset()
         return self._observe()
 
@@ -209,11 +367,13 @@ class PlateBatch:
             z = self.x + self.rng.normal(0.0, 1.0, (self.b, 2)) * self.noise[:, None]
             self._kalman(t, z, arrived)
             self.pending.append((t + self.nom.vision_delay_s, self.kf_x.copy(), self.kf_v.copy(), t,
-                                 arrived & self.kf_init))
+                                 arrived & self.kf_init, self.tilt_p.copy(), self.tilt_v.copy()))
         while self.pending and self.pending[0][0] <= t + 1e-9:
-            _, ex, ev, stamp, valid = self.pending.pop(0)
+            _, ex, ev, stamp, valid, tilt_p, tilt_v = self.pending.pop(0)
             self.obs_x[valid], self.obs_v[valid] = ex[valid], ev[valid]
             self.obs_stamp[valid] = stamp
+            # the pipeline adds each new state it controls on to the plant estimate
+            self.estimator.add_state(np.full(self.b, stamp), ex, tilt_p, tilt_v, valid & self.alive)
 
     def _kalman(self, t, z, arrived) -> None:
         n = self.nom
@@ -248,7 +408,8 @@ class PlateBatch:
 
     def _predicted_state(self):
         """The pipeline's latency prediction: the state at its stamp carried to now over the
-        commanded tilts (nominal k g, no actuation delay: config/pid.yaml)."""
+        commanded tilts (the plant estimate's k g and disturbance, no actuation delay:
+        config/policy.yaml)."""
         t = self.time_s
         age = np.clip(t - self.obs_stamp, 0.0, None)
         start = t - np.minimum(age, self.nom.max_prediction_s)
@@ -261,7 +422,7 @@ class PlateBatch:
             seg0 = np.maximum(j * CONTROL_DT_S, start)
             seg1 = np.full(self.b, (j + 1) * CONTROL_DT_S)
             h = np.clip(seg1 - seg0, 0.0, None)[:, None]
-            a = -self.nom.k_g * self.cmd_hist[:, :, j % self.hist_len]
+            a = -self.estimator.k_g[:, None] * self.cmd_hist[:, :, j % self.hist_len] + self.estimator.offset
             x = x + v * h + 0.5 * a * h * h
             v = v + a * h
         return x, v, age
@@ -276,7 +437,12 @@ class PlateBatch:
         ref = self._ref(0)
         self.e, self.ve = x - ref[:, 0], v - ref[:, 1]
         self.a_ref = ref[:, 2]
-        self.u_pid = self.pid.step(self.e, self.ve, self.a_ref, CONTROL_DT_S)
+        # the PID as the pipeline runs it (control/pipeline.py adapted_pid_step): the estimate
+        # sets the feed-forward and the disturbance tilt, and scales the feedback down only
+        k_est = self.estimator.k_g[:, None]
+        scale = np.minimum(1.0, self.nom.k_g / k_est) if self.scale_feedback else 1.0
+        self.u_pid = self.pid.step(self.e, self.ve, self.a_ref * (self.nom.k_g / k_est), CONTROL_DT_S,
+                                   gain_scale=scale, u_bias=self.estimator.offset / k_est)
         self.u_pid = np.where(self.engaged[:, None], self.u_pid, 0.0)
         self.age = np.where(have, age, 0.0)
         return self.builder.build(self.e, self.ve, -self.a_ref / self.nom.k_g, self.u_pid, self.age)
@@ -350,6 +516,9 @@ class PlateBatch:
         self.cmd = cmd
         self.cmd_hist[:, :, self.tick % self.hist_len] = cmd
         t0 = self.time_s
+        # the tilt reached, as the measured joints give it each tick (the plant estimate's input)
+        self.tilt_p += self.tilt_v * CONTROL_DT_S + 0.5 * self.theta * CONTROL_DT_S ** 2
+        self.tilt_v += self.theta * CONTROL_DT_S
         for k in range(SUBSTEPS):
             self.x, self.v, self.theta = self._substep(self.x, self.v, self.theta, t0 + k * SUBSTEP_S)
         # random pushes

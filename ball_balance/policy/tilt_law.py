@@ -14,6 +14,7 @@ from typing import Mapping, Optional
 import numpy as np
 
 from ball_balance.control.pid import PidGains, PlatePid
+from ball_balance.control.pipeline import adapted_pid_step
 from ball_balance.policy.observation import ObservationBuilder, flat_names
 from ball_balance.policy.params import model_path
 from controller_manager_py.controllers.policy_model import PolicyModelError, PolicyRunner
@@ -24,8 +25,11 @@ ACTION_KIND = "residual_tilt"
 class PolicyTiltLaw:
     """A pipeline tilt law (ball_balance.control.pipeline.TiltLaw): `reset()`, `tilt(ctx)`."""
 
-    def __init__(self, runner: PolicyRunner, gains: PidGains, k_g: float, blend_s: float = 1.0):
+    def __init__(self, runner: PolicyRunner, gains: PidGains, k_g: float, blend_s: float = 1.0,
+                 scale_feedback: bool = False, use_estimate: bool = True):
         self.runner, self.k_g, self.blend_s = runner, k_g, blend_s
+        self.scale_feedback = scale_feedback   # adapt_pid_feedback, as the PID law
+        self.use_estimate = use_estimate       # the PID takes the plant estimate (as the model was trained)
         self.pid = PlatePid(gains, k_g)
         self.builder = ObservationBuilder(1, runner.metadata.observation.history)
         self.u = np.zeros(2)
@@ -49,12 +53,19 @@ class PolicyTiltLaw:
     def tilt(self, ctx):
         """One tick of the pipeline (TiltContext): the PID's tilt plus the policy's correction."""
         age = ctx.obs.age_s if ctx.obs is not None else 0.0
-        return self.step(ctx.pos_m, ctx.vel_m_s, ctx.ref, ctx.dt_s, age)
+        if not self.use_estimate:
+            return self.step(ctx.pos_m, ctx.vel_m_s, ctx.ref, ctx.dt_s, age)
+        return self.step(ctx.pos_m, ctx.vel_m_s, ctx.ref, ctx.dt_s, age, ctx.k_g, ctx.accel_offset_m_s2)
 
-    def step(self, pos_m, vel_m_s, ref, dt_s: float, age_s: float = 0.0):
-        """(u_x, u_y) [rad] for the (latency-predicted) ball state and the reference sample."""
+    def step(self, pos_m, vel_m_s, ref, dt_s: float, age_s: float = 0.0, k_g: Optional[float] = None,
+             accel_offset_m_s2=(0.0, 0.0)):
+        """(u_x, u_y) [rad] for the (latency-predicted) ball state and the reference sample.
+        k_g, accel_offset_m_s2: the pipeline's plant estimate, which the PID uses as the PID law
+        does (None: the configured k_g, no disturbance)."""
         pos, vel = np.asarray(pos_m, dtype=float), np.asarray(vel_m_s, dtype=float)
-        u_pid = np.asarray(self.pid.step(pos, vel, ref, dt_s), dtype=float)
+        scale_feedback = self.scale_feedback and k_g is not None
+        u_pid = np.asarray(adapted_pid_step(self.pid, self.k_g, scale_feedback, pos, vel, ref, dt_s,
+                                            self.k_g if k_g is None else k_g, accel_offset_m_s2), dtype=float)
         obs = self.builder.build((pos - ref.p)[None], (vel - ref.v)[None], (-np.asarray(ref.a) / self.k_g)[None],
                                  u_pid[None], age_s)
         action = self.runner.infer(obs[0])
@@ -90,8 +101,11 @@ def load_tilt_law(values: Mapping) -> PolicyTiltLaw:
     mismatch = base_pid_mismatch(runner.metadata.training, values)
     if mismatch:
         raise PolicyModelError(f"policy model {runner.where}: trained on a different PID ({mismatch})")
+    # a model trained on a PID that took the plant estimate records the estimate's parameters
+    # (ball_balance/policy/env.py BASE_PID_KEYS); one trained before that runs on the PID without it
+    use_estimate = "adapt_plant_gain" in (runner.metadata.training.get("base_pid") or {})
     return PolicyTiltLaw(runner, control_config.pid_gains(values), control_config.k_g(values),
-                         values["policy_blend_s"])
+                         values["policy_blend_s"], bool(values.get("adapt_pid_feedback", False)), use_estimate)
 
 
 def make_tilt_law(cfg) -> PolicyTiltLaw:

@@ -4,8 +4,9 @@ import pytest
 
 from ball_balance.benchmark.episode import controller_values
 from ball_balance.control import config as control_config
+from ball_balance.control.estimation import PlantEstimator
 from ball_balance.control.pid import AxisPid
-from ball_balance.policy.env import BatchPid, DomainRanges, PlateBatch
+from ball_balance.policy.env import BatchPid, BatchPlantEstimator, DomainRanges, PlateBatch
 
 
 def test_batch_pid_is_the_axis_pid():
@@ -14,11 +15,49 @@ def test_batch_pid_is_the_axis_pid():
     rng = np.random.default_rng(3)
     batch = BatchPid((5, 2), values, k_g, gains.u_max_rad)
     axes = [[AxisPid(gains, k_g) for _ in range(2)] for _ in range(5)]
+    scale = np.linspace(0.5, 1.0, 5)[:, None]
     for _ in range(300):
         e, ve, a = rng.normal(0, 0.03, (5, 2)), rng.normal(0, 0.1, (5, 2)), rng.normal(0, 0.2, (5, 2))
-        got = batch.step(e, ve, a, 0.02)
-        want = np.array([[axes[i][j].step(e[i, j], ve[i, j], a[i, j], 0.02) for j in range(2)] for i in range(5)])
+        bias = rng.normal(0, 0.01, (5, 2))
+        got = batch.step(e, ve, a, 0.02, gain_scale=scale, u_bias=bias)
+        want = np.array([[axes[i][j].step(e[i, j], ve[i, j], a[i, j], 0.02, float(scale[i, 0]), bias[i, j])
+                          for j in range(2)] for i in range(5)])
         np.testing.assert_allclose(got, want, atol=1e-12)
+
+
+def test_batch_plant_estimator_is_the_plant_estimator():
+    """The batched estimate follows control/estimation.py on the same positions and tilts,
+    a push (window restart) included."""
+    cfg = control_config.estimator_config(controller_values("policy", "stationary"))
+    b, k_nominal, dt = 3, 5.886, 0.02
+    k_true = np.array([4.0, 7.0, 9.0])
+    d_true = np.array([[0.05, -0.02], [0.0, 0.1], [-0.1, 0.0]])
+    batch = BatchPlantEstimator(b, cfg, k_nominal, int(np.ceil(cfg.window_s * 30)) + 8)
+    single = [PlantEstimator(cfg, k_nominal) for _ in range(b)]
+    rng = np.random.default_rng(0)
+    x, v = np.zeros((b, 2)), np.full((b, 2), 0.05)
+    big_p, big_v = np.zeros((b, 2)), np.zeros((b, 2))
+    next_frame = 0.0
+    for n in range(900):
+        t = n * dt
+        u = 0.03 * np.stack([np.sin(2 * np.pi * t / 3 + np.arange(b)), np.cos(2 * np.pi * t / 2.3) + 0 * k_true], 1)
+        for i in range(b):
+            single[i].add_tilt(t, u[i])
+        if t >= next_frame - 1e-9:
+            next_frame += 1 / 30
+            z = x + rng.normal(0, 0.001, (b, 2))
+            for i in range(b):
+                single[i].add_state(t, z[i])
+            batch.add_state(np.full(b, t), z, big_p.copy(), big_v.copy(), np.ones(b, bool))
+        if n == 500:
+            v[1] += (0.15, 0.0)    # a push on plate 1
+        a = -k_true[:, None] * u + d_true
+        x, v = x + v * dt + 0.5 * a * dt * dt, v + a * dt
+        big_p, big_v = big_p + big_v * dt + 0.5 * u * dt * dt, big_v + u * dt
+    assert single[1].restarts + single[1].skipped > 0
+    np.testing.assert_allclose(batch.k_g, [e.k_g for e in single], rtol=2e-3)
+    np.testing.assert_allclose(batch.offset, [e.offset for e in single], atol=2e-3)
+    np.testing.assert_allclose(batch.k_g, k_true, rtol=0.05)
 
 
 def test_pid_alone_balances_the_nominal_plant():
