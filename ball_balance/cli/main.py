@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 from typing import List, Optional
 
@@ -256,6 +257,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[List[str]] = None) -> int:
     args = build_parser().parse_args(argv)
+    # Ctrl-C stops every verb even when we were started with SIGINT ignored (a background job
+    # of a script, `cmd &`, inherits that): `bag record` would otherwise never finish its file
+    # on `kill -INT`. ros2cli's verbs and rosbag2 install their own SIGINT handler too.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     module_name, function_name = args._target.split(":")
     try:
         from ball_balance.cli.errors import CliError

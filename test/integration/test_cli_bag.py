@@ -6,6 +6,7 @@ MCAP ROS 2 decoder, and replayed into a fresh tracker that answers as the live o
 """
 import json
 import os
+import shlex
 import signal
 import struct
 import subprocess
@@ -248,6 +249,20 @@ def test_record_rematches_when_a_best_effort_publisher_joins_a_reliable_topic(la
     assert sorted(p["reliability"] for p in meta["offered_qos_profiles"]) == ["best_effort", "reliable"]
     texts = {d[-12:] for d in read_topics(bag, ["/mixed"])["/mixed"]}
     assert any(b"BEST_EFFORT" in t for t in texts) and any(b"RELIABLE" in t for t in texts)
+
+
+def test_record_finishes_its_bag_on_sigint_when_started_with_sigint_ignored(launcher, graph, tmp_path):
+    """A background job of a script (`ros2py bag record ... &`) starts with SIGINT ignored;
+    `kill -INT` must still end the recording with a complete bag, as rosbag2's does."""
+    bag = tmp_path / "background"
+    recorder = launcher.start(["bash", "-c", f"trap '' INT; exec {shlex.quote(executable('ros2py'))} bag record "
+                               f"-o {shlex.quote(str(bag))} /nothing_published"], name="record")
+    graph.spin_until(lambda: "Recording to" in recorder.output(), 60, "the recorder to start")
+    stop(recorder)
+    assert recorder.wait(timeout=5) == 0, recorder.output()
+    assert "Recorded 0 messages" in recorder.output()
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["topics_with_message_count"] == []
 
 
 def _best_effort():
