@@ -12,7 +12,8 @@ in the log). An accepted goal preempts the running one (which ends ABORTED, INVA
 "preempted"), gets the tolerances of tolerances.goal_tolerances, and ends SUCCEEDED once the
 goal tolerances hold after the last point, or ABORTED with PATH_TOLERANCE_VIOLATED /
 GOAL_TOLERANCE_VIOLATED (the arm then holds where it is). A cancel of the running goal
-holds the arm where it is and ends the goal CANCELED.
+holds the arm where it is, or brakes it to a stop with `constraints.decelerate_on_cancel`,
+and ends the goal CANCELED.
 
 The loop never waits on this side: it reads one slot and writes a goal's outcome (one
 assignment); a timer at `action_monitor_rate` turns outcomes into results and publishes
@@ -132,7 +133,7 @@ class TrajectoryRosInterface:
             if run.outcome is None and handle.is_cancel_requested:
                 run.finish(GoalRun.CANCELED, 0, "Goal canceled: holding position")
                 if self.c.active:
-                    self.c.hold()
+                    self.c.cancel()
             if run.outcome is not None:
                 del self._runs[goal_id]
                 future.set_result(run.outcome)

@@ -29,7 +29,10 @@ interface (the UR driver's speed_scaling/speed_scaling_factor, 0..1): the scaled
 controller. A header stamp of zero starts the trajectory now; otherwise at the stamp
 (manager clock). While it runs the path tolerances are checked, after its last point the
 goal tolerances (within goal_time); a violation holds the arm where it is (and aborts the
-goal). An empty trajectory stops: hold where the arm is. The desired positions pass
+goal). An empty trajectory stops: hold where the arm is. With
+`constraints.decelerate_on_cancel` (and every joint's `max_deceleration_on_cancel` > 0, and
+velocity states) a cancel or an abort brakes each joint at that deceleration to where it
+comes to rest instead (tolerances.stopping_profile), as ros2_controllers does. The desired positions pass
 through the shared JointLimiter (manager/joint_limits.py: position range, velocity,
 acceleration) before they are commanded, so what the controller believes it commands is
 what the joints get; clamps are counted (`clamped_commands`) and logged, throttled.
@@ -61,13 +64,14 @@ class TrajectoryError(ValueError):
 class Goal:
     """A checked trajectory in controller joint order: times (s), positions[point][joint],
     velocities (same shape, or None), stamp (s, 0 = start when picked up), mask (joints it
-    commands), run (the action goal following it, or None for a topic trajectory)."""
+    commands), run (the action goal following it, or None for a topic trajectory), decelerate
+    (an empty one: brake to a stop if configured, else hold)."""
 
-    __slots__ = ("times", "positions", "velocities", "stamp", "mask", "run")
+    __slots__ = ("times", "positions", "velocities", "stamp", "mask", "run", "decelerate")
 
-    def __init__(self, times, positions, velocities, stamp, mask, run=None):
+    def __init__(self, times, positions, velocities, stamp, mask, run=None, decelerate=False):
         self.times, self.positions, self.velocities, self.stamp, self.mask = times, positions, velocities, stamp, mask
-        self.run = run
+        self.run, self.decelerate = run, decelerate
 
 
 class GoalRun:
@@ -173,6 +177,8 @@ class JointTrajectoryController(ControllerInterface):
             return CallbackReturn.ERROR
         self.scaling_name = self.params["speed_scaling_interface_name"]
         self.default_tolerances = tol.default_tolerances(self.joints, self.params)
+        self.stop_decelerations = self._stop_decelerations()
+        self._stopping = False
         self.limits: Dict[str, JointLimits] = self._joint_limits()
         self.limiter = JointLimiter(self.joints, self.limits, self.get_logger(), self.name)
         self.throttle = Throttle(self.get_logger())
@@ -184,6 +190,7 @@ class JointTrajectoryController(ControllerInterface):
         self._snapshot = None
         self.traj_time = 0.0
         self.scale = 1.0
+        self._step = 0.0
         self.holding = True
         n = len(self.joints)
         self.desired_p = [math.nan] * n
@@ -204,6 +211,20 @@ class JointTrajectoryController(ControllerInterface):
             from .follow_joint_trajectory import TrajectoryRosInterface
             self.ros = TrajectoryRosInterface(self, self.get_node())
         return CallbackReturn.SUCCESS
+
+    def _stop_decelerations(self) -> Optional[List[float]]:
+        """Each joint's max_deceleration_on_cancel when decelerate_on_cancel can be honoured,
+        else None (hold where the arm is), with one error line saying why not."""
+        if not self.params["constraints.decelerate_on_cancel"]:
+            return None
+        decelerations = [self.params[f"constraints.{j}.max_deceleration_on_cancel"] for j in self.joints]
+        missing = [j for j, a in zip(self.joints, decelerations) if a <= 0.0]
+        problem = (f"max_deceleration_on_cancel not set (> 0) for {missing}" if missing else
+                   None if "velocity" in self.state_names else "no velocity state interface")
+        if problem:
+            self.get_logger().error(f"{self.name}: decelerate_on_cancel: {problem}; holding position on cancel")
+            return None
+        return decelerations
 
     def _joint_limits(self) -> Dict[str, JointLimits]:
         """The limits of our joints from the robot description the manager hands its
@@ -272,8 +293,12 @@ class JointTrajectoryController(ControllerInterface):
         self._slot = goal
 
     def hold(self) -> None:
-        """Stop where the arm is (cancel): an empty trajectory."""
+        """Stop where the arm is: an empty trajectory."""
         self.offer(Goal([], [], None, 0.0, [True] * len(self.joints)))
+
+    def cancel(self) -> None:
+        """A cancelled goal: brake to a stop (decelerate_on_cancel) or hold where the arm is."""
+        self.offer(Goal([], [], None, 0.0, [True] * len(self.joints), decelerate=True))
 
     def on_trajectory(self, msg) -> bool:
         """~/joint_trajectory callback: a trajectory without a goal (preempts a running goal)."""
@@ -341,6 +366,7 @@ class JointTrajectoryController(ControllerInterface):
         """Hold the measured position (ros2_controllers' set_hold_position)."""
         self._knots = []
         self.holding = True
+        self._stopping = False
         self.limiter.reset(self.actual_p)
         for j, handle in enumerate(self.command_interfaces):
             p = self.actual_p[j]
@@ -355,7 +381,8 @@ class JointTrajectoryController(ControllerInterface):
             self.throttle.warn("stamp", f"{self.name}: trajectory stamped {-self.traj_time:+.1f} s from now; "
                                         "check use_sim_time (a zero stamp starts it on arrival)")
         if not goal.times:  # empty trajectory: stop here
-            self._hold_here()
+            # the desired state is last cycle's command: this cycle's sample is one step on
+            self._stop_here(self._step) if goal.decelerate else self._hold_here()
             return
         from_desired = self.params["interpolate_from_desired_state"] and not self.holding
         start_p = self.desired_p if from_desired else self.actual_p
@@ -377,11 +404,32 @@ class JointTrajectoryController(ControllerInterface):
                 v = clamped_spline_velocities(times, p, start_v[j], 0.0)
             knots_p.append(p)
             knots_v.append(v)
+        self._begin(times, knots_p, knots_v, start_p, start_v)
+
+    def _begin(self, times, knots_p, knots_v, start_p, start_v, stopping: bool = False) -> None:
         self._knots = [(times, knots_p, knots_v)]
         self.limiter.reset(start_p, start_v)
         self._segment = 0
         self._first_sample = True
         self.holding = False
+        self._stopping = stopping
+
+    def _stop_here(self, elapsed: float = 0.0) -> None:
+        """Brake each joint to rest at its max_deceleration_on_cancel, or hold (not configured).
+        elapsed: trajectory time since the desired state was commanded (0 within this cycle)."""
+        decelerations = self.stop_decelerations
+        if decelerations is None or self._vel is None:
+            self._hold_here()
+            return
+        # from the commanded state: the measured one lags it by the arm's following delay, and
+        # braking from there would first step the command back (the arm stalls a cycle, then moves on)
+        start_p, start_v = (self.actual_p, self.actual_v) if self.holding else (self.desired_p, self.desired_v)
+        times, knots_p, knots_v = tol.stopping_profile(start_p, start_v, decelerations)
+        if len(times) < 2:  # nothing moves
+            self._hold_here()
+            return
+        self._begin(times, knots_p, knots_v, list(start_p), list(start_v), stopping=True)
+        self.traj_time = elapsed
 
     def _abort(self, code: int, text: str) -> None:
         """A tolerance violation: hold where the arm is; report it on the goal, if any."""
@@ -391,7 +439,7 @@ class JointTrajectoryController(ControllerInterface):
             run.finish(GoalRun.ABORTED, code, text)
             self._run = None
         self.throttle.warn(f"abort{code}", f"{self.name}: holding position: {text}")
-        self._hold_here()
+        self._stop_here()
 
     def update(self, time: float, period: float) -> return_type:
         self._read_state()
@@ -400,6 +448,7 @@ class JointTrajectoryController(ControllerInterface):
             scale = self._scaling.value
             scale = 1.0 if scale != scale else (0.0 if scale < 0.0 else scale)
         self.scale = scale
+        self._step = period * scale
         goal = self._slot
         if goal is not None and goal is not self._taken:
             self._taken = goal
@@ -443,6 +492,10 @@ class JointTrajectoryController(ControllerInterface):
 
     def _check_tolerances(self, after_end: float, moving: bool) -> None:
         """Path tolerances while moving, goal tolerances after the last point (Jazzy's rules)."""
+        if self._stopping:  # braking after a cancel or an abort: nothing to check, rest at its end
+            if after_end >= 0.0 and not self._held_back:
+                self._knots, self._stopping = [], False
+            return
         run = self._run
         tolerances = run.tolerances if run is not None else self.default_tolerances
         n = len(self.joints)

@@ -58,13 +58,35 @@ def constraint_params(joints: Sequence[str]) -> List[Param]:
               "goal velocity tolerance of every joint: the arm counts as stopped below it", unit="rad/s", min=0.0),
         Param("constraints.goal_time", 0.0,
               "time after the last point by which the goal tolerance must hold (0 = no limit)", unit="s", min=0.0),
+        Param("constraints.decelerate_on_cancel", False,
+              "on a cancel or an abort, decelerate to a stop at each joint's max_deceleration_on_cancel "
+              "instead of holding where the arm is (needs every joint's, and velocity states)", read_only=True),
     ]
     for joint in joints:
         params.append(Param(f"constraints.{joint}.trajectory", 0.0,
                             f"path position tolerance of {joint} (0 = not checked)", unit="rad", min=0.0))
         params.append(Param(f"constraints.{joint}.goal", 0.0,
                             f"goal position tolerance of {joint} (0 = not checked)", unit="rad", min=0.0))
+        params.append(Param(f"constraints.{joint}.max_deceleration_on_cancel", 0.0,
+                            f"deceleration of {joint} when stopping with decelerate_on_cancel (0 = not set)",
+                            unit="rad/s^2", min=0.0, read_only=True))
     return params
+
+
+def stopping_profile(positions: Sequence[float], velocities: Sequence[float], decelerations: Sequence[float]):
+    """Each joint brakes from (p, v) at its constant deceleration a to p + sign(v) v^2 / (2 a) in
+    |v| / a (ros2_controllers' decelerate_to_hold_position). Returns (times, knot positions,
+    knot velocities) with knots at 0, every joint's stop time and the last one: between two
+    knots each joint's motion is one parabola, which a cubic Hermite segment through the knots'
+    positions and velocities reproduces exactly. A single knot when nothing moves."""
+    stop_times = [abs(v) / a for v, a in zip(velocities, decelerations)]
+    times = sorted({0.0, *(t for t in stop_times if t > 1e-9)})
+    knots_p, knots_v = [], []
+    for p, v, a, t_stop in zip(positions, velocities, decelerations, stop_times):
+        brake = -a if v > 0.0 else a
+        knots_p.append([p + v * min(t, t_stop) + 0.5 * brake * min(t, t_stop) ** 2 for t in times])
+        knots_v.append([v + brake * t if t < t_stop else 0.0 for t in times])
+    return times, knots_p, knots_v
 
 
 def default_tolerances(joints: Sequence[str], params: Mapping) -> Tolerances:

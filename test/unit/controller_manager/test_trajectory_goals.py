@@ -143,6 +143,62 @@ def test_hold_stops_the_arm_where_it_is():
     assert HOME[0] + 0.05 < held[0] < HOME[0] + 0.3
 
 
+DECELERATION = 2.0  # rad/s^2
+BRAKING = {"constraints.decelerate_on_cancel": True,
+           **{f"constraints.{j}.max_deceleration_on_cancel": DECELERATION for j in JOINTS}}
+
+
+def brake_and_record(cm, t, cycles=60):
+    """Positions of joint 0 over `cycles` cycles (the stop is planned at the first)."""
+    path = [positions(cm)[0]]
+    for _ in range(cycles):
+        t = run(cm, 1, start=t)
+        path.append(positions(cm)[0])
+    return path, t
+
+
+def test_cancel_with_decelerate_on_cancel_brakes_to_rest_at_the_deceleration():
+    cm = make_manager(rate=RATE)
+    jtc = spawn_jtc(cm, BRAKING)
+    send(jtc, trajectory([(1.0, offset(0.3))]), goal_run(jtc))
+    t = run(cm, 40)
+    p0, v0 = jtc.desired_p[0], jtc.desired_v[0]  # commanded: braking starts from there
+    assert v0 > 0.3  # mid-way, moving
+    jtc.cancel()
+    path, t = brake_and_record(cm, t)
+    rest = p0 + v0 * v0 / (2 * DECELERATION)  # where constant braking from (p0, v0) ends
+    assert path[-1] == pytest.approx(rest, abs=1e-6)
+    assert path[-1] == pytest.approx(path[-20], abs=1e-9)  # at rest, well before the end
+    steps = [b - a for a, b in zip(path, path[1:])]
+    assert all(step >= -1e-12 for step in steps)  # never turns back
+    braking = [(b - a) * RATE * RATE for a, b in zip(steps[1:], steps[2:])]
+    assert max(abs(x) for x in braking) <= 1.2 * DECELERATION
+
+
+def test_abort_with_decelerate_on_cancel_brakes_instead_of_stopping_dead():
+    cm = make_manager(rate=RATE)
+    jtc = spawn_jtc(cm, BRAKING)
+    run_ = send(jtc, trajectory([(1.0, offset(0.3))]), goal_run(jtc))
+    t = run(cm, 40)
+    run_.tolerances.path[0].position = 1e-5  # the mock follows one cycle late: violated next cycle
+    path, t = brake_and_record(cm, t)
+    assert run_.outcome[:2] == (GoalRun.ABORTED, PATH_TOLERANCE_VIOLATED)
+    assert path[-1] - path[1] > 0.02 and path[-1] == pytest.approx(path[-20], abs=1e-9)
+
+
+def test_decelerate_on_cancel_without_every_deceleration_holds_and_says_why(caplog):
+    cm = make_manager(rate=RATE)
+    jtc = spawn_jtc(cm, {**BRAKING, f"constraints.{JOINTS[0]}.max_deceleration_on_cancel": 0.0})
+    assert jtc.stop_decelerations is None
+    send(jtc, trajectory([(1.0, offset(0.3))]), goal_run(jtc))
+    t = run(cm, 40)
+    jtc.cancel()
+    t = run(cm, 2, start=t)
+    held = positions(cm)
+    run(cm, 50, start=t)
+    assert positions(cm) == pytest.approx(held, abs=1e-9)
+
+
 def test_unreachable_point_is_refused_and_the_controller_never_diverges_from_the_arm():
     """Issue 9.2 replayed: 50 rad, then a valid trajectory home."""
     cm = make_manager(rate=RATE)
