@@ -8,8 +8,9 @@ busy. Cases:
 
   forward_position_controller   the node path's controller in the manager, fed at 50 Hz (baseline)
   ball_balance_controller       config/ur_controllers_policy.yaml: the policy engaged, each step in
-                                the controller's worker thread (async_step, SCHED_FIFO 45), targets
-                                written every cycle
+                                the controller's worker thread (async_step, SCHED_FIFO 45, on the
+                                loop's CPU), targets written every cycle
+  same, worker on any CPU       step_thread_on_loop_cpu: false
   same, worker normal priority  step_thread_priority: 0
   same, async_step: false       the step inline in the loop's update()
 
@@ -19,7 +20,7 @@ WARN above a std of 100 us), the longest period and the periods over 1.5x / 2x n
 beside it what the policy controller reported on ~/introspection_data at the end (mode,
 missed steps, step time).
 
-    source env.sh && python benchmarks/policy_in_manager_timing_bench.py [--seconds 8] [--busy 1]
+    source env.sh && python benchmarks/policy_in_manager_timing_bench.py [--seconds 8] [--busy 1] [--cases 0,1]
 """
 from __future__ import annotations
 
@@ -45,6 +46,7 @@ POLICY = "ball_balance_controller"
 CASES = [
     ("forward_position_controller (node path)", "forward_position_controller", {}),
     ("ball_balance_controller, async_step", POLICY, {}),
+    ("same, worker on any CPU", POLICY, {"step_thread_on_loop_cpu": False}),
     ("same, worker at normal priority", POLICY, {"step_thread_priority": 0}),
     ("ball_balance_controller, step inline", POLICY, {"async_step": False}),
 ]
@@ -124,12 +126,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=8.0, help="measuring window per case")
     parser.add_argument("--busy", type=int, default=1, help="busy processes beside the manager")
+    parser.add_argument("--cases", default="", help="comma-separated case numbers (0-based, table order); "
+                        "default all")
+    parser.add_argument("--repeat", type=int, default=1, help="run the chosen cases this many times, interleaved")
     args = parser.parse_args()
+    chosen = [CASES[int(i)] for i in args.cases.split(",")] if args.cases else CASES
     print(f"load average at start: {os.getloadavg()[0]:.2f}; {os.cpu_count()} CPUs; window {args.seconds:g} s; "
           f"{args.busy} busy process(es)")
     print(f"{HEADER} | policy: mode, missed steps, step us")
     with Busy(args.busy):
-        for label, controller, overrides in CASES:
+        for label, controller, overrides in chosen * args.repeat:
             result, seen = run_case(controller, overrides, args.seconds)
             policy = ""
             if controller == POLICY:

@@ -107,7 +107,10 @@ def _schema() -> tuple:
                            Param("async_step", True, "run each control step in a worker thread (update() "
                                  "never waits for it; a step due while the last one runs is missed)"),
                            Param("step_thread_priority", STEP_THREAD_PRIORITY, "SCHED_FIFO priority of the "
-                                 "async_step worker thread (0: normal scheduling)", min=0, max=99)]
+                                 "async_step worker thread (0: normal scheduling)", min=0, max=99),
+                           Param("step_thread_on_loop_cpu", True, "the async_step worker runs on the manager "
+                                 "loop thread's CPU(s): below the loop's priority it then steps only while the "
+                                 "loop sleeps and never takes Python's interpreter lock from a running cycle")]
     for p in (control_config.PID_SCHEMA + control_config.MPC_SCHEMA + POLICY_PARAMS):
         if p.name not in seen and p.name not in NODE_ONLY:
             seen.add(p.name)
@@ -319,7 +322,8 @@ class BallBalanceController(ControllerInterface):
         self.limiter.reset([h if math.isfinite(h) else m for h, m in zip(held, measured)])
         if self.values["async_step"]:
             self._worker = AsyncHandler(f"{self.name}.step", self._step,
-                                        thread_priority=self.values["step_thread_priority"])
+                                        thread_priority=self.values["step_thread_priority"],
+                                        on_trigger_cpus=self.values["step_thread_on_loop_cpu"])
         return CallbackReturn.SUCCESS
 
     def on_deactivate(self, previous_state: State) -> CallbackReturn:

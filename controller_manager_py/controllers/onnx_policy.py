@@ -76,6 +76,12 @@ class OnnxPolicyController(ControllerInterface):
               "s", 0.0, 60.0),
         Param("max_input_age_s", 0.0, "hold when an input is older than this (0: no check)", "s", 0.0, 60.0),
         Param("async_inference", True, "infer in a worker thread (the loop never waits for it)"),
+        Param("inference_thread_priority", 45, "SCHED_FIFO priority of the inference worker (0: normal "
+              "scheduling); below the loop's, so that, preempted, it does not hold Python's interpreter lock "
+              "the loop waits for", "", 0, 99),
+        Param("inference_on_loop_cpu", True, "the inference worker runs on the manager loop thread's CPU(s): "
+              "below the loop's priority it then runs only while the loop sleeps and never takes the "
+              "interpreter lock from a running cycle"),
     )
 
     # ---- configure: load the model and resolve every name -----------------------------------
@@ -226,7 +232,9 @@ class OnnxPolicyController(ControllerInterface):
             self._limiter.reset(list(self._last))
         if self.params["async_inference"]:
             from ..manager.async_handler import AsyncHandler
-            self._worker = AsyncHandler(f"{self.name}.inference", self._infer_pending)
+            self._worker = AsyncHandler(f"{self.name}.inference", self._infer_pending,
+                                        thread_priority=self.params["inference_thread_priority"],
+                                        on_trigger_cpus=self.params["inference_on_loop_cpu"])
         else:
             self._worker = None
         return CallbackReturn.SUCCESS

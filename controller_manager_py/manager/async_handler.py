@@ -4,6 +4,14 @@
 the previous call is still running the trigger is skipped (counted in `skipped`) and the
 last result is returned again. In "detached" mode the worker runs on its own at `rate_hz`
 and trigger() only reports the last result. Used for is_async controllers and hardware.
+
+`on_trigger_cpus`: the worker moves to the CPUs of the thread that first triggers it (the
+manager's loop thread, which the node pins to one CPU with `executor_on_loop_cpu`). With a
+SCHED_FIFO priority below the loop's, the worker then runs only while the loop sleeps, as the
+executor thread does: it cannot ask for Python's interpreter lock while the loop holds it.
+On another CPU it can, and does (a 2 ms step of Python is a long run of bytecode): the loop,
+made to give the lock back 20 us after taking it, then waits for it for as long as its own
+raised switch interval (hold_interpreter, a period), and that cycle starts late.
 """
 from __future__ import annotations
 
@@ -24,7 +32,7 @@ except (AttributeError, OSError):
 class AsyncHandler:
     def __init__(self, name: str, function: Callable[[float, float], return_type],
                  detached: bool = False, rate_hz: float = 0.0, clock: Callable[[], float] = _time.monotonic,
-                 thread_priority: int = 0, affinity: Sequence[int] = ()):
+                 thread_priority: int = 0, affinity: Sequence[int] = (), on_trigger_cpus: bool = False):
         self.name = name
         self._function = function
         self._detached = detached
@@ -42,6 +50,8 @@ class AsyncHandler:
         self.last_duration = 0.0
         self.thread_priority = thread_priority  # SCHED_FIFO when > 0 and permitted
         self.affinity = tuple(affinity)  # CPUs for the thread (empty: any)
+        self._pin_to_trigger = on_trigger_cpus and not detached
+        self._pin_cpus: tuple = ()  # the first triggering thread's CPUs, applied by the worker once
         self._thread = threading.Thread(target=self._run, name=f"async:{name}", daemon=True)
         self._thread.start()
 
@@ -52,6 +62,12 @@ class AsyncHandler:
             self.skipped += 1
             return self.last_result
         self._args = (time, period)
+        if self._pin_to_trigger:
+            self._pin_to_trigger = False
+            try:
+                self._pin_cpus = tuple(os.sched_getaffinity(0))   # (0: the calling thread)
+            except (AttributeError, OSError):
+                pass
         self._busy = True
         self._wake.set()
         return self.last_result
@@ -106,5 +122,8 @@ class AsyncHandler:
             self._wake.clear()
             if self._stop:
                 return
+            if self._pin_cpus:
+                cpus, self._pin_cpus = self._pin_cpus, ()
+                configure_thread(None, f"async thread '{self.name}'", 0, cpus)
             self._call(*self._args)
             self._busy = False

@@ -33,3 +33,21 @@ def test_async_thread_started_from_a_pinned_thread_runs_on_any_cpu():
     thread.start()
     thread.join(10)
     assert seen["cpus"] == set(PROCESS_CPUS)
+
+
+def test_async_thread_on_trigger_cpus_follows_the_first_triggering_thread():
+    """on_trigger_cpus: the worker moves to the CPUs of the (loop) thread that triggers it."""
+    seen = {}
+    handler = AsyncHandler("on loop cpu", lambda time, period: seen.setdefault(
+        "cpus", os.sched_getaffinity(0)) and return_type.OK, on_trigger_cpus=True)
+
+    def trigger_from_pinned_thread():
+        set_cpu_affinity([PROCESS_CPUS[-1]])
+        handler.trigger(0.0, 0.002)
+        handler.wait_idle(10.0)
+
+    thread = threading.Thread(target=trigger_from_pinned_thread)
+    thread.start()
+    thread.join(15)
+    handler.stop()
+    assert seen["cpus"] == {PROCESS_CPUS[-1]}
