@@ -156,7 +156,9 @@ def _play_once(session: Session, paths, topics, channels, rate: float, clock: Op
         while True:
             now = bag_now()
             if clock is not None and (clock.next_ns is None or now >= clock.next_ns):
-                clock.publish(now)
+                # never ahead of the message about to go out: a late wake-up must not move
+                # /clock past it (nor past the bag's end)
+                clock.publish(min(now, bag_ns))
                 clock.next_ns = now + int(clock.period_ns * rate)
             if now >= bag_ns:
                 return

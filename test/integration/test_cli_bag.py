@@ -12,6 +12,7 @@ import struct
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -263,6 +264,62 @@ def test_record_finishes_its_bag_on_sigint_when_started_with_sigint_ignored(laun
     assert "Recorded 0 messages" in recorder.output()
     info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert info["topics_with_message_count"] == []
+
+
+COUNTER = textwrap.dedent("""
+    import rclpy
+    from std_msgs.msg import String
+    rclpy.init()
+    node = rclpy.create_node('counter')
+    pub = node.create_publisher(String, '/count', 10)
+    sent = [0]
+    def tick():
+        pub.publish(String(data=str(sent[0])))
+        sent[0] += 1
+    node.create_timer(0.05, tick)
+    rclpy.spin(node)
+""")
+
+
+def test_play_loops_at_a_rate_with_the_bags_time_on_clock(launcher, graph, tmp_path):
+    """`bag play --rate 4 --loop --clock 20 --topics /count`: the recording again and again,
+    /clock carrying the bag's time, running 4 times as fast as the wall clock."""
+    from rclpy.qos import QoSProfile
+    from rosgraph_msgs.msg import Clock
+    from std_msgs.msg import String
+
+    counter = launcher.start([sys.executable, "-c", COUNTER], name="counter")
+    graph.wait_for_topic("/count", timeout=30)
+    bag = tmp_path / "count"
+    result = launcher.run([executable("ros2py"), "bag", "record", "-o", str(bag), "/count", "--duration", "3"],
+                          timeout=90)
+    assert result.returncode == 0, result.stderr
+    stop(counter)
+    recorded = [d for d in read_topics(bag, ["/count"])["/count"]]
+    assert len(recorded) >= 10, len(recorded)
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    bag_start_ns = info["starting_time"]["nanoseconds_since_epoch"]
+    bag_end_ns = bag_start_ns + info["duration"]["nanoseconds"]
+
+    received, clocks = [], []  # (wall s, value)
+    graph.node.create_subscription(String, "/count", lambda m: received.append(m.data), 100)
+    graph.node.create_subscription(
+        Clock, "/clock", lambda m: clocks.append((time.monotonic(), m.clock.sec * 1_000_000_000 + m.clock.nanosec)),
+        QoSProfile(depth=100))
+    player = launcher.start([executable("ros2py"), "bag", "play", str(bag), "--rate", "4", "--loop", "--clock", "20",
+                             "--topics", "/count", "--delay", "2"], name="bag_play")
+    graph.spin_until(lambda: len(received) >= 4 * len(recorded), 120, "four passes of the bag")
+    stop(player)
+    assert player.wait(timeout=5) == 0, player.output()
+    first = received.index(received[0], 1)  # the first message again: the second pass begins
+    assert received[:first] == received[first:2 * first]  # every pass plays the same messages in order
+    outside = [(v - bag_start_ns) / 1e6 for _, v in clocks if not bag_start_ns <= v <= bag_end_ns]
+    assert not outside, (outside, info["duration"]["nanoseconds"] / 1e6)  # the bag's time
+    # bag time runs at 4x the wall clock: its forward steps over all passes against the wall
+    # time they took (loose: receive times jitter on a busy machine, each pass reopens the file)
+    advanced_s = sum(max(0, b[1] - a[1]) for a, b in zip(clocks, clocks[1:])) / 1e9
+    ratio = advanced_s / (clocks[-1][0] - clocks[0][0])
+    assert 2.5 < ratio < 5.0, ratio
 
 
 def _best_effort():
