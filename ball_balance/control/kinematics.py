@@ -1,6 +1,6 @@
 """Plate kinematics: forward kinematics from the robot description, the rotational Jacobian
 J_r of the wrist joints, the (u_x, u_y) -> world-rotation wiring and least-squares IK
-(docs/design.md section 6, steps 3-5). No ROS import.
+(docs/design.md section 6, steps 5-6). No ROS import.
 
 Chain: the URDF joints from `base_link` to `plate_center`, each joint transform being
 T_origin(xyz, rpy) * Rot(axis, q) as in URDF (rpy = fixed-axis roll, pitch, yaw:

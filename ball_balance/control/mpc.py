@@ -1,4 +1,4 @@
-"""Per-axis linear MPC on the discrete double integrator (docs/design.md section 6, step 2).
+"""Per-axis linear MPC on the discrete double integrator (docs/design.md section 6, step 4).
 
 Model per plate axis, state x = [p, v] ([m], [m/s]), input u (tilt [rad]), zero-order hold
 over dt:

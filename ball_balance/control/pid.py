@@ -1,4 +1,4 @@
-"""Per-axis PID on the plate-frame ball error (docs/design.md section 6, step 2).
+"""Per-axis PID on the plate-frame ball error (docs/design.md section 6, step 4).
 
 Sign: the plant is x'' = -k g u, so a ball on the +x side of its reference needs u_x > 0
 (positive gains push it back). With e = x - r and the derivative taken from the measured

@@ -1,4 +1,4 @@
-"""References r(t) the ball tracks, in the plate frame [m] (docs/design.md section 6, step 1).
+"""References r(t) the ball tracks, in the plate frame [m] (docs/design.md section 6, step 3).
 
 Every reference gives position, velocity and acceleration at time t [s] since it started,
 so controllers can use velocity/acceleration feed-forward and preview (MPC). `make_reference`
