@@ -199,6 +199,8 @@ def check_replay_drives_a_fresh_tracker_to_the_recorded_ball_state(bag: Path, en
     matched = [(a, b) for a, b in matched if a.tracking_valid and b.tracking_valid][5:]  # the filter settles
     assert len(matched) >= 20, f"{len(matched)} replayed ball states matched recorded ones of {len(replayed)}"
     worst = max(max(abs(a.x - b.x), abs(a.y - b.y)) for a, b in matched)
+    print(f"replayed /ball_state: {len(matched)} of {len(replayed)} matched a recorded one, "
+          f"worst difference {worst * 1000:.3f} mm")
     assert worst <= 0.001, f"replayed /ball_state differs by up to {worst * 1000:.2f} mm"
 
 
