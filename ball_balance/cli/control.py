@@ -143,7 +143,10 @@ def cmd_list_hardware_interfaces(args) -> int:
         response = _manager(args, session).call("list_hardware_interfaces", "ListHardwareInterfaces")
     print("command interfaces")
     for interface in sorted(response.command_interfaces, key=lambda i: i.name):
-        print(f"\t{interface.name}{_data_type(interface, args.verbose)} {_interface_flags(interface)}")
+        # ros2controlcli prints an unavailable command interface as unclaimed, whatever it says
+        flags = (_interface_flags(interface) if interface.is_available
+                 else f"{_interface_flags(interface, claimed=False)} [unclaimed]")
+        print(f"\t{interface.name}{_data_type(interface, args.verbose)} {flags}")
     print("state interfaces")
     for interface in sorted(response.state_interfaces, key=lambda i: i.name):
         print(f"\t{interface.name}{_data_type(interface, args.verbose)}")

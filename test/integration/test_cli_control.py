@@ -42,7 +42,9 @@ FAKE_CONTROLLER_MANAGER = textwrap.dedent("""
 
     def list_interfaces(request, response):
         response.command_interfaces = [HardwareInterface(name='joint1/velocity', data_type='double',
-                                                         is_available=True)]
+                                                         is_available=True),
+                                       HardwareInterface(name='joint2/velocity', data_type='double',
+                                                         is_available=False, is_claimed=True)]
         response.state_interfaces = [HardwareInterface(name='joint1/position', data_type='bool', is_available=True)]
         return response
 
@@ -124,10 +126,13 @@ def test_hardware_components_and_interfaces(launcher, manager):
     assert "\t\tjoint1/velocity [double] [available] [unclaimed]" in components
     assert "\tstate interfaces\n\t\tjoint1/position [double] [available]" in components
     interfaces = ros2py(launcher, "control", "list_hardware_interfaces").stdout
+    # as ros2controlcli: an unavailable command interface is printed unclaimed
     assert interfaces == ("command interfaces\n\tjoint1/velocity [available] [unclaimed]\n"
+                          "\tjoint2/velocity [unavailable] [unclaimed]\n"
                           "state interfaces\n\tjoint1/position\n")
     typed = ros2py(launcher, "control", "list_hardware_interfaces", "-v").stdout
     assert typed == ("command interfaces\n\tjoint1/velocity [double] [available] [unclaimed]\n"
+                     "\tjoint2/velocity [double] [unavailable] [unclaimed]\n"
                      "state interfaces\n\tjoint1/position [bool]\n")
 
 
