@@ -109,6 +109,11 @@ def main(argv=None) -> int:
     parser.add_argument("--action-scale", type=float, default=0.1, help="largest correction [rad]")
     parser.add_argument("--eval-batch", type=int, default=256)
     parser.add_argument("--max-rows", type=int, default=3_000_000, help="keep at most this many samples")
+    parser.add_argument("--loss", choices=("mse", "huber"), default="mse",
+                        help="huber: squared below 0.05 of the action range, linear above (the labels of states "
+                        "the student cannot tell apart, e.g. just after a push, weigh less)")
+    parser.add_argument("--final-lr", type=float, default=1e-3,
+                        help="learning rate of the last iteration (geometric from 1e-3)")
     parser.add_argument("--out", default=str(DEFAULT_OUT))
     args = parser.parse_args(argv)
     torch = _torch()
@@ -135,6 +140,12 @@ def main(argv=None) -> int:
     net = make_net(torch, args.hidden)
     student = Student(torch, net, mean, std)
     opt = torch.optim.Adam(net.parameters(), lr=1e-3)
+    lr_factor = (args.final_lr / 1e-3) ** (1.0 / max(args.iterations, 1))
+
+    def loss_of(pred, target):
+        if args.loss == "huber":
+            return torch.nn.functional.smooth_l1_loss(pred, target, beta=0.05)
+        return torch.mean((pred - target) ** 2)
     history = []
     best = None
 
@@ -148,7 +159,7 @@ def main(argv=None) -> int:
             loss_sum, count = 0.0, 0
             for i in range(0, n, 4096):
                 idx = perm[i:i + 4096]
-                loss = torch.mean((net(Xn[idx]) - Yt[idx]) ** 2)
+                loss = loss_of(net(Xn[idx]), Yt[idx])
                 opt.zero_grad()
                 loss.backward()
                 opt.step()
@@ -161,6 +172,8 @@ def main(argv=None) -> int:
 
     for it in range(args.iterations + 1):
         if it > 0:
+            for group in opt.param_groups:
+                group["lr"] *= lr_factor
             env = PlateBatch(args.batch, args.seed * 1000 + it, ranges, action_scale_rad=args.action_scale)
             Xi, Yi = rollout(env, act_student, True, rng)
             X, Y = np.concatenate([X, Xi]), np.concatenate([Y, Yi])
@@ -192,7 +205,8 @@ def main(argv=None) -> int:
     elapsed = time.monotonic() - t_start
     training = {"method": "DAgger imitation of a privileged PD teacher, residual on the PID",
                 "seed": args.seed, "commit": commit_id(), "iterations": args.iterations, "batch": args.batch,
-                "epochs": args.epochs, "hidden": args.hidden, "samples": int(len(X)),
+                "epochs": args.epochs, "loss": args.loss, "final_lr": args.final_lr, "hidden": args.hidden,
+                "samples": int(len(X)),
                 "wall_time_s": round(elapsed, 1), "torch": torch.__version__, "domains": ranges.as_dict(),
                 "evaluation": best[3], "iterations_evaluated": history,
                 "base_pid": {k: env.pid_values[k] for k in BASE_PID_KEYS},
