@@ -22,9 +22,9 @@ from typing import List, Optional
 PROG = "ros2py"
 QOS_RELIABILITY = ["reliable", "best_effort", "system_default"]
 QOS_DURABILITY = ["volatile", "transient_local", "system_default"]
-# listing waits until the graph is unchanged for 1.5 s (session.SETTLE_S); on a busy machine
-# the last participant was seen 2.2 s after start, so the bound is above 2.2 + 1.5 s
-LIST_SPIN_TIME_S = 5.0
+# listing waits until the graph is unchanged for 2 s (session.SETTLE_S); on a busy machine
+# the last node was seen 3.1 s after start, so the bound is above 3.1 + 2 s
+LIST_SPIN_TIME_S = 6.0
 WAIT_FOR_NODE_S = 5.0  # discovering a node or topic can take 2-3 s on a loaded machine
 
 
