@@ -180,7 +180,7 @@ class Recorder:
             ms = 1e-6
             row = {"render": (rendered - captured) * ms, "image publish": (image - rendered) * ms,
                    "image transport": stats["transport_ms"],
-                   "decode": stats["take_ms"] + stats["queue_ms"] + stats["decode_ms"],
+                   "decode": stats["take_ms"] + stats["decode_ms"],
                    "track": stats["total_ms"], "state publish": stats["publish_ms"],
                    "controller": (command_written - state[0]) * ms,
                    "command -> hw": (hardware[j] - command_written) * ms,

@@ -9,8 +9,9 @@
    it), so latency = receipt of its /ball_state here - frame stamp (one clock, one host).
    Prints frames answered (%) and latency median/p95/p99/max, then the tracker's own
    per-frame stages from its ~/statistics (transport: DDS write -> DDS receipt; take:
-   receipt -> callback; queue: callback -> tracking thread; decode; track; publish), and
-   frames it skipped: stale (a newer one waited) and never delivered (sequence gaps).
+   receipt -> callback; decode; track; publish), and frames it skipped: stale (a newer one
+   waited; only with image_queue_depth > 1) and never delivered (sequence gaps: lost, or
+   replaced in the tracker's DDS queue of 1 by a newer one while it was busy).
 2. BallState one hop (--ball-state): a publisher process at --rate Hz, sensor data and
    reliable QoS, receipt - send time.
 
@@ -41,7 +42,7 @@ from harness import DDS_ENV, DomainLease, executable, ros_env  # noqa: E402
 
 CYCLONE_PUBLISHER = ROOT / "test" / "integration" / "peers" / "cyclone_image_publisher.py"
 RESOLUTIONS = {"640": (640, 480), "960": (960, 540)}
-TRACKER_STAGES = ("transport_ms", "take_ms", "queue_ms", "decode_ms", "total_ms", "publish_ms")
+TRACKER_STAGES = ("transport_ms", "take_ms", "decode_ms", "total_ms", "publish_ms")
 
 # rclpy/Fast DDS camera: same arguments and output as the Cyclone peer
 FASTDDS_PUBLISHER = textwrap.dedent("""
