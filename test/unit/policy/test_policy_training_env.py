@@ -25,6 +25,18 @@ def test_batch_pid_is_the_axis_pid():
         np.testing.assert_allclose(got, want, atol=1e-12)
 
 
+def test_the_policy_is_trained_on_the_pid_nodes_pid():
+    """One PID: the policy's parameters leave the PID to the schema's defaults, as the pid node."""
+    policy, pid = controller_values("policy", "stationary"), controller_values("pid", "stationary")
+    for name in ("kp", "ki", "kd", "i_limit_rad", "i_zone_m", "deadband_m", "derivative_filter_s",
+                 "adapt_pid_feedback", "adapt_plant_gain", "adapt_disturbance", "adapt_time_constant_s"):
+        assert policy[name] == pid[name], name
+    env = PlateBatch(2, seed=0, duration_s=1.0)
+    env.reset()
+    assert env.pid.d_filter_s == pid["derivative_filter_s"] and env.pid.deadband == pid["deadband_m"]
+    assert env.estimator_cfg == control_config.estimator_config(policy)
+
+
 def test_batch_plant_estimator_is_the_plant_estimator():
     """The batched estimate follows control/estimation.py on the same positions and tilts,
     a push (window restart) included."""
