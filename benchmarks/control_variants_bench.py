@@ -9,7 +9,9 @@ table. For judging a control change (adaptation, braking, gains) before it becom
         --variant hold:brake_on_loss_s=0 --variant brake:      # tracking lost on a circle
 
 A variant is NAME:param=value,param=value (values parsed as YAML: true, 0.5, [0, 0]); an empty
-list runs the defaults (config/<controller>.yaml over the schema). Per cell: drops, RMSE after
+list runs the defaults (config/<controller>.yaml over the schema). A parameter named
+tracker.NAME is the tracker's (over config/ball_tracker.yaml), e.g.
+`--variant fixed:tracker.use_plate_cmd=false,tracker.adaptive_meas_noise=false`. Per cell: drops, RMSE after
 5 s (mean and worst episode), settling time (worst), push recovery (mean and worst) and tick p50.
 """
 from __future__ import annotations
@@ -30,14 +32,19 @@ from ball_balance.benchmark.episode import EpisodeSpec, Occlusion, run_episode  
 
 
 def parse_variant(text: str):
+    """NAME:param=value,... -> (name, controller overrides, tracker overrides)."""
     name, _, body = text.partition(":")
-    overrides = []
+    overrides, tracker = [], []
     for item in filter(None, (part.strip() for part in body.split(","))):
         key, sep, value = item.partition("=")
         if not sep:
             raise SystemExit(f"variant '{text}': '{item}' is not param=value")
-        overrides.append((key.strip(), yaml.safe_load(value)))
-    return name or "default", tuple(overrides)
+        key = key.strip()
+        if key.startswith("tracker."):
+            tracker.append((key[len("tracker."):], yaml.safe_load(value)))
+        else:
+            overrides.append((key, yaml.safe_load(value)))
+    return name or "default", tuple(overrides), tuple(tracker)
 
 
 def _finite(values):
@@ -72,11 +79,12 @@ def main(argv=None) -> int:
     lines = []
     t_start = time.monotonic()
     for controller, reference, domain in cells:
-        for name, overrides in variants:
+        for name, overrides, tracker_overrides in variants:
             ms = []
             for k in range(args.episodes):
                 spec = EpisodeSpec(controller=controller, domain=domain, reference=reference, seed=args.seed + k,
                                    duration_s=args.duration, mode=args.mode, overrides=overrides,
+                                   tracker_overrides=tracker_overrides,
                                    release_speed_m_s=(0.0, args.release_speed), events=events)
                 ms.append(run_episode(spec).metrics)
             kept = [m for m in ms if not m["drop"]]

@@ -115,6 +115,7 @@ class EpisodeSpec:
     events: tuple = ()                      # Push, Force, Occlusion, Exposure, CameraGap
     protocol: str = "ours"                  # label of the protocol the spec follows (table rows)
     overrides: tuple = ()                   # extra controller parameters ((name, value), ...)
+    tracker_overrides: tuple = ()           # tracker parameters over config/ball_tracker.yaml ((name, value), ...)
     record: bool = False                    # keep time series (for plots)
 
 
@@ -263,7 +264,7 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
     from ball_balance.sim.world import SimWorld
     from ball_balance.vision.camera import CameraModel
     from ball_balance.vision.config import TrackerConfig
-    from ball_balance.vision.kalman import BallKalman
+    from ball_balance.vision.kalman import BallKalman, PlateCommandInput
     from ball_balance.vision.tracker import BallTracker
 
     values = controller_values(spec.controller, spec.reference, spec.overrides)
@@ -281,7 +282,7 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
 
     pipeline = ControlPipeline(control_config.pipeline_config(values, spec.controller), _kinematics(values),
                                control_config.reference(values))
-    tracker_cfg = TrackerConfig.from_values(tracker_values())
+    tracker_cfg = TrackerConfig.from_values({**tracker_values(), **dict(spec.tracker_overrides)})
     tracker = None
     if spec.mode == "vision":  # the rendered camera's intrinsics, as /camera/camera_info gives them
         camera = world.config.camera
@@ -290,10 +291,14 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
         world.history_s = knobs.blur_exposure_s
     kalman = None
     if spec.mode == "fast":
+        # the tracker's own filter; a fixed measurement noise stands in for one tuned to this
+        # domain's noise, an adaptive one starts from the configured value as the live tracker does
         noise = max(knobs.detection_noise_m, spec.fast_noise_floor_m)
-        kalman = BallKalman(max(tracker_cfg.meas_noise_m, noise), tracker_cfg.accel_noise_m_s2,
-                            tracker_cfg.init_vel_std_m_s, tracker_cfg.gate_sigma, tracker_cfg.max_coast_frames,
-                            tracker_cfg.max_dt_s)
+        kalman_cfg = tracker_cfg if tracker_cfg.adaptive_meas_noise else \
+            dataclasses.replace(tracker_cfg, meas_noise_m=max(tracker_cfg.meas_noise_m, noise))
+        kalman = BallKalman.from_config(kalman_cfg)
+        plate_cmds = PlateCommandInput(values["rolling_factor"] * values["gravity_m_s2"],
+                                       tracker_cfg.plate_cmd_delay_s, tracker_cfg.plate_cmd_timeout_s)
         world.knobs = knobs if knobs.detection_noise_m >= spec.fast_noise_floor_m else \
             dataclasses.replace(knobs, detection_noise_m=spec.fast_noise_floor_m)
 
@@ -303,7 +308,6 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
     pending = []            # (visible_at_s, observation fields, stamp_s)
     latest = None           # (obs fields tuple, stamp_s)
     next_frame_s = 0.0
-    kg = values["rolling_factor"] * values["gravity_m_s2"]
     rec = {k: [] for k in ("t", "x", "y", "rx", "ry", "ux", "uy", "age", "mode", "ex", "ey", "markers")}
     frames = []
     solve_times = []        # whole control tick (wall time)
@@ -344,7 +348,6 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
                 image = develop(world.render_exposure(knobs.blur_exposure_s), gain, noise, camera_rng)
                 if hidden:
                     image = hand_over_markers(image, world, hidden)
-                tracker.set_plate_cmd(u_cmd[0], u_cmd[1], stamp)
                 r = tracker.process(image, stamp)
                 fields_ = (r.x, r.y, r.vx, r.vy, r.tracking_valid, r.markers_found,
                            float(getattr(r, "position_std_m", 0.0)))
@@ -355,7 +358,7 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
                 fields_ = (tr.x, tr.y, tr.vx, tr.vy, True, 4 - len(hidden), 0.0)
             else:
                 zx, zy = world.detected_ball()
-                accel = (-kg * math.sin(u_cmd[0]), -kg * math.sin(u_cmd[1])) if tracker_cfg.use_plate_cmd else None
+                accel = plate_cmds.acceleration(stamp) if tracker_cfg.use_plate_cmd else None
                 est = kalman.step(stamp, (zx, zy), accel)
                 visible = tuple(m for m in range(4) if m not in hidden)
                 std = fast_position_std_m(visible, world.config.camera, tracker_cfg.corner_noise_px)
@@ -374,6 +377,11 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
         if pipeline.mpc is not None and result.mode == Mode.ENGAGED:
             qp_times.append(pipeline.mpc.last_solve_s)
         u_cmd = result.u
+        # /plate_cmd as the tracker receives it
+        if tracker is not None:
+            tracker.set_plate_cmd(u_cmd[0], u_cmd[1], t)
+        elif kalman is not None:
+            plate_cmds.add(u_cmd[0], u_cmd[1], t)
         world.set_joint_targets(result.q_cmd)
         world.step(steps_per_tick)
         truth = world.ball_truth()

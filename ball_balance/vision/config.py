@@ -86,8 +86,29 @@ TRACKER_SCHEMA = (
     Param("max_coast_frames", 5, "frames predicted without a detection before the track is reset",
           "frames", 0, 1000),
     Param("max_dt_s", 0.5, "a gap between frames longer than this resets the track", "s", 0.001, 60.0),
-    Param("use_plate_cmd", False, "use the commanded tilt on /plate_cmd as known acceleration"),
-    Param("plate_cmd_timeout_s", 0.2, "ignore a commanded tilt older than this", "s", 0.0, 10.0),
+    Param("use_plate_cmd", True, "use the commanded tilt on /plate_cmd as known acceleration"),
+    Param("plate_cmd_timeout_s", 0.2, "ignore the commanded tilts when the last is older than this", "s", 0.0, 10.0),
+    Param("plate_cmd_delay_s", 0.0, "the plate reaches a commanded tilt this long after it is received",
+          "s", 0.0, 1.0),
+    Param("cmd_accel_noise_m_s2", 0.1,
+          "white-noise acceleration (1 sigma) of the process model while a commanded tilt is known "
+          "(accel_noise_m_s2 without one)", "m/s^2", 1e-4, 1000.0),
+    Param("estimate_input_gain", True,
+          "estimate online the ratio of the ball's acceleration to the commanded tilt's -k g sin(u)"),
+    Param("input_gain_bounds", (0.4, 2.5), "[min, max] of that ratio", "", check=_range_pair),
+    Param("input_gain_std", 0.3, "uncertainty (1 sigma) of that ratio at the first track", "", 0.0, 10.0),
+    Param("input_gain_rate_per_s", 0.05, "random-walk rate of that ratio (1 sigma per sqrt(s))",
+          "1/sqrt(s)", 0.0, 10.0),
+    Param("consistency_time_s", 0.3,
+          "time constant of the running innovation consistency that raises cmd_accel_noise_m_s2 (up to "
+          "accel_noise_m_s2) while the detections disagree with the model; 0 = off", "s", 0.0, 60.0),
+    Param("adaptive_meas_noise", True,
+          "estimate the measurement noise online from the detections' scatter, within "
+          "[meas_noise_m, meas_noise_max_m]"),
+    Param("meas_noise_max_m", 0.02, "upper bound of the estimated measurement noise (1 sigma per axis)",
+          "m", 1e-6, 1.0),
+    Param("meas_noise_window_frames", 60, "detections the measurement-noise estimate is taken over",
+          "frames", 5, 100000),
     Param("rolling_factor", pg.ROLLING_FACTOR_SHELL, "x'' = -k g sin(u): 0.6 thin shell, 5/7 solid ball",
           "", 0.0, 1.0),
 )
@@ -122,6 +143,16 @@ class TrackerConfig:
     max_dt_s: float
     use_plate_cmd: bool
     plate_cmd_timeout_s: float
+    plate_cmd_delay_s: float
+    cmd_accel_noise_m_s2: float
+    estimate_input_gain: bool
+    input_gain_bounds: Tuple[float, float]
+    input_gain_std: float
+    input_gain_rate_per_s: float
+    consistency_time_s: float
+    adaptive_meas_noise: bool
+    meas_noise_max_m: float
+    meas_noise_window_frames: int
     rolling_factor: float
 
     @classmethod

@@ -1,25 +1,45 @@
-"""Constant-velocity Kalman filter of the ball in the plate frame (filterpy).
+"""Kalman filter of the ball in the plate frame (filterpy), constant velocity plus an optional
+known acceleration from the commanded plate tilt.
 
-State x = [x, y, vx, vy] (m, m/s); measurement z = [x, y] (m). Per frame, with the
-time step dt from the frame stamps:
+State x = [x, y, vx, vy] (m, m/s), with `estimate_input_gain` also s, the ratio of the
+acceleration the ball really shows to the known one; measurement z = [x, y] (m). Per frame,
+with the time step dt from the frame stamps and the known acceleration a = (a_x, a_y):
 
-    F = [[I, dt I], [0, I]]                 constant velocity
-    B = [[dt^2/2 I], [dt I]],  u = a        optional known acceleration (from the tilt)
-    Q = q [[dt^4/4 I, dt^3/2 I], [dt^3/2 I, dt^2 I]],  q = sigma_a^2   white-noise acceleration
+    x' = x + vx dt + s a_x dt^2/2,   vx' = vx + s a_x dt,   s' = s      (likewise y)
+    Q = q [[dt^4/4 I, dt^3/2 I], [dt^3/2 I, dt^2 I]],  q = sigma_a^2      white-noise acceleration
     H = [I 0],  R = sigma_z^2 I
+
+The known acceleration is -k g sin(u) of the commanded tilt (the tracker's `known_acceleration`).
+With it the model explains most of the ball's motion, so its process noise
+`cmd_accel_noise_m_s2` is much smaller than `accel_noise_m_s2`, used without it (no recent
+command): the filter then averages the detections over many frames instead of following them.
+s is linear in the state because a is known, so the filter stays linear; it absorbs a wrong
+k g (a solid ball rolls at 5/7 g where a shell rolls at 3/5, gravity or a plate gain differ),
+which would otherwise show up as an acceleration error far above `cmd_accel_noise_m_s2`.
+It drifts as a random walk (`input_gain_rate_per_s`) and stays within `input_gain_bounds`.
+
+Measurement noise: with `adaptive_meas_noise` sigma_z is estimated online from the detections
+themselves (`DetectionNoiseEstimator`: their scatter about the path through their neighbours),
+independent of the filter's own tuning, and kept within [meas_noise_m, meas_noise_max_m]; a
+camera, lighting or ball that detects worse than assumed then gets a filter that averages more
+instead of passing the noise on to the controller.
 
 A detection whose Mahalanobis distance sqrt(y^T S^-1 y) exceeds `gate_sigma` is ignored
 (an outlier). Without a usable detection the filter coasts (predicts) for up to
 `max_coast_frames` frames, still valid; then the track is dropped and the next detection
-starts a new one. A gap longer than `max_dt_s` also drops the track.
+starts a new one. A gap longer than `max_dt_s` also drops the track. The noise and gain
+estimates describe the camera and the plant, not the track: they survive a dropped track.
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
-from typing import Optional, Tuple
+from typing import Deque, Optional, Tuple
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
+
+CHI2_1_MEDIAN = 0.45493642311957283   # median of a chi-square variable with one degree of freedom
 
 
 @dataclass(frozen=True)
@@ -33,51 +53,198 @@ class TrackEstimate:
     gated: bool = False  # a detection was rejected as an outlier
 
 
+class DetectionNoiseEstimator:
+    """Standard deviation of the detections (per axis, m) from consecutive detection triples.
+
+    For detections z0, z1, z2 at t0 < t1 < t2, the middle one's distance from the straight line
+    through its neighbours, r = z1 - (w0 z0 + w2 z2) with w0 = (t2 - t1) / (t2 - t0) and
+    w2 = 1 - w0, has variance sigma^2 (1 + w0^2 + w2^2) for independent noise of std sigma; a
+    constant acceleration a adds -a (t1 - t0)(t2 - t1) / 2, removed with the known acceleration
+    when there is one. The estimate is the median of the normalised r^2 over the last `window`
+    triples (both axes) divided by the chi-square median, so the frames around a push, a hand
+    or an outlier barely move it. None until `min_samples` triples are in.
+    """
+
+    def __init__(self, window: int = 60, min_samples: int = 10, max_span_s: float = 0.25):
+        self.max_span_s = max_span_s
+        self.min_samples = min_samples
+        self._last: Deque[Tuple[float, np.ndarray, np.ndarray]] = deque(maxlen=3)
+        self._samples: Deque[float] = deque(maxlen=2 * window)
+
+    def add(self, t: float, z: Tuple[float, float], accel: Optional[Tuple[float, float]] = None) -> None:
+        """A detection z (m) at stamp t (s); accel (m/s^2) the known acceleration or None."""
+        if self._last and not t > self._last[-1][0]:
+            return                                    # repeated or out-of-order stamp
+        a = np.zeros(2) if accel is None else np.asarray(accel, dtype=float)
+        self._last.append((t, np.asarray(z, dtype=float), a))
+        if len(self._last) < 3:
+            return
+        (t0, z0, _), (t1, z1, a1), (t2, z2, a2) = self._last
+        if t2 - t0 > self.max_span_s:
+            return                                    # a gap: the path between is not a line
+        w0 = (t2 - t1) / (t2 - t0)
+        w2 = 1.0 - w0
+        a = 0.5 * (a1 + a2)                       # the known acceleration over the triple
+        r = z1 - (w0 * z0 + w2 * z2) + 0.5 * a * (t1 - t0) * (t2 - t1)
+        self._samples.extend((r ** 2 / (1.0 + w0 ** 2 + w2 ** 2)).tolist())
+
+    def sigma_m(self) -> Optional[float]:
+        """The estimated detection noise (1 sigma per axis, m), None before enough detections."""
+        if len(self._samples) < 2 * self.min_samples:
+            return None
+        return float(np.sqrt(np.median(np.asarray(self._samples)) / CHI2_1_MEDIAN))
+
+
+class PlateCommandInput:
+    """The known acceleration from the commanded plate tilts: x'' = -k g sin(u), with u the
+    command in force `delay_s` before the frame (the arm reaches a command that much later),
+    None when no command arrived within `timeout_s` of the frame (no controller running)."""
+
+    def __init__(self, k_g_m_s2: float, delay_s: float = 0.0, timeout_s: float = 0.2, max_len: int = 256):
+        self.k_g = k_g_m_s2
+        self.delay_s = delay_s
+        self.timeout_s = timeout_s
+        self._commands: Deque[Tuple[float, float, float]] = deque(maxlen=max_len)   # (t, u_x, u_y)
+
+    def add(self, u_x: float, u_y: float, t_s: float) -> None:
+        """A command (rad) received at t_s; an older stamp than the last one replaces the history."""
+        if self._commands and t_s < self._commands[-1][0]:
+            self._commands.clear()
+        self._commands.append((t_s, u_x, u_y))
+
+    def acceleration(self, now_s: float) -> Optional[Tuple[float, float]]:
+        """(a_x, a_y) in m/s^2 at now_s, or None."""
+        if not self._commands or abs(now_s - self._commands[-1][0]) > self.timeout_s:
+            return None
+        at = now_s - self.delay_s
+        u_x, u_y = self._commands[0][1:]
+        for t_i, ux, uy in self._commands:
+            if t_i > at:
+                break
+            u_x, u_y = ux, uy
+        return (-self.k_g * float(np.sin(u_x)), -self.k_g * float(np.sin(u_y)))
+
+
 class BallKalman:
     """Tracks one ball; `step()` once per frame with the frame's stamp."""
 
     def __init__(self, meas_noise_m: float = 0.001, accel_noise_m_s2: float = 1.0, init_vel_std_m_s: float = 0.5,
-                 gate_sigma: float = 6.0, max_coast_frames: int = 5, max_dt_s: float = 0.5):
+                 gate_sigma: float = 6.0, max_coast_frames: int = 5, max_dt_s: float = 0.5, *,
+                 cmd_accel_noise_m_s2: Optional[float] = None, adaptive_meas_noise: bool = False,
+                 meas_noise_max_m: float = 0.02, meas_noise_window: int = 60,
+                 estimate_input_gain: bool = False, input_gain_bounds: Tuple[float, float] = (0.3, 2.5),
+                 input_gain_std: float = 0.3, input_gain_rate_per_s: float = 0.05,
+                 consistency_time_s: float = 0.0):
         self.sigma_a = accel_noise_m_s2
+        self.sigma_a_cmd = accel_noise_m_s2 if cmd_accel_noise_m_s2 is None else cmd_accel_noise_m_s2
         self.init_vel_std = init_vel_std_m_s
         self.gate_sigma = gate_sigma
         self.max_coast_frames = max_coast_frames
         self.max_dt_s = max_dt_s
-        kf = KalmanFilter(dim_x=4, dim_z=2, dim_u=2)
-        kf.H = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])   # z = H x
+        self.meas_noise_min_m = meas_noise_m
+        self.meas_noise_max_m = max(meas_noise_max_m, meas_noise_m)
+        self.noise = DetectionNoiseEstimator(meas_noise_window) if adaptive_meas_noise else None
+        self.gain_state = estimate_input_gain
+        self.gain_bounds = input_gain_bounds
+        self.gain_rate = input_gain_rate_per_s
+        self.dim = 5 if estimate_input_gain else 4
+        self.consistency_time_s = consistency_time_s
+        self.nis = 1.0                # running mean of the normalised innovation squared (per axis)
+        kf = KalmanFilter(dim_x=self.dim, dim_z=2, dim_u=2)
+        kf.H = np.eye(2, self.dim)                                           # z = H x
         kf.R = np.eye(2) * meas_noise_m ** 2                                 # measurement noise
         self.kf = kf
+        self._gain = (1.0, input_gain_std ** 2)   # s and its variance, kept over dropped tracks
         self.initialised = False
         self.coasted = 0              # frames predicted without a detection since the last one
         self.t_last: Optional[float] = None
         self.gated_count = 0          # detections rejected as outliers (total)
         self.reset_count = 0          # tracks dropped (total)
 
+    @classmethod
+    def from_config(cls, cfg) -> BallKalman:
+        """The filter a TrackerConfig (ball_balance.vision.config) describes."""
+        return cls(cfg.meas_noise_m, cfg.accel_noise_m_s2, cfg.init_vel_std_m_s, cfg.gate_sigma,
+                   cfg.max_coast_frames, cfg.max_dt_s, cmd_accel_noise_m_s2=cfg.cmd_accel_noise_m_s2,
+                   adaptive_meas_noise=cfg.adaptive_meas_noise, meas_noise_max_m=cfg.meas_noise_max_m,
+                   meas_noise_window=cfg.meas_noise_window_frames, estimate_input_gain=cfg.estimate_input_gain,
+                   input_gain_bounds=tuple(cfg.input_gain_bounds), input_gain_std=cfg.input_gain_std,
+                   input_gain_rate_per_s=cfg.input_gain_rate_per_s, consistency_time_s=cfg.consistency_time_s)
+
+    @property
+    def meas_noise_m(self) -> float:
+        """The measurement noise (1 sigma per axis, m) in use."""
+        return float(np.sqrt(self.kf.R[0, 0]))
+
+    @property
+    def input_gain(self) -> float:
+        """s: the acceleration the ball shows per unit of the known one (1 without the estimate)."""
+        if not self.gain_state:
+            return 1.0
+        return float(self.kf.x[4]) if self.initialised else self._gain[0]
+
     def reset(self) -> None:
         """Drop the track: the next detection starts a new one."""
         if self.initialised:
             self.reset_count += 1
+            if self.gain_state:
+                self._gain = (float(self.kf.x[4]), float(self.kf.P[4, 4]))
         self.initialised = False
         self.coasted = 0
         self.t_last = None
 
     def _start(self, z: Tuple[float, float], t: float) -> None:
         kf = self.kf
-        kf.x = np.array([z[0], z[1], 0.0, 0.0])
-        kf.P = np.diag([kf.R[0, 0], kf.R[1, 1], self.init_vel_std ** 2, self.init_vel_std ** 2])
+        P = [kf.R[0, 0], kf.R[1, 1], self.init_vel_std ** 2, self.init_vel_std ** 2]
+        x = [z[0], z[1], 0.0, 0.0]
+        if self.gain_state:
+            x.append(self._gain[0])
+            P.append(self._gain[1])
+        kf.x = np.array(x)
+        kf.P = np.diag(P)
         self.initialised, self.coasted, self.t_last = True, 0, t
 
     def _predict(self, dt: float, accel: Optional[Tuple[float, float]]) -> None:
         kf = self.kf
         I2 = np.eye(2)
-        kf.F = np.block([[I2, dt * I2], [0 * I2, I2]])
-        q = self.sigma_a ** 2
-        kf.Q = q * np.block([[dt ** 4 / 4 * I2, dt ** 3 / 2 * I2], [dt ** 3 / 2 * I2, dt ** 2 * I2]])
-        if accel is None:
+        q = self.process_noise(accel is not None)
+        F = np.eye(self.dim)
+        F[0:2, 2:4] = dt * I2
+        Q = np.zeros((self.dim, self.dim))
+        Q[:4, :4] = q * np.block([[dt ** 4 / 4 * I2, dt ** 3 / 2 * I2], [dt ** 3 / 2 * I2, dt ** 2 * I2]])
+        a = None if accel is None else np.asarray(accel, dtype=np.float64)
+        if self.gain_state:
+            if a is not None:                        # x' = ... + s a dt^2/2, v' = ... + s a dt
+                F[0:2, 4] = a * dt ** 2 / 2
+                F[2:4, 4] = a * dt
+            Q[4, 4] = self.gain_rate ** 2 * dt
+            kf.F, kf.Q = F, Q
+            kf.predict()
+            kf.P[4, 4] = min(kf.P[4, 4], self._gain_var_max)
+            return
+        kf.F, kf.Q = F, Q
+        if a is None:
             kf.predict()
         else:
             kf.B = np.block([[dt ** 2 / 2 * I2], [dt * I2]])
-            kf.predict(u=np.asarray(accel, dtype=np.float64))
+            kf.predict(u=a)
+
+    def process_noise(self, known_accel: bool) -> float:
+        """q (m^2/s^4) for the next prediction: sigma_a^2 without a known acceleration; with one
+        sigma_a_cmd^2, raised by the running innovation consistency (up to sigma_a^2) while the
+        detections disagree with the model more than its covariance says (a wrong delay or gain)."""
+        if not known_accel:
+            return self.sigma_a ** 2
+        scale = 1.0
+        if self.consistency_time_s > 0.0:
+            scale = min(max(self.nis, 1.0), max(1.0, (self.sigma_a / self.sigma_a_cmd) ** 2))
+        return scale * self.sigma_a_cmd ** 2
+
+    @property
+    def _gain_var_max(self) -> float:
+        """s's variance never grows past a quarter of its range squared (no command for long)."""
+        low, high = self.gain_bounds
+        return ((high - low) / 4.0) ** 2
 
     def mahalanobis(self, z: Tuple[float, float]) -> float:
         """Distance of z from the predicted measurement, in standard deviations."""
@@ -86,11 +253,23 @@ class BallKalman:
         S = kf.H @ kf.P @ kf.H.T + kf.R                    # innovation covariance
         return float(np.sqrt(y @ np.linalg.solve(S, y)))
 
+    def _adapt_noise(self, t: float, z: Tuple[float, float], accel) -> None:
+        if accel is not None:
+            accel = (self.input_gain * accel[0], self.input_gain * accel[1])
+        self.noise.add(t, z, accel)
+        sigma = self.noise.sigma_m()
+        if sigma is not None:
+            sigma = min(max(sigma, self.meas_noise_min_m), self.meas_noise_max_m)
+            self.kf.R = np.eye(2) * sigma ** 2
+
     def step(self, t: float, z: Optional[Tuple[float, float]],
              accel: Optional[Tuple[float, float]] = None) -> TrackEstimate:
         """Advance to stamp t (s) and fold in detection z (m) if any; accel in m/s^2 or None."""
+        if z is not None and self.noise is not None:
+            self._adapt_noise(t, z, accel)
+        dt_step = 0.0
         if self.initialised:
-            dt = t - self.t_last
+            dt = dt_step = t - self.t_last
             if dt > self.max_dt_s:
                 self.reset()
             elif dt > 0.0:            # a repeated or out-of-order stamp only updates
@@ -103,8 +282,14 @@ class BallKalman:
             return self._estimate(fresh=True, valid=True)
         gated = False
         if z is not None:
-            if self.mahalanobis(z) <= self.gate_sigma:
+            distance = self.mahalanobis(z)
+            if self.consistency_time_s > 0.0:   # a gated detection counts too, at the gate
+                alpha = min(1.0, dt_step / self.consistency_time_s)
+                self.nis += alpha * (min(distance, self.gate_sigma) ** 2 / 2.0 - self.nis)
+            if distance <= self.gate_sigma:
                 self.kf.update(np.asarray(z, dtype=np.float64))
+                if self.gain_state:
+                    self.kf.x[4] = min(max(self.kf.x[4], self.gain_bounds[0]), self.gain_bounds[1])
                 self.coasted = 0
                 return self._estimate(fresh=True, valid=True)
             gated = True

@@ -27,7 +27,7 @@ from ball_balance.plate_geometry import GRAVITY_M_S2
 from ball_balance.vision.ball_segmentation import BallBlob, BallSegmenter
 from ball_balance.vision.camera import CameraModel, Undistorter
 from ball_balance.vision.config import TrackerConfig
-from ball_balance.vision.kalman import BallKalman
+from ball_balance.vision.kalman import BallKalman, PlateCommandInput
 from ball_balance.vision.plate import (
     FULL_FIT_MIN_MARKERS,
     PIVOT_PRIOR_SIGMA_ROT_RAD,
@@ -82,8 +82,7 @@ class BallTracker:
         self.plate = PlateLocator(cfg.geometry, cfg.startup_frames, cfg.startup_max_motion_px, cfg.plate_hold_s,
                                   cfg.marker_roi_margin, cfg.full_scan_period)
         self.segmenter = BallSegmenter(cfg.hsv_lower, cfg.hsv_upper, cfg.morph_kernel_px, cfg.min_circularity)
-        self.kalman = BallKalman(cfg.meas_noise_m, cfg.accel_noise_m_s2, cfg.init_vel_std_m_s, cfg.gate_sigma,
-                                 cfg.max_coast_frames, cfg.max_dt_s)
+        self.kalman = BallKalman.from_config(cfg)
         self.undistort_mode = undistort_mode
         self.camera: Optional[CameraModel] = None
         self.undistorter: Optional[Undistorter] = None
@@ -91,7 +90,8 @@ class BallTracker:
         self.C_P: Optional[np.ndarray] = None           # camera centre, plate frame (for parallax)
         self._K_estimated: Optional[np.ndarray] = None
         self._K_nominal: Optional[np.ndarray] = None     # pose covariance without intrinsics
-        self._plate_cmd: Optional[Tuple[float, float, float]] = None   # (u_x, u_y, stamp_s)
+        self.plate_cmds = PlateCommandInput(cfg.rolling_factor * GRAVITY_M_S2, cfg.plate_cmd_delay_s,
+                                            cfg.plate_cmd_timeout_s)
         self.frames = 0
         self.rejected_off_plate = 0
 
@@ -105,17 +105,14 @@ class BallTracker:
     def set_plate_cmd(self, u_x: float, u_y: float, received_s: float) -> None:
         """Commanded tilts (rad) from /plate_cmd, used as known acceleration when enabled.
         `received_s` is on the same clock as `process(..., now_s)` (the node's receipt clock)."""
-        self._plate_cmd = (u_x, u_y, received_s)
+        self.plate_cmds.add(u_x, u_y, received_s)
 
     def known_acceleration(self, now_s: float) -> Optional[Tuple[float, float]]:
-        """x'' = -k g sin(u_x), y'' = -k g sin(u_y) from a recent enough command, else None."""
-        if not self.config.use_plate_cmd or self._plate_cmd is None:
+        """x'' = -k g sin(u_x), y'' = -k g sin(u_y) of the command in force `plate_cmd_delay_s`
+        before now_s, from a recent enough command stream, else None."""
+        if not self.config.use_plate_cmd:
             return None
-        u_x, u_y, t_cmd = self._plate_cmd
-        if abs(now_s - t_cmd) > self.config.plate_cmd_timeout_s:
-            return None
-        kg = self.config.rolling_factor * GRAVITY_M_S2
-        return (-kg * np.sin(u_x), -kg * np.sin(u_y))
+        return self.plate_cmds.acceleration(now_s)
 
     # -- the pipeline ----------------------------------------------------------------------------
     def process(self, image_bgr: np.ndarray, stamp_s: float, now_s: Optional[float] = None) -> TrackerResult:

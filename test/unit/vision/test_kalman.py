@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from filterpy.common import Q_discrete_white_noise
 
-from ball_balance.vision.kalman import BallKalman
+from ball_balance.vision.kalman import BallKalman, DetectionNoiseEstimator, PlateCommandInput
 
 
 def test_process_noise_matches_filterpys_white_noise_acceleration_model():
@@ -71,3 +71,150 @@ def test_known_acceleration_is_used_in_the_prediction():
 def test_no_detection_before_any_track_is_invalid_zero():
     est = BallKalman().step(0.0, None)
     assert not est.valid and not est.fresh and (est.x, est.y, est.vx, est.vy) == (0, 0, 0, 0)
+
+
+# ---- measurement noise estimated online, the commanded tilt's gain ----------------------------
+def _noisy_path(rng, sigma_m, accel_m_s2=(0.0, 0.0), n=300):
+    """Stamps with jitter and detections of a ball accelerating uniformly, noise sigma_m per axis."""
+    t = np.cumsum(rng.uniform(0.02, 0.045, n))
+    a = np.asarray(accel_m_s2)
+    truth = np.array([0.02, -0.01]) + np.outer(t, [0.1, 0.05]) + 0.5 * np.outer(t ** 2, a)
+    return t, truth, truth + rng.normal(0.0, sigma_m, truth.shape)
+
+
+@pytest.mark.parametrize("sigma_m", [0.0005, 0.003, 0.008])
+def test_detection_noise_estimate_recovers_sigma_on_jittered_frames(sigma_m):
+    t, _, z = _noisy_path(np.random.default_rng(4), sigma_m)
+    est = DetectionNoiseEstimator(window=150)
+    assert est.sigma_m() is None
+    for ti, zi in zip(t, z, strict=True):
+        est.add(ti, zi)
+    assert est.sigma_m() == pytest.approx(sigma_m, rel=0.15)
+
+
+def test_detection_noise_estimate_removes_the_known_acceleration():
+    accel = (3.0, -2.0)
+    t, _, z = _noisy_path(np.random.default_rng(5), 0.0002, accel)
+    told, blind = DetectionNoiseEstimator(window=150), DetectionNoiseEstimator(window=150)
+    for ti, zi in zip(t, z, strict=True):
+        told.add(ti, zi, accel)
+        blind.add(ti, zi)
+    assert told.sigma_m() == pytest.approx(0.0002, rel=0.2)
+    assert blind.sigma_m() > 0.0004                     # the curvature read as noise
+
+
+def test_detection_noise_estimate_ignores_an_outlier_and_skips_gaps():
+    rng = np.random.default_rng(6)
+    t, _, z = _noisy_path(rng, 0.001, n=100)
+    est = DetectionNoiseEstimator(window=100)
+    for i, (ti, zi) in enumerate(zip(t, z, strict=True)):
+        est.add(ti + (1.0 if i >= 50 else 0.0), zi + (0.05 if i == 30 else 0.0))
+    assert est.sigma_m() == pytest.approx(0.001, rel=0.2)
+
+
+def test_adaptive_measurement_noise_follows_the_detections_within_bounds():
+    rng = np.random.default_rng(7)
+    t, truth, z = _noisy_path(rng, 0.005)
+    adaptive = BallKalman(meas_noise_m=0.001, adaptive_meas_noise=True, accel_noise_m_s2=0.3)
+    fixed = BallKalman(meas_noise_m=0.001, accel_noise_m_s2=0.3)
+    err_adaptive, err_fixed = [], []
+    for ti, zi, xi in zip(t, z, truth, strict=True):
+        e, f = adaptive.step(ti, tuple(zi)), fixed.step(ti, tuple(zi))
+        err_adaptive.append(np.hypot(e.x - xi[0], e.y - xi[1]))
+        err_fixed.append(np.hypot(f.x - xi[0], f.y - xi[1]))
+    assert adaptive.meas_noise_m == pytest.approx(0.005, rel=0.2)
+    assert fixed.meas_noise_m == pytest.approx(0.001)
+    assert np.sqrt(np.mean(np.square(err_adaptive[100:]))) < 0.7 * np.sqrt(np.mean(np.square(err_fixed[100:])))
+    assert adaptive.reset_count == 0                     # the 1 mm gate would not have held
+    low = BallKalman(meas_noise_m=0.002, adaptive_meas_noise=True)
+    high = BallKalman(meas_noise_m=0.001, adaptive_meas_noise=True, meas_noise_max_m=0.003)
+    _, _, quiet = _noisy_path(rng, 0.0003)
+    for ti, qi, zi in zip(t, quiet, z, strict=True):
+        low.step(ti, tuple(qi))
+        high.step(ti, tuple(zi))
+    assert low.meas_noise_m == pytest.approx(0.002) and high.meas_noise_m == pytest.approx(0.003)
+
+
+def _run_with_gain(kf, gain, rng, n=600, sigma_m=0.003):
+    """A ball driven by a varying known acceleration times `gain`; returns RMS position error."""
+    x, v, err = np.zeros(2), np.array([0.05, 0.0]), []
+    for k in range(n):
+        t = (k + 1) / 30
+        known = -0.6 * 9.81 * np.sin(0.05 * np.sin(np.array([3.0, 3.9]) * t))
+        a = gain * known
+        x, v = x + v / 30 + a / 1800, v + a / 30
+        e = kf.step(t, tuple(x + rng.normal(0.0, sigma_m, 2)), tuple(known))
+        err.append(np.hypot(e.x - x[0], e.y - x[1]))
+    return float(np.sqrt(np.mean(np.square(err[n // 3:]))))
+
+
+def test_input_gain_is_estimated_and_bounded_and_kept_over_a_dropped_track():
+    rng = np.random.default_rng(8)
+    kf = BallKalman(meas_noise_m=0.003, cmd_accel_noise_m_s2=0.05, estimate_input_gain=True)
+    blind = BallKalman(meas_noise_m=0.003, cmd_accel_noise_m_s2=0.05)
+    err = _run_with_gain(kf, 1.6, rng)
+    assert kf.input_gain == pytest.approx(1.6, abs=0.15)
+    assert err < 0.6 * _run_with_gain(blind, 1.6, np.random.default_rng(8))
+    kf.reset()
+    assert kf.input_gain == pytest.approx(1.6, abs=0.15)
+    kf.step(100.0, (0.0, 0.0))
+    assert kf.kf.x[4] == pytest.approx(1.6, abs=0.15)
+    bounded = BallKalman(meas_noise_m=0.003, cmd_accel_noise_m_s2=0.05, estimate_input_gain=True,
+                         input_gain_bounds=(0.5, 1.2))
+    _run_with_gain(bounded, 1.6, rng)
+    assert bounded.input_gain == pytest.approx(1.2)
+
+
+def test_smaller_process_noise_while_the_acceleration_is_known():
+    kf = BallKalman(accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1)
+    kf.step(0.0, (0.0, 0.0))
+    kf.step(0.04, (0.0, 0.0), accel=(0.0, 0.0))
+    assert kf.kf.Q[2, 2] == pytest.approx(0.1 ** 2 * 0.04 ** 2)
+    kf.step(0.08, (0.0, 0.0))
+    assert kf.kf.Q[2, 2] == pytest.approx(1.0 * 0.04 ** 2)
+
+
+def test_from_config_builds_the_schema_filter():
+    from ball_balance.vision.config import TrackerConfig
+
+    cfg = TrackerConfig.from_values({"meas_noise_m": 0.002, "cmd_accel_noise_m_s2": 0.2, "adaptive_meas_noise": True,
+                                     "meas_noise_max_m": 0.01, "estimate_input_gain": True,
+                                     "input_gain_bounds": [0.4, 2.0]})
+    kf = BallKalman.from_config(cfg)
+    assert (kf.meas_noise_m, kf.sigma_a_cmd, kf.meas_noise_max_m, kf.gain_bounds, kf.dim) == \
+        (pytest.approx(0.002), 0.2, 0.01, (0.4, 2.0), 5)
+    assert kf.noise is not None
+
+
+def test_plate_command_input_applies_the_command_in_force_a_delay_earlier():
+    k_g = 0.6 * 9.81
+    cmds = PlateCommandInput(k_g, delay_s=0.08, timeout_s=0.2)
+    assert cmds.acceleration(0.0) is None                               # no controller yet
+    for t, u in ((0.0, 0.0), (0.1, 0.05), (0.2, -0.02)):
+        cmds.add(u, -u, t)
+    assert cmds.acceleration(0.15) == pytest.approx((0.0, 0.0))         # 0.07: the first command
+    assert cmds.acceleration(0.19) == pytest.approx((-k_g * np.sin(0.05), k_g * np.sin(0.05)))
+    assert cmds.acceleration(0.30) == pytest.approx((k_g * np.sin(0.02), -k_g * np.sin(0.02)))
+    assert cmds.acceleration(0.41) is None                              # the stream stopped
+    cmds.add(0.01, 0.0, 0.05)                                           # a restarted clock
+    assert cmds.acceleration(0.06) == pytest.approx((-k_g * np.sin(0.01), 0.0))
+
+
+def test_process_noise_rises_while_the_detections_disagree_with_the_known_acceleration():
+    def run(consistency_time_s):
+        kf = BallKalman(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
+                        consistency_time_s=consistency_time_s)
+        rng, err = np.random.default_rng(9), []
+        for k in range(90):
+            t = k / 30
+            x = 0.5 * 0.8 * max(0.0, t - 1.0) ** 2          # an unannounced 0.8 m/s^2 from t = 1 s
+            e = kf.step(t, (x + rng.normal(0.0, 0.001), 0.0), accel=(0.0, 0.0))
+            err.append(abs(e.x - x))
+        return kf, float(np.sqrt(np.mean(np.square(err[30:]))))
+
+    adaptive, err_adaptive = run(0.3)
+    fixed, err_fixed = run(0.0)
+    assert fixed.process_noise(True) == pytest.approx(0.1 ** 2)
+    assert 0.1 ** 2 < adaptive.process_noise(True) <= 1.0
+    assert adaptive.process_noise(False) == pytest.approx(1.0)
+    assert err_adaptive < 0.6 * err_fixed
