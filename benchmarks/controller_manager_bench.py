@@ -22,6 +22,13 @@ from the cycles that started inside the measuring window:
                     wake-up + waiting for the interpreter lock) and the lock-holding sleep
                     (kernel wake-up alone), us
 
+The acceptance table ends with the machine's own limit at 1 kHz: the same wait without Python
+(benchmarks/native/wakeup_baseline.c, compiled with the system's C compiler: SCHED_FIFO at the
+loop's default priority, on the loop's CPU, a sleep to the manager's default spin tail before
+each deadline and a busy wait after it, the loop's schedule). Whatever it shows beyond the
+targets is the kernel's and the machine's (wake-up latency, a virtual CPU taken away), and no
+Python loop can do better; its rel p99 column is how late its sleep returned.
+
 Tables:
   acceptance   500 Hz with `--busy` busy processes, 1 kHz with none (the issue's targets)
   causes       one knob changed at a time against the defaults, at 500 Hz under load, cases
@@ -37,6 +44,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -254,6 +262,34 @@ def row(label: str, rate: int, r: dict) -> str:
             f"{r['woke_p99']:>7.0f} {r['ready_p99']:>8.0f}")
 
 
+def kernel_baseline(rate: int, seconds: float) -> dict:
+    """The manager's wait at `rate` in C (benchmarks/native/wakeup_baseline.c) with the loop's
+    defaults (priority, CPU, spin tail): the table's figures, or {"error": why not}."""
+    from controller_manager_py.ros.node import SCHEMA, shared_loop_cpu
+
+    defaults = {p.name: p.default for p in SCHEMA}
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    if compiler is None:
+        return {"error": "no C compiler (cc) to build benchmarks/native/wakeup_baseline.c"}
+    tmp = Path(tempfile.mkdtemp(prefix="wakeup_baseline_"))
+    binary, out = tmp / "wakeup_baseline", tmp / "cycles.bin"
+    source = ROOT / "benchmarks" / "native" / "wakeup_baseline.c"
+    build = subprocess.run([compiler, "-O2", "-o", str(binary), str(source)], capture_output=True, text=True)
+    if build.returncode != 0:
+        return {"error": f"cannot build wakeup_baseline.c: {build.stderr.strip()[:200]}"}
+    cpu = shared_loop_cpu([c for c in defaults["cpu_affinity"] if c >= 0])
+    spin_us = defaults["spin_tail"] * 1e6
+    run = subprocess.run([str(binary), str(defaults["thread_priority"]), str(1e6 / rate), str(seconds), str(cpu),
+                          str(spin_us), str(out)], capture_output=True, text=True)
+    if run.returncode != 0:
+        return {"error": f"wakeup_baseline failed ({run.returncode}): {run.stderr.strip()[:200]}"}
+    deadline, start, woke = np.fromfile(out, dtype=np.float64).reshape(3, -1)
+    shutil.rmtree(tmp, ignore_errors=True)
+    data = {"start": start, "end": start, "deadline": deadline, "woke": woke, "ready": woke,
+            "period": 1.0 / rate, "wake_tail": 0.0, "spin_tail": spin_us * 1e-6}
+    return timing(data, start[0], start[-1])
+
+
 class Busy:
     """`n` processes that each keep a core busy (the issue's load), stopped on exit."""
 
@@ -407,6 +443,9 @@ def main() -> None:
             print(row(f"defaults, {args.busy} busy process(es)", 500, run_case(500, {}, True, args.seconds)),
                   flush=True)
         print(row("defaults, no busy process", 1000, run_case(1000, {}, True, args.seconds)), flush=True)
+        baseline = kernel_baseline(1000, args.seconds)
+        label = "machine limit: the same wait in C"
+        print(f"{label:<42} {baseline['error']}" if "error" in baseline else row(label, 1000, baseline), flush=True)
     if args.table in ("causes", "all"):
         print(f"\ncauses at 500 Hz, {args.busy} busy process(es), list_controllers every 100 ms\n{HEADER}")
         with Busy(args.busy):
