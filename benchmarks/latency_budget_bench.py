@@ -11,7 +11,7 @@ engaging) it follows every camera frame for --seconds through:
   render            frame captured (sim loop) -> rendered (camera thread)      /sim/latency_trace
   image publish     rendered -> image written to DDS (its camera_info follows)  source timestamps
   image transport   DDS write -> DDS receipt in the tracker                     tracker ~/statistics
-  decode            receipt -> callback -> tracking thread -> numpy array       tracker ~/statistics
+  decode            receipt -> callback -> numpy array (a view of the sample)   tracker ~/statistics
   track             markers, homography, ball, Kalman                            tracker ~/statistics
   state publish     /plate_pose + /ball_state                                   tracker ~/statistics
   controller        /ball_state written -> joint command written: state transport, the

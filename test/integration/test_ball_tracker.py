@@ -151,7 +151,7 @@ def test_best_effort_image_publisher_is_matched_too(launcher, graph, scene):
 
 
 def test_thread_priority_puts_every_tracker_thread_on_sched_fifo(launcher, graph, scene):
-    """DDS's receive threads, the executor and the tracking thread: a frame waits for none of
+    """DDS's receive threads and the executor that tracks: a frame waits for none of
     them on a busy machine."""
     tracker = launcher.start(tracker_cmd("thread_priority:=1"), name="ball_tracker")
     image, _ = scene.render(BALL_XY)
