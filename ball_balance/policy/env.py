@@ -3,8 +3,10 @@
 It models what stands between the controller and the ball in the MuJoCo simulation, at the
 rates the closed-loop benchmark uses (ball_balance/benchmark/episode.py):
 
-    camera 30 Hz (frames dropped with frame_drop_prob) -> detection noise -> per-axis
-    constant-velocity Kalman (the tracker's parameters) -> visible vision_delay_s later ->
+    camera 30 Hz (frames dropped with frame_drop_prob) -> detection noise -> the tracker's
+    Kalman filter as it runs (batch_kalman.py: its config, the commanded tilt as known
+    acceleration with its gain estimated, adaptive process and measurement noise) -> visible
+    vision_delay_s later ->
     control tick 50 Hz: online plant estimate (k g and a constant disturbance, the pipeline's
     control/estimation.py, batched) -> latency prediction over the state's age with that
     estimate -> the PID as the pid node runs it (schema defaults, the estimate in its
@@ -28,6 +30,7 @@ import numpy as np
 from ball_balance.control import config as control_config
 from ball_balance.control.estimation import EstimatorConfig
 from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
+from ball_balance.policy.batch_kalman import BatchBallKalman
 from ball_balance.policy.observation import ObservationBuilder
 
 CONTROL_DT_S = 0.02
@@ -40,6 +43,13 @@ BASE_PID_KEYS = ("kp", "ki", "kd", "i_limit_rad", "i_zone_m", "deadband_m", "ant
                  "rolling_factor", "gravity_m_s2", "derivative_filter_s", "adapt_pid_feedback", "adapt_plant_gain",
                  "adapt_disturbance", "adapt_time_constant_s", "adapt_window_s", "actuation_delay_s",
                  "estimate_actuation_delay")
+
+# the tracker's filter parameters the plant models (recorded in the model's training metadata)
+TRACKER_FILTER_KEYS = ("meas_noise_m", "accel_noise_m_s2", "init_vel_std_m_s", "gate_sigma", "max_coast_frames",
+                       "max_dt_s", "use_plate_cmd", "plate_cmd_timeout_s", "plate_cmd_delay_s",
+                       "cmd_accel_noise_m_s2", "estimate_input_gain", "input_gain_bounds", "input_gain_std",
+                       "input_gain_rate_per_s", "consistency_time_s", "adaptive_meas_noise", "meas_noise_max_m",
+                       "meas_noise_window_frames", "rolling_factor")
 
 
 @dataclass(frozen=True)
@@ -67,30 +77,33 @@ class DomainRanges:
 
 @dataclass(frozen=True)
 class Nominal:
-    """What the controllers and the tracker assume. `Nominal.from_config()` reads them where
-    they are set (the policy's parameters, config/ball_tracker.yaml over the tracker's schema)."""
+    """What the controllers assume. `Nominal.from_config()` reads them where they are set (the
+    policy's parameters). The tracker's filter is read from config/ball_tracker.yaml over the
+    tracker's schema (`tracker_config()`)."""
 
     k_g: float = ROLLING_FACTOR_SHELL * GRAVITY_M_S2
     u_max_rad: float = 0.15
     max_total_tilt_rad: float = 0.20
     vision_delay_s: float = 0.015
     max_prediction_s: float = 0.5
-    meas_noise_m: float = 0.001
-    accel_noise_m_s2: float = 1.0
-    init_vel_std_m_s: float = 0.5
     fast_noise_floor_m: float = 0.0005   # the benchmark's fast mode: never less (pixel quantisation)
 
     @classmethod
     def from_config(cls) -> Nominal:
-        from ball_balance.benchmark.episode import controller_values, tracker_values
-        from ball_balance.vision.config import TrackerConfig
+        from ball_balance.benchmark.episode import controller_values
 
         values = controller_values("policy", "stationary")
-        tracker = TrackerConfig.from_values(tracker_values())
         return cls(k_g=control_config.k_g(values), u_max_rad=values["max_tilt_cmd_rad"],
-                   max_total_tilt_rad=values["max_total_tilt_rad"], max_prediction_s=values["max_prediction_s"],
-                   meas_noise_m=tracker.meas_noise_m,
-                   accel_noise_m_s2=tracker.accel_noise_m_s2, init_vel_std_m_s=tracker.init_vel_std_m_s)
+                   max_total_tilt_rad=values["max_total_tilt_rad"], max_prediction_s=values["max_prediction_s"])
+
+
+def tracker_config():
+    """The tracker's parameters as the benchmark and the node run them (config/ball_tracker.yaml
+    over the schema's defaults)."""
+    from ball_balance.benchmark.episode import tracker_values
+    from ball_balance.vision.config import TrackerConfig
+
+    return TrackerConfig.from_values(tracker_values())
 
 
 def reference_table(kind: str, n_ticks: int) -> np.ndarray:
@@ -278,7 +291,7 @@ class PlateBatch:
 
     def __init__(self, batch: int, seed: int, ranges: DomainRanges = DomainRanges(),
                  nominal: Optional[Nominal] = None, duration_s: float = 20.0, action_scale_rad: float = 0.1,
-                 teacher_wn: float = 4.0, teacher_zeta: float = 0.85):
+                 teacher_wn: float = 4.0, teacher_zeta: float = 0.85, tracker_cfg=None):
         self.b, self.ranges = batch, ranges
         self.nom = Nominal.from_config() if nominal is None else nominal
         self.rng = np.random.default_rng(seed)
@@ -296,6 +309,9 @@ class PlateBatch:
         pad = int(0.5 / CONTROL_DT_S) + 2   # the teacher looks ahead up to its latency + lag
         self.refs = np.stack([reference_table(k, self.n_ticks + pad) for k in REFERENCES])   # (R, n, 3, 2)
         self.builder = ObservationBuilder(batch)
+        self.tracker_cfg = tracker_config() if tracker_cfg is None else tracker_cfg
+        # the known acceleration the tracker derives from /plate_cmd (the law's tilt)
+        self.tracker_k_g = self.tracker_cfg.rolling_factor * GRAVITY_M_S2
 
     # ---- episode start ---------------------------------------------------------------
     def reset(self) -> np.ndarray:
@@ -320,17 +336,15 @@ class PlateBatch:
         self.x = np.stack([radius * np.cos(angle), radius * np.sin(angle)], 1)
         self.v = np.stack([speed * np.cos(heading), speed * np.sin(heading)], 1)
         self.theta = np.zeros((b, 2))          # plate tilt
-        self.hist_len = int(np.ceil((r.latency_s[1] + Nominal.max_prediction_s) / CONTROL_DT_S)) + 4
+        self.hist_len = int(np.ceil((max(r.latency_s[1], self.tracker_cfg.plate_cmd_delay_s)
+                                     + Nominal.max_prediction_s) / CONTROL_DT_S)) + 4
         self.cmd_hist = np.zeros((b, 2, self.hist_len))   # shaped commands by tick (ring, index tick % len)
+        self.law_hist = np.zeros((b, 2, self.hist_len))   # the law's tilts (/plate_cmd) by tick
         self.cmd = np.zeros((b, 2))            # last shaped command
         self.u_law = np.zeros((b, 2))          # last law output
-        # Kalman per axis: state (x, v), covariance p00 p01 p11
-        self.kf_x = np.zeros((b, 2))
-        self.kf_v = np.zeros((b, 2))
-        self.kf_p = np.zeros((b, 2, 3))
-        self.kf_init = np.zeros(b, bool)
-        self.kf_t = np.zeros(b)
-        self.meas_r = np.maximum(self.noise, self.nom.meas_noise_m) ** 2
+        # the tracker's filter; a fixed measurement noise stands in for one tuned to the
+        # episode's noise (as the benchmark's fast mode does), an adaptive one starts from the config
+        self.kalman = BatchBallKalman(b, self.tracker_cfg, fixed_meas_noise_m=self.noise)
         self.pending = []                      # (visible_at, est x, est v, stamp, valid mask)
         self.obs_x = np.zeros((b, 2))
         self.obs_v = np.zeros((b, 2))
@@ -365,9 +379,9 @@ class PlateBatch:
             self.next_frame += 1.0 / CAMERA_RATE_HZ
             arrived = self.rng.random(self.b) >= self.drop_p
             z = self.x + self.rng.normal(0.0, 1.0, (self.b, 2)) * self.noise[:, None]
-            self._kalman(t, z, arrived)
-            self.pending.append((t + self.nom.vision_delay_s, self.kf_x.copy(), self.kf_v.copy(), t,
-                                 arrived & self.kf_init, self.tilt_p.copy(), self.tilt_v.copy()))
+            est_x, est_v, valid = self.kalman.step(t, z, arrived, self._known_acceleration(t))
+            self.pending.append((t + self.nom.vision_delay_s, est_x, est_v, t, valid,
+                                 self.tilt_p.copy(), self.tilt_v.copy()))
         while self.pending and self.pending[0][0] <= t + 1e-9:
             _, ex, ev, stamp, valid, tilt_p, tilt_v = self.pending.pop(0)
             self.obs_x[valid], self.obs_v[valid] = ex[valid], ev[valid]
@@ -375,36 +389,17 @@ class PlateBatch:
             # the pipeline adds each new state it controls on to the plant estimate
             self.estimator.add_state(np.full(self.b, stamp), ex, tilt_p, tilt_v, valid & self.alive)
 
-    def _kalman(self, t, z, arrived) -> None:
-        n = self.nom
-        start = arrived & ~self.kf_init
-        run = arrived & self.kf_init
-        dt = (t - self.kf_t)[:, None]
-        q = n.accel_noise_m_s2 ** 2
-        x, v, p = self.kf_x, self.kf_v, self.kf_p
-        # predict (every initialised track, detection or not: the filter coasts on missing frames)
-        x_p = x + v * dt
-        p00 = p[..., 0] + 2 * dt * p[..., 1] + dt * dt * p[..., 2] + q * dt ** 4 / 4
-        p01 = p[..., 1] + dt * p[..., 2] + q * dt ** 3 / 2
-        p11 = p[..., 2] + q * dt ** 2
-        # update
-        r = self.meas_r[:, None]
-        s = p00 + r
-        k0, k1 = p00 / s, p01 / s
-        y = z - x_p
-        m = run[:, None]
-        self.kf_x = np.where(m, x_p + k0 * y, x)
-        self.kf_v = np.where(m, v + k1 * y, v)
-        new_p = np.stack([(1 - k0) * p00, (1 - k0) * p01, p11 - k1 * p01], -1)
-        self.kf_p = np.where(m[..., None], new_p, p)
-        self.kf_t = np.where(run, t, self.kf_t)
-        if start.any():
-            self.kf_x[start], self.kf_v[start] = z[start], 0.0
-            self.kf_p[start] = np.stack([np.broadcast_to(self.meas_r[start, None], (start.sum(), 2)),
-                                         np.zeros((start.sum(), 2)),
-                                         np.full((start.sum(), 2), n.init_vel_std_m_s ** 2)], -1)
-            self.kf_t[start] = t
-            self.kf_init |= start
+    def _known_acceleration(self, t):
+        """What the tracker's PlateCommandInput gives at a frame stamped t: -k g sin(u) of the
+        law's tilt in force plate_cmd_delay_s before t (commands arrive once per tick, after
+        the tick's frames), None before the first command, without use_plate_cmd or past the
+        timeout."""
+        cfg = self.tracker_cfg
+        if not cfg.use_plate_cmd or self.tick == 0 or t - (self.tick - 1) * CONTROL_DT_S > cfg.plate_cmd_timeout_s:
+            return None
+        j = int(np.floor((t - cfg.plate_cmd_delay_s) / CONTROL_DT_S + 1e-9))
+        j = min(max(j, 0, self.tick - self.hist_len + 1), self.tick - 1)
+        return -self.tracker_k_g * np.sin(self.law_hist[:, :, j % self.hist_len])
 
     def _predicted_state(self):
         """The pipeline's latency prediction: the state at its stamp carried to now over the
@@ -504,6 +499,7 @@ class PlateBatch:
         u = np.clip(tilt, -self.nom.u_max_rad, self.nom.u_max_rad)
         u = np.where(self.engaged[:, None], u, 0.0)
         self.u_law = u
+        self.law_hist[:, :, self.tick % self.hist_len] = u
         self.builder.record_tilt(u)
         # shaping: tilt change per tick limited (the joint-step limit), total tilt limited
         du = u - self.cmd

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ball_balance.policy.env import BASE_PID_KEYS, CONTROL_DT_S, DomainRanges, PlateBatch
+from ball_balance.policy.env import BASE_PID_KEYS, CONTROL_DT_S, TRACKER_FILTER_KEYS, DomainRanges, PlateBatch
 from ball_balance.policy.export import write_mlp_onnx
 from ball_balance.policy.observation import HISTORY, axis_size, flat_names, layout
 from controller_manager_py.controllers.policy_model import ActionSpec, ObservationSpec, make_metadata
@@ -210,6 +210,7 @@ def main(argv=None) -> int:
                 "wall_time_s": round(elapsed, 1), "torch": torch.__version__, "domains": ranges.as_dict(),
                 "evaluation": best[3], "iterations_evaluated": history,
                 "base_pid": {k: env.pid_values[k] for k in BASE_PID_KEYS},
+                "tracker_filter": {k: getattr(env.tracker_cfg, k) for k in TRACKER_FILTER_KEYS},
                 "command": "python -m ball_balance.policy.train " + " ".join(
                     sys.argv[1:] if argv is None else argv)}
     weights = [(m.weight.detach().numpy(), m.bias.detach().numpy()) for m in net if hasattr(m, "weight")]

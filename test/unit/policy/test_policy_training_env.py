@@ -1,4 +1,6 @@
 """The vectorised training plant agrees with the controllers it stands in for."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -105,3 +107,54 @@ def test_training_domains_cover_the_benchmark_extremes(knob):
         v = spec.get(knob)
         values += list(v) if isinstance(v, tuple) else [v] if v is not None else []
     assert low <= min(values) and high >= max(values)
+
+
+@pytest.mark.parametrize("overrides", [{}, {"estimate_input_gain": False, "adaptive_meas_noise": False},
+                                       {"consistency_time_s": 0.0, "use_plate_cmd": False}])
+def test_batch_kalman_is_the_trackers_filter(overrides):
+    """The plant's batched filter follows vision/kalman.py BallKalman frame by frame on the same
+    detections and known accelerations: dropped frames, outliers (gate, coasting, a lost
+    track), a gap that restarts the track, a wrong plant gain, noise that changes."""
+    from ball_balance.policy.batch_kalman import BatchBallKalman
+    from ball_balance.policy.env import tracker_config
+    from ball_balance.vision.kalman import BallKalman
+
+    cfg = dataclasses.replace(tracker_config(), **overrides)
+    b, dt = 6, 1 / 30
+    noise = np.array([0.0005, 0.001, 0.003, 0.006, 0.002, 0.004])
+    batch = BatchBallKalman(b, cfg, fixed_meas_noise_m=noise)
+    single = [BallKalman.from_config(cfg if cfg.adaptive_meas_noise else
+                                     dataclasses.replace(cfg, meas_noise_m=max(cfg.meas_noise_m, noise[i])))
+              for i in range(b)]
+    rng = np.random.default_rng(1)
+    k_g, gain = 5.886, np.array([1.0, 1.2, 0.8, 1.4, 1.0, 0.6])
+    x, v = rng.normal(0, 0.05, (b, 2)), np.zeros((b, 2))
+    worst = 0.0
+    for n in range(400):
+        t = n * dt
+        u = 0.05 * np.sin(2 * np.pi * t / np.array([1.5, 2.0, 2.5, 3.0, 1.0, 0.7]))[:, None] * np.array([1.0, -0.7])
+        accel = None if (n < 3 or not cfg.use_plate_cmd) else -k_g * np.sin(u)
+        a_true = -k_g * gain[:, None] * np.sin(u)
+        x, v = x + v * dt + 0.5 * a_true * dt * dt, v + a_true * dt
+        z = x + rng.normal(0, 1, (b, 2)) * noise[:, None]
+        z[rng.random(b) < 0.03] += 0.1                      # outliers
+        if 150 <= n < 160:
+            z[2] += 0.2                                     # a lost track (coasting past max_coast_frames)
+        det = rng.random(b) >= 0.1
+        if 250 <= n < 270:
+            det[4] = False                                  # a gap longer than max_dt_s
+        pos, vel, valid = batch.step(t, z, det, accel)
+        for i in range(b):
+            if not det[i]:
+                continue
+            est = single[i].step(t, tuple(z[i]), None if accel is None else tuple(accel[i]))
+            assert valid[i] == est.valid, (n, i)
+            if est.valid:
+                want = np.array([est.x, est.y, est.vx, est.vy])
+                got = np.concatenate([pos[i], vel[i]])
+                np.testing.assert_allclose(got, want, rtol=1e-7, atol=1e-9, err_msg=f"frame {n} ball {i}")
+                worst = max(worst, float(np.max(np.abs(got - want))))
+    for i in range(b):
+        assert batch.r[i] == pytest.approx(single[i].kf.R[0, 0], rel=1e-9)
+        assert batch.gain[i] == pytest.approx(single[i].input_gain, rel=1e-7)
+    assert worst < 1e-9

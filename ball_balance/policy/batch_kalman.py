@@ -1,0 +1,198 @@
+"""The tracker's Kalman filter (ball_balance/vision/kalman.py BallKalman) over a batch of balls,
+for the vectorised training plant: the same model and the same adaptations, numpy, all balls
+at once. Built from the same TrackerConfig (`BatchBallKalman.from_config`), so the plant
+follows whatever config/ball_tracker.yaml and the tracker's schema set.
+
+Per ball: state [x, y, vx, vy, s] (s the input gain; held at 1 with zero variance when
+`estimate_input_gain` is off, which is then the plain known-acceleration model), the commanded
+tilt's known acceleration, process noise raised by the running innovation consistency, the
+measurement noise estimated from the detections' scatter (median of the normalised triple
+residuals, DetectionNoiseEstimator), the gate, coasting and track restarts (the gain estimate
+survives them). filterpy's update (Joseph form) is reproduced step for step; a test checks the
+batch against BallKalman on the same detections.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ball_balance.vision.kalman import CHI2_1_MEDIAN
+
+DIM = 5
+
+
+class BatchBallKalman:
+    """`step(t, z, arrived, accel)` once per frame (one stamp for the whole batch)."""
+
+    def __init__(self, batch: int, cfg, fixed_meas_noise_m=None, window_max_span_s: float = 0.25,
+                 noise_min_samples: int = 10):
+        self.b, self.cfg = batch, cfg
+        self.sigma_a = cfg.accel_noise_m_s2
+        self.sigma_a_cmd = cfg.cmd_accel_noise_m_s2
+        self.adaptive = bool(cfg.adaptive_meas_noise)
+        self.gain_state = bool(cfg.estimate_input_gain)
+        self.noise_min = cfg.meas_noise_m
+        self.noise_max = max(cfg.meas_noise_max_m, cfg.meas_noise_m)
+        low, high = cfg.input_gain_bounds
+        self.gain_var_max = ((high - low) / 4.0) ** 2
+        # R per ball: the configured noise, or (a fixed filter, as the benchmark's fast mode
+        # runs it) the larger of it and the ball's own detection noise
+        r0 = np.full(batch, cfg.meas_noise_m) if fixed_meas_noise_m is None or self.adaptive \
+            else np.maximum(cfg.meas_noise_m, fixed_meas_noise_m)
+        self.r = r0 ** 2
+        self.x = np.zeros((batch, DIM))
+        self.p = np.zeros((batch, DIM, DIM))
+        self.saved_gain = np.ones(batch)
+        self.saved_gain_var = np.full(batch, cfg.input_gain_std ** 2 if self.gain_state else 0.0)
+        self.init = np.zeros(batch, bool)
+        self.t_last = np.zeros(batch)
+        self.coasted = np.zeros(batch, int)
+        self.nis = np.ones(batch)
+        # detection-noise estimator: the last three detections and a ring of 2 * window samples
+        self.span = window_max_span_s
+        self.min_samples = noise_min_samples
+        self.n_ring = 2 * cfg.meas_noise_window_frames
+        self.tri_t = np.full((batch, 3), np.nan)
+        self.tri_z = np.zeros((batch, 3, 2))
+        self.tri_a = np.zeros((batch, 3, 2))
+        self.n_tri = np.zeros(batch, int)
+        self.samples = np.full((batch, self.n_ring), np.inf)
+        self.n_samples = np.zeros(batch, int)
+        self.ring_at = np.zeros(batch, int)
+
+    @property
+    def gain(self) -> np.ndarray:
+        """s per ball (the saved estimate between tracks)."""
+        return np.where(self.init, self.x[:, 4], self.saved_gain) if self.gain_state else np.ones(self.b)
+
+    def _reset(self, mask) -> None:
+        if self.gain_state:
+            self.saved_gain = np.where(mask & self.init, self.x[:, 4], self.saved_gain)
+            self.saved_gain_var = np.where(mask & self.init, self.p[:, 4, 4], self.saved_gain_var)
+        self.init &= ~mask
+        self.coasted[mask] = 0
+
+    def _adapt_noise(self, t, z, a, det) -> None:
+        """DetectionNoiseEstimator.add + sigma_m for the balls with a detection `det`."""
+        if a is None:
+            a = np.zeros((self.b, 2))
+        else:
+            a = a * self.gain[:, None]
+        newer = det & ~(self.n_tri > 0) | det & (t > self.tri_t[:, 2])
+        self.tri_t[newer] = np.roll(self.tri_t[newer], -1, axis=1)
+        self.tri_z[newer] = np.roll(self.tri_z[newer], -1, axis=1)
+        self.tri_a[newer] = np.roll(self.tri_a[newer], -1, axis=1)
+        self.tri_t[newer, 2], self.tri_z[newer, 2], self.tri_a[newer, 2] = t, z[newer], a[newer]
+        self.n_tri = np.where(newer, np.minimum(self.n_tri + 1, 3), self.n_tri)
+        t0, t1, t2 = self.tri_t[:, 0], self.tri_t[:, 1], self.tri_t[:, 2]
+        use = newer & (self.n_tri >= 3)
+        use &= np.where(use, t2 - t0, np.inf) <= self.span
+        if use.any():
+            i = np.flatnonzero(use)
+            w0 = ((t2 - t1) / (t2 - t0))[i]
+            w2 = 1.0 - w0
+            acc = 0.5 * (self.tri_a[i, 1] + self.tri_a[i, 2])
+            r = self.tri_z[i, 1] - (w0[:, None] * self.tri_z[i, 0] + w2[:, None] * self.tri_z[i, 2]) \
+                + 0.5 * acc * ((t1 - t0) * (t2 - t1))[i, None]
+            s = r ** 2 / (1.0 + w0 ** 2 + w2 ** 2)[:, None]
+            at = self.ring_at[i]
+            self.samples[i, at % self.n_ring] = s[:, 0]
+            self.samples[i, (at + 1) % self.n_ring] = s[:, 1]
+            self.ring_at[i] = at + 2
+            self.n_samples[i] = np.minimum(self.n_samples[i] + 2, self.n_ring)
+        ready = det & (self.n_samples >= 2 * self.min_samples)
+        if ready.any():
+            i = np.flatnonzero(ready)
+            srt = np.sort(self.samples[i], axis=1)     # empty slots (inf) sort last
+            n = self.n_samples[i]
+            med = 0.5 * (srt[np.arange(len(i)), (n - 1) // 2] + srt[np.arange(len(i)), n // 2])
+            sigma = np.clip(np.sqrt(med / CHI2_1_MEDIAN), self.noise_min, self.noise_max)
+            self.r[i] = sigma ** 2
+
+    def step(self, t: float, z: np.ndarray, det: np.ndarray, accel=None):
+        """Frame at stamp t: detections z (b, 2) where det (b,) is set (the others are not
+        stepped: a dropped frame, as the benchmark's fast mode skips it); accel (b, 2) the known
+        acceleration or None. Returns (position (b, 2), velocity (b, 2), valid (b,)) after it."""
+        if self.adaptive:
+            self._adapt_noise(t, z, accel, det)
+        dt = np.where(self.init, t - self.t_last, 0.0)
+        self._reset(det & self.init & (dt > self.cfg.max_dt_s))
+        pred = det & self.init & (dt > 0.0)
+        if pred.any():
+            self._predict(pred, np.where(pred, dt, 0.0), accel)
+            self.t_last = np.where(pred, t, self.t_last)
+        start = det & ~self.init
+        if start.any():
+            i = np.flatnonzero(start)
+            self.x[i] = 0.0
+            self.x[i, :2] = z[i]
+            self.x[i, 4] = self.saved_gain[i] if self.gain_state else 1.0
+            self.p[i] = 0.0
+            self.p[i, 0, 0] = self.p[i, 1, 1] = self.r[i]
+            self.p[i, 2, 2] = self.p[i, 3, 3] = self.cfg.init_vel_std_m_s ** 2
+            self.p[i, 4, 4] = self.saved_gain_var[i]
+            self.init[i], self.coasted[i], self.t_last[i] = True, 0, t
+        run = det & self.init & ~start
+        valid = start.copy()
+        if run.any():
+            p, r = self.p, self.r
+            y = z - self.x[:, :2]
+            s00, s01, s11 = p[:, 0, 0] + r, p[:, 0, 1], p[:, 1, 1] + r
+            det_s = s00 * s11 - s01 * s01
+            inv = np.stack([np.stack([s11, -s01], -1), np.stack([-s01, s00], -1)], -2) / det_s[:, None, None]
+            d2 = np.einsum("bi,bij,bj->b", y, inv, y)
+            distance = np.sqrt(np.maximum(d2, 0.0))
+            gate = self.cfg.gate_sigma
+            if self.cfg.consistency_time_s > 0.0:
+                alpha = np.minimum(1.0, dt / self.cfg.consistency_time_s)
+                self.nis = np.where(run, self.nis + alpha * (np.minimum(distance, gate) ** 2 / 2.0 - self.nis),
+                                    self.nis)
+            ok = run & (distance <= gate)
+            if ok.any():
+                i = np.flatnonzero(ok)
+                k = np.einsum("bij,bjk->bik", p[i, :, :2], inv[i])            # P H^T S^-1
+                x_new = self.x[i] + np.einsum("bij,bj->bi", k, y[i])
+                ikh = np.broadcast_to(np.eye(DIM), (len(i), DIM, DIM)).copy()
+                ikh[:, :, :2] -= k
+                p_new = ikh @ p[i] @ ikh.transpose(0, 2, 1) + r[i, None, None] * (k @ k.transpose(0, 2, 1))
+                if self.gain_state:
+                    low, high = self.cfg.input_gain_bounds
+                    x_new[:, 4] = np.clip(x_new[:, 4], low, high)
+                self.x[i], self.p[i] = x_new, p_new
+                self.coasted[i] = 0
+            gated = run & ~ok
+            self.coasted = np.where(gated, self.coasted + 1, self.coasted)
+            lost = gated & (self.coasted > self.cfg.max_coast_frames)
+            valid |= run & ~lost
+            self._reset(lost)
+        return self.x[:, :2].copy(), self.x[:, 2:4].copy(), valid
+
+    def _predict(self, mask, dt, accel) -> None:
+        """BallKalman._predict for the balls in mask, dt (b,) their time steps."""
+        i = np.flatnonzero(mask)
+        h = dt[i]
+        known = accel is not None
+        if not known:
+            q = np.full(len(i), self.sigma_a ** 2)
+        elif self.cfg.consistency_time_s > 0.0:
+            q = np.minimum(np.maximum(self.nis[i], 1.0), max(1.0, (self.sigma_a / self.sigma_a_cmd) ** 2)) \
+                * self.sigma_a_cmd ** 2
+        else:
+            q = np.full(len(i), self.sigma_a_cmd ** 2)
+        f = np.broadcast_to(np.eye(DIM), (len(i), DIM, DIM)).copy()
+        f[:, 0, 2] = f[:, 1, 3] = h
+        if known:
+            a = accel[i]
+            f[:, 0:2, 4] = a * (h ** 2 / 2)[:, None]
+            f[:, 2:4, 4] = a * h[:, None]
+        qm = np.zeros((len(i), DIM, DIM))
+        for axis in range(2):
+            qm[:, axis, axis] = q * h ** 4 / 4
+            qm[:, axis, axis + 2] = qm[:, axis + 2, axis] = q * h ** 3 / 2
+            qm[:, axis + 2, axis + 2] = q * h ** 2
+        if self.gain_state:
+            qm[:, 4, 4] = self.cfg.input_gain_rate_per_s ** 2 * h
+        self.x[i] = np.einsum("bij,bj->bi", f, self.x[i])
+        p = f @ self.p[i] @ f.transpose(0, 2, 1) + qm
+        if self.gain_state:
+            p[:, 4, 4] = np.minimum(p[:, 4, 4], self.gain_var_max)
+        self.p[i] = p
