@@ -102,6 +102,9 @@ TRACKER_SCHEMA = (
     Param("consistency_time_s", 0.3,
           "time constant of the running innovation consistency that raises cmd_accel_noise_m_s2 (up to "
           "accel_noise_m_s2) while the detections disagree with the model; 0 = off", "s", 0.0, 60.0),
+    Param("maneuver_sigma", 4.0,
+          "a detection farther than this Mahalanobis distance re-predicts its frame with accel_noise_m_s2 "
+          "(a push the commanded tilt does not explain); 0 = off", "", 0.0, 1000.0),
     Param("adaptive_meas_noise", True,
           "estimate the measurement noise online from the detections' scatter, within "
           "[meas_noise_m, meas_noise_max_m]"),
@@ -150,6 +153,7 @@ class TrackerConfig:
     input_gain_std: float
     input_gain_rate_per_s: float
     consistency_time_s: float
+    maneuver_sigma: float
     adaptive_meas_noise: bool
     meas_noise_max_m: float
     meas_noise_window_frames: int

@@ -134,7 +134,7 @@ class BallKalman:
                  meas_noise_max_m: float = 0.02, meas_noise_window: int = 60,
                  estimate_input_gain: bool = False, input_gain_bounds: Tuple[float, float] = (0.3, 2.5),
                  input_gain_std: float = 0.3, input_gain_rate_per_s: float = 0.05,
-                 consistency_time_s: float = 0.0):
+                 consistency_time_s: float = 0.0, maneuver_sigma: float = 0.0):
         self.sigma_a = accel_noise_m_s2
         self.sigma_a_cmd = accel_noise_m_s2 if cmd_accel_noise_m_s2 is None else cmd_accel_noise_m_s2
         self.init_vel_std = init_vel_std_m_s
@@ -150,6 +150,9 @@ class BallKalman:
         self.dim = 5 if estimate_input_gain else 4
         self.consistency_time_s = consistency_time_s
         self.nis = 1.0                # running mean of the normalised innovation squared (per axis)
+        self.maneuver_sigma = maneuver_sigma
+        self.maneuver_count = 0       # detections that re-predicted with accel_noise_m_s2 (total)
+        self._last_prediction = (0.0, 0.0)   # (dt, q) of the last prediction
         kf = KalmanFilter(dim_x=self.dim, dim_z=2, dim_u=2)
         kf.H = np.eye(2, self.dim)                                           # z = H x
         kf.R = np.eye(2) * meas_noise_m ** 2                                 # measurement noise
@@ -169,7 +172,8 @@ class BallKalman:
                    adaptive_meas_noise=cfg.adaptive_meas_noise, meas_noise_max_m=cfg.meas_noise_max_m,
                    meas_noise_window=cfg.meas_noise_window_frames, estimate_input_gain=cfg.estimate_input_gain,
                    input_gain_bounds=tuple(cfg.input_gain_bounds), input_gain_std=cfg.input_gain_std,
-                   input_gain_rate_per_s=cfg.input_gain_rate_per_s, consistency_time_s=cfg.consistency_time_s)
+                   input_gain_rate_per_s=cfg.input_gain_rate_per_s, consistency_time_s=cfg.consistency_time_s,
+                   maneuver_sigma=cfg.maneuver_sigma)
 
     @property
     def meas_noise_m(self) -> float:
@@ -208,6 +212,7 @@ class BallKalman:
         kf = self.kf
         I2 = np.eye(2)
         q = self.process_noise(accel is not None)
+        self._last_prediction = (dt, q)
         F = np.eye(self.dim)
         F[0:2, 2:4] = dt * I2
         Q = np.zeros((self.dim, self.dim))
@@ -228,6 +233,17 @@ class BallKalman:
         else:
             kf.B = np.block([[dt ** 2 / 2 * I2], [dt * I2]])
             kf.predict(u=a)
+
+    def _widen_last_prediction(self) -> None:
+        """Add the process noise the last prediction would have had without a known acceleration
+        (a push or a hand on the ball: the model did not see it coming)."""
+        dt, q = self._last_prediction
+        extra = self.sigma_a ** 2 - q
+        if extra <= 0.0 or dt <= 0.0:
+            return
+        I2 = np.eye(2)
+        self.kf.P[:4, :4] += extra * np.block([[dt ** 4 / 4 * I2, dt ** 3 / 2 * I2], [dt ** 3 / 2 * I2, dt ** 2 * I2]])
+        self.maneuver_count += 1
 
     def process_noise(self, known_accel: bool) -> float:
         """q (m^2/s^4) for the next prediction: sigma_a^2 without a known acceleration; with one
@@ -283,6 +299,9 @@ class BallKalman:
         gated = False
         if z is not None:
             distance = self.mahalanobis(z)
+            if 0.0 < self.maneuver_sigma < distance and dt_step > 0.0:
+                self._widen_last_prediction()
+                distance = self.mahalanobis(z)
             if self.consistency_time_s > 0.0:   # a gated detection counts too, at the gate
                 alpha = min(1.0, dt_step / self.consistency_time_s)
                 self.nis += alpha * (min(distance, self.gate_sigma) ** 2 / 2.0 - self.nis)

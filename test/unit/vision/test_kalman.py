@@ -218,3 +218,22 @@ def test_process_noise_rises_while_the_detections_disagree_with_the_known_accele
     assert 0.1 ** 2 < adaptive.process_noise(True) <= 1.0
     assert adaptive.process_noise(False) == pytest.approx(1.0)
     assert err_adaptive < 0.6 * err_fixed
+
+
+def test_a_push_the_known_acceleration_does_not_explain_widens_that_frames_prediction():
+    def run(maneuver_sigma):
+        kf = BallKalman(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
+                        maneuver_sigma=maneuver_sigma)
+        rng, x, err = np.random.default_rng(10), 0.0, []
+        for k in range(60):
+            t = k / 30
+            x = 0.15 * max(0.0, t - 1.0)                     # pushed to 0.15 m/s at t = 1 s
+            e = kf.step(t, (x + rng.normal(0.0, 0.001), 0.0), accel=(0.0, 0.0))
+            err.append(abs(e.vx - (0.15 if t > 1.0 else 0.0)))
+        return kf, float(np.mean(err[31:45]))
+
+    widened, err_widened = run(4.0)
+    plain, err_plain = run(0.0)
+    assert widened.maneuver_count >= 1 and plain.maneuver_count == 0
+    assert widened.reset_count == 0
+    assert err_widened < 0.5 * err_plain
