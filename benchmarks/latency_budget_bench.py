@@ -92,6 +92,30 @@ def start_graph(args, env, workdir: Path) -> list:
             for cmd, log in zip(commands, logs)]
 
 
+def cpu_seconds(pid: int) -> float:
+    """CPU time (user + system, all threads) of a process and its children still running, s."""
+    tick = os.sysconf("SC_CLK_TCK")
+    total = 0.0
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        total += (int(fields[11]) + int(fields[12])) / tick
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            for child in (task / "children").read_text().split():
+                total += cpu_seconds(int(child))
+    except (FileNotFoundError, ProcessLookupError, IndexError):
+        pass
+    return total
+
+
+def process_cpu(pid: int) -> float:
+    """CPU time of one process alone (all threads), s."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except FileNotFoundError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def overrides(params) -> list:
     """["name:=value", ...] -> ["-p", "name:=value", ...]"""
     return [arg for param in params for arg in ("-p", param)]
@@ -104,6 +128,7 @@ class Recorder:
         from ball_tracker_msgs.msg import BallState
         from pal_statistics_msgs.msg import Statistics
         from rclpy.qos import QoSProfile, qos_profile_sensor_data
+        from rosgraph_msgs.msg import Clock
         from sensor_msgs.msg import CameraInfo
         from std_msgs.msg import Float64MultiArray, Header
         from trajectory_msgs.msg import JointTrajectory
@@ -116,6 +141,7 @@ class Recorder:
         self.state = {}                       # stamp -> (written wall ns, received wall ns)
         self.commands = []                    # (written wall ns, received wall ns), in order
         self.tracker = {}                     # stamp -> {stage: ms}
+        self.clock = []                       # (wall s, sim s) of each /clock while recording
         node.create_subscription(Header, "/sim/latency_trace", self.on_trace, QoSProfile(depth=100))
         node.create_subscription(CameraInfo, "/camera/camera_info", self.on_camera_info, qos_profile_sensor_data)
         node.create_subscription(BallState, "/ball_state", self.on_state, qos_profile_sensor_data)
@@ -125,6 +151,7 @@ class Recorder:
             node.create_subscription(JointTrajectory, "/scaled_joint_trajectory_controller/joint_trajectory",
                                      self.on_command, 10)
         node.create_subscription(Statistics, "/ball_tracker/statistics/full", self.on_statistics, 100)
+        node.create_subscription(Clock, "/clock", self.on_clock, QoSProfile(depth=1))
 
     @staticmethod
     def stamp_ns(stamp) -> int:
@@ -150,6 +177,16 @@ class Recorder:
         self.commands_seen += 1
         if self.recording:
             self.commands.append((info["source_timestamp"], info["received_timestamp"]))
+
+    def on_clock(self, msg):
+        if self.recording:
+            self.clock.append((time.monotonic(), msg.clock.sec + msg.clock.nanosec * 1e-9))
+
+    def sim_seconds(self) -> tuple[float, float]:
+        """(simulated s, wall s) between the first and the last /clock received while recording."""
+        if len(self.clock) < 2:
+            return 0.0, 0.0
+        return self.clock[-1][1] - self.clock[0][1], self.clock[-1][0] - self.clock[0][0]
 
     def on_statistics(self, msg):
         if not self.recording:
@@ -235,10 +272,15 @@ def main() -> int:
             end = time.monotonic() + args.warmup_s
             while time.monotonic() < end:
                 executor.spin_once(timeout_sec=0.05)
+            names = ("manager", "tracker", "controller")
+            cpu0 = {name: process_cpu(p.pid) for name, p in zip(names, processes, strict=False)}
+            cpu0["camera"] = cpu_seconds(processes[0].pid) - cpu0["manager"]
             recorder.recording = True
             end = time.monotonic() + args.seconds
             while time.monotonic() < end:
                 executor.spin_once(timeout_sec=0.05)
+            cpu = {name: process_cpu(p.pid) - cpu0[name] for name, p in zip(names, processes, strict=False)}
+            cpu["camera"] = cpu_seconds(processes[0].pid) - cpu["manager"] - cpu0["manager"] - cpu0["camera"]
             load = os.getloadavg()[0]
         finally:
             executor.shutdown()
@@ -266,6 +308,13 @@ def main() -> int:
               f"tracker {args.tracker_param or '-'}, controller {args.controller_param or '-'}")
     print(f"frames captured {frames}, rendered {len(recorder.trace['rendered'])}, tracked "
           f"{len(recorder.tracker)}, /ball_state {len(recorder.state)}, followed to the hardware {len(rows)}")
+    sim_s, wall_s = recorder.sim_seconds()
+    if sim_s > 0:
+        rendered = len(recorder.trace["rendered"])
+        print(f"real-time factor {sim_s / wall_s:.2f} (/clock: {sim_s:.1f} simulated s in {wall_s:.1f} s); per "
+              f"simulated s: frames captured {frames / sim_s:.1f}, rendered {rendered / sim_s:.1f}, "
+              f"/ball_state {len(recorder.state) / sim_s:.1f}")
+        print("CPU s per simulated s: " + ", ".join(f"{name} {value / sim_s:.2f}" for name, value in cpu.items()))
     if not rows:
         print("no frame followed end to end (is the controller engaged? see the process logs)")
         return 1
