@@ -64,7 +64,7 @@ trap stop_all INT TERM EXIT
 
 robot_state_publisher --ros-args -p "robot_description_file:=$URDF" &
 PIDS+=($!)
-# config/sim_manager.yaml: normal scheduling for a simulated arm (why: in that file)
+# config/sim_manager.yaml: the simulated arm below the camera chain's SCHED_FIFO priorities (why: in that file)
 ros2_control_node --ros-args --params-file "$CONTROLLERS" --params-file "$ROOT/config/sim_manager.yaml" \
   -p "robot_description_file:=$URDF" \
   -p "activate_controllers:=$ACTIVE" -p "inactive_controllers:=$INACTIVE" &

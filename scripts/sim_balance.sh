@@ -97,9 +97,10 @@ if ((! TRUTH_FED)); then
   start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
     -p "publish_debug_image:=$DEBUG_IMAGE"
 fi
-# peer_timeout_s 5 s (1 s for a real arm): the simulated manager is normally scheduled
-# (config/sim_manager.yaml), and at load 30-36 on 2 cores the controller saw /joint_states
-# gaps of 1.0-2.3 s wall time from a live manager, stopped, and homed with the ball on the plate
+# peer_timeout_s 5 s (1 s for a real arm): with the simulated manager normally scheduled, at
+# load 30-36 on 2 cores the controller saw /joint_states gaps of 1.0-2.3 s wall time from a live
+# manager, stopped, and homed with the ball on the plate (it now runs at SCHED_FIFO 20,
+# config/sim_manager.yaml, but below the camera chain it can still be starved)
 start controller "$EXE" --ros-args --params-file "$YAML" -p use_sim_time:=true -p peer_timeout_s:=5.0 \
   ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"}
 start visualizer ball_balance_visualizer --ros-args -p use_sim_time:=true ${VIS_PARAMS[@]+"${VIS_PARAMS[@]}"}

@@ -63,7 +63,8 @@ SCHEMA = (
           choices=("lockstep", "realtime")),
     Param("cycle_period", 0.002, "sim time per cycle when the manager gives no usable period", "s", 1e-4, 0.1),
     Param("sim_time", True, "own the manager's clock and publish /clock"),
-    Param("clock_rate_hz", 500.0, "/clock publishing rate (sim time)", "Hz", 1.0, 10000.0),
+    Param("clock_rate_hz", 100.0, "/clock publishing rate (sim time); every node on simulated time wakes for "
+          "each tick, so its time advances in steps of this period", "Hz", 1.0, 10000.0),
     Param("camera_enabled", True, "render and publish the overhead camera"),
     Param("camera_rate_hz", 30.0, "camera frame rate (sim time)", "Hz", 0.1, 1000.0),
     Param("camera_width", 640, "image width", "px", 1, 4096),

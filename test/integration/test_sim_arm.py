@@ -193,7 +193,7 @@ def test_pause_step_reset_and_push_services(launcher, graph, tmp_path):
         response = graph.call(Trigger, "/sim/step_simulation", Trigger.Request())
         assert response.success and "10 physics step" in response.message
         start = float(response.message.rsplit("t=", 1)[1].split()[0])
-        # /clock runs at 500 Hz of sim time: the 10 ms step shows within one 2 ms tick
+        # /clock ticks every 10 ms of sim time (clock_rate_hz 100): the 10 ms step shows in one tick
         graph.spin_until(lambda: clocks[-1] >= start + 0.008 - 1e-6, 30, "the clock to follow the step")
         return start
 
