@@ -26,6 +26,12 @@ class BatchBallKalman:
     def __init__(self, batch: int, cfg, fixed_meas_noise_m=None, window_max_span_s: float = 0.25,
                  noise_min_samples: int = 10):
         self.b, self.cfg = batch, cfg
+        # a detection beyond maneuver_sigma widens its frame's prediction (getattr: tracker
+        # versions without these options)
+        self.maneuver_sigma = getattr(cfg, "maneuver_sigma", 0.0)
+        self.maneuver_vel_var = getattr(cfg, "maneuver_vel_std_m_s", 0.0) ** 2
+        self.last_dt = np.zeros(batch)                 # (dt, q) of each ball's last prediction
+        self.last_q = np.zeros(batch)
         self.sigma_a = cfg.accel_noise_m_s2
         self.sigma_a_cmd = cfg.cmd_accel_noise_m_s2
         self.adaptive = bool(cfg.adaptive_meas_noise)
@@ -141,6 +147,15 @@ class BatchBallKalman:
             inv = np.stack([np.stack([s11, -s01], -1), np.stack([-s01, s00], -1)], -2) / det_s[:, None, None]
             d2 = np.einsum("bi,bij,bj->b", y, inv, y)
             distance = np.sqrt(np.maximum(d2, 0.0))
+            if self.maneuver_sigma > 0.0:
+                widen = run & (distance > self.maneuver_sigma) & (dt > 0.0)
+                if widen.any() and self._widen(widen):
+                    p = self.p
+                    s00, s01, s11 = p[:, 0, 0] + r, p[:, 0, 1], p[:, 1, 1] + r
+                    det_s = s00 * s11 - s01 * s01
+                    inv = np.stack([np.stack([s11, -s01], -1), np.stack([-s01, s00], -1)], -2) / det_s[:, None, None]
+                    distance = np.where(widen, np.sqrt(np.maximum(np.einsum("bi,bij,bj->b", y, inv, y), 0.0)),
+                                        distance)
             gate = self.cfg.gate_sigma
             if self.cfg.consistency_time_s > 0.0:
                 alpha = np.minimum(1.0, dt / self.cfg.consistency_time_s)
@@ -166,6 +181,23 @@ class BatchBallKalman:
             self._reset(lost)
         return self.x[:, :2].copy(), self.x[:, 2:4].copy(), valid
 
+    def _widen(self, mask) -> bool:
+        """BallKalman._widen_last_prediction for the balls in mask (a push the commanded tilt does
+        not explain): the last prediction's missing process noise and a velocity jump."""
+        h = self.last_dt
+        extra = np.maximum(self.sigma_a ** 2 - self.last_q, 0.0)
+        mask = mask & (h > 0.0) & ((extra > 0.0) | (self.maneuver_vel_var > 0.0))
+        if not mask.any():
+            return False
+        i = np.flatnonzero(mask)
+        h, extra, jump = h[i], extra[i], self.maneuver_vel_var
+        for axis in range(2):
+            self.p[i, axis, axis] += extra * h ** 4 / 4 + jump * h ** 2 / 3
+            self.p[i, axis, axis + 2] += extra * h ** 3 / 2 + jump * h / 2
+            self.p[i, axis + 2, axis] += extra * h ** 3 / 2 + jump * h / 2
+            self.p[i, axis + 2, axis + 2] += extra * h ** 2 + jump
+        return True
+
     def _predict(self, mask, dt, accel) -> None:
         """BallKalman._predict for the balls in mask, dt (b,) their time steps."""
         i = np.flatnonzero(mask)
@@ -178,6 +210,7 @@ class BatchBallKalman:
                 * self.sigma_a_cmd ** 2
         else:
             q = np.full(len(i), self.sigma_a_cmd ** 2)
+        self.last_dt[i], self.last_q[i] = h, q
         f = np.broadcast_to(np.eye(DIM), (len(i), DIM, DIM)).copy()
         f[:, 0, 2] = f[:, 1, 3] = h
         if known:

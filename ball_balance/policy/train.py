@@ -210,7 +210,8 @@ def main(argv=None) -> int:
                 "wall_time_s": round(elapsed, 1), "torch": torch.__version__, "domains": ranges.as_dict(),
                 "evaluation": best[3], "iterations_evaluated": history,
                 "base_pid": {k: env.pid_values[k] for k in BASE_PID_KEYS},
-                "tracker_filter": {k: getattr(env.tracker_cfg, k) for k in TRACKER_FILTER_KEYS},
+                "tracker_filter": {k: getattr(env.tracker_cfg, k) for k in TRACKER_FILTER_KEYS
+                                   if hasattr(env.tracker_cfg, k)},
                 "command": "python -m ball_balance.policy.train " + " ".join(
                     sys.argv[1:] if argv is None else argv)}
     weights = [(m.weight.detach().numpy(), m.bias.detach().numpy()) for m in net if hasattr(m, "weight")]

@@ -110,11 +110,13 @@ def test_training_domains_cover_the_benchmark_extremes(knob):
 
 
 @pytest.mark.parametrize("overrides", [{}, {"estimate_input_gain": False, "adaptive_meas_noise": False},
-                                       {"consistency_time_s": 0.0, "use_plate_cmd": False}])
+                                       {"consistency_time_s": 0.0, "use_plate_cmd": False},
+                                       {"maneuver_sigma": 2.5}])
 def test_batch_kalman_is_the_trackers_filter(overrides):
     """The plant's batched filter follows vision/kalman.py BallKalman frame by frame on the same
     detections and known accelerations: dropped frames, outliers (gate, coasting, a lost
-    track), a gap that restarts the track, a wrong plant gain, noise that changes."""
+    track), a gap that restarts the track, a wrong plant gain, noise that changes, pushes
+    (maneuver_sigma)."""
     from ball_balance.policy.batch_kalman import BatchBallKalman
     from ball_balance.policy.env import tracker_config
     from ball_balance.vision.kalman import BallKalman
@@ -136,6 +138,8 @@ def test_batch_kalman_is_the_trackers_filter(overrides):
         accel = None if (n < 3 or not cfg.use_plate_cmd) else -k_g * np.sin(u)
         a_true = -k_g * gain[:, None] * np.sin(u)
         x, v = x + v * dt + 0.5 * a_true * dt * dt, v + a_true * dt
+        if n % 40 == 20:
+            v[n // 40 % b] += 0.15                          # a push
         z = x + rng.normal(0, 1, (b, 2)) * noise[:, None]
         z[rng.random(b) < 0.03] += 0.1                      # outliers
         if 150 <= n < 160:
@@ -158,3 +162,5 @@ def test_batch_kalman_is_the_trackers_filter(overrides):
         assert batch.r[i] == pytest.approx(single[i].kf.R[0, 0], rel=1e-9)
         assert batch.gain[i] == pytest.approx(single[i].input_gain, rel=1e-7)
     assert worst < 1e-9
+    if getattr(cfg, "maneuver_sigma", 0.0) > 0.0 and cfg.use_plate_cmd:
+        assert sum(f.maneuver_count for f in single) > 0   # the pushes were taken as such
