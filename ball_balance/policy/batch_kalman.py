@@ -26,10 +26,8 @@ class BatchBallKalman:
     def __init__(self, batch: int, cfg, fixed_meas_noise_m=None, window_max_span_s: float = 0.25,
                  noise_min_samples: int = 10):
         self.b, self.cfg = batch, cfg
-        # a detection beyond maneuver_sigma widens its frame's prediction (getattr: tracker
-        # versions without these options)
-        self.maneuver_sigma = getattr(cfg, "maneuver_sigma", 0.0)
-        self.maneuver_vel_var = getattr(cfg, "maneuver_vel_std_m_s", 0.0) ** 2
+        # a detection beyond maneuver_sigma widens its frame's prediction
+        self.maneuver_sigma = cfg.maneuver_sigma
         self.last_dt = np.zeros(batch)                 # (dt, q) of each ball's last prediction
         self.last_q = np.zeros(batch)
         self.sigma_a = cfg.accel_noise_m_s2
@@ -183,19 +181,19 @@ class BatchBallKalman:
 
     def _widen(self, mask) -> bool:
         """BallKalman._widen_last_prediction for the balls in mask (a push the commanded tilt does
-        not explain): the last prediction's missing process noise and a velocity jump."""
+        not explain): the last prediction's missing process noise."""
         h = self.last_dt
         extra = np.maximum(self.sigma_a ** 2 - self.last_q, 0.0)
-        mask = mask & (h > 0.0) & ((extra > 0.0) | (self.maneuver_vel_var > 0.0))
+        mask = mask & (h > 0.0) & (extra > 0.0)
         if not mask.any():
             return False
         i = np.flatnonzero(mask)
-        h, extra, jump = h[i], extra[i], self.maneuver_vel_var
+        h, extra = h[i], extra[i]
         for axis in range(2):
-            self.p[i, axis, axis] += extra * h ** 4 / 4 + jump * h ** 2 / 3
-            self.p[i, axis, axis + 2] += extra * h ** 3 / 2 + jump * h / 2
-            self.p[i, axis + 2, axis] += extra * h ** 3 / 2 + jump * h / 2
-            self.p[i, axis + 2, axis + 2] += extra * h ** 2 + jump
+            self.p[i, axis, axis] += extra * h ** 4 / 4
+            self.p[i, axis, axis + 2] += extra * h ** 3 / 2
+            self.p[i, axis + 2, axis] += extra * h ** 3 / 2
+            self.p[i, axis + 2, axis + 2] += extra * h ** 2
         return True
 
     def _predict(self, mask, dt, accel) -> None:
