@@ -1,6 +1,7 @@
 """Shared fixtures. Integration tests get a private ROS domain, a process launcher that
 always cleans up, and an in-test graph node; see harness.py."""
 import os
+import signal
 
 import pytest
 
@@ -11,6 +12,13 @@ if not os.environ.get("BALL_BALANCE_ROOT"):
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_LOCALHOST_ONLY", None)
+
+# The tests stop nodes and scripts with SIGINT, as Ctrl-C in a terminal does. A test run started
+# as a background job of a script (`scripts/test.sh &`, a CI runner) inherits SIGINT ignored, and
+# every process it starts would then ignore it too (bash cannot even trap it). A handler here is
+# reset to the default in each started process.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture
