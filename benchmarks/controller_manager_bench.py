@@ -45,7 +45,6 @@ import argparse
 import math
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -57,7 +56,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "test"))
 
-from harness import DomainLease, executable, ros_env  # noqa: E402
+from harness import DomainLease, Graph, executable, ros_env, stop_groups  # noqa: E402
 
 JOINTS = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint",
           "wrist_3_joint"]
@@ -109,40 +108,20 @@ TAILS = [
 ]
 
 
-class Driver:
+class Driver(Graph):
     """The benchmark's own node: commands, list_controllers calls, statistics subscriptions."""
 
     def __init__(self, domain: int):
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain)
-        self.node = rclpy.create_node("bench_driver", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-
-    def spin_for(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.01)
+        super().__init__(domain, "bench_driver")
 
     def list_controllers_client(self, timeout_s: float):
         """A client of the manager's list_controllers, once the manager is up (it answers)."""
         from controller_manager_msgs.srv import ListControllers
 
         client = self.node.create_client(ListControllers, "/controller_manager/list_controllers")
-        deadline = time.monotonic() + timeout_s
-        while not client.service_is_ready() and time.monotonic() < deadline:
-            self.spin_for(0.1)
-        if not client.service_is_ready():
+        if not self.wait_until(client.service_is_ready, timeout_s):
             raise RuntimeError(f"the manager did not come up within {timeout_s:.0f} s")
         return client
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.context.try_shutdown()
 
 
 def drive(driver: Driver, list_calls: bool, subscribe: bool, seconds: float) -> tuple:
@@ -202,11 +181,7 @@ def run_manager(params_yaml: str, overrides: dict, drive_with) -> tuple:
         window, result = drive_with(driver)
     finally:
         driver.close()
-        process.send_signal(signal.SIGINT)  # a clean stop writes the cycle log
-        try:
-            process.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            os.killpg(process.pid, signal.SIGKILL)
+        stop_groups([process], grace_s=20.0)  # a clean stop (Ctrl-C) writes the cycle log
         log.close()
         lease.release()
     if not cycle_log.exists():

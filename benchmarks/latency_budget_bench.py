@@ -20,9 +20,12 @@ engaging) it follows every camera frame for --seconds through:
                     the hardware (MujocoSystem.write sets a new joint target)   /sim/latency_trace
 
 The stages add up to the whole chain, camera capture -> joint command written to the
-hardware; each is printed as median and p95 (ms). Times are wall-clock DDS source/receipt
-timestamps of each message (one host, one clock), matched by the frame's stamp; a
-controller command is matched to the first one written after the frame's /ball_state.
+hardware; each is printed as median and p95 (ms). Then the live monitor's camera-to-command
+(ball_balance/benchmark/wall_latency.py: the frame's stamp mapped to the wall clock through
+/clock, -> the first /plate_cmd written after its /ball_state), beside "capture -> command
+written" measured here from the latency trace: the two should agree within a few ms.
+Times are wall-clock DDS source/receipt timestamps of each message (one host, one clock),
+matched by the frame's stamp; a controller command is matched to the first one written after the frame's /ball_state.
 For reference (not part of the sum), the two DDS hops inside "controller" and
 "command -> hw", measured to this process: a stand-in for the hops to the controller and
 to the manager, which do not report their receipt times.
@@ -37,7 +40,6 @@ from __future__ import annotations
 import argparse
 import bisect
 import os
-import signal
 import subprocess
 import sys
 import tempfile
@@ -49,7 +51,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "test"))
-from harness import DomainLease, executable, ros_env  # noqa: E402
+from harness import DomainLease, Graph, executable, ros_env, stop_groups  # noqa: E402
 
 STAGES = ("render", "image publish", "image transport", "decode", "track", "state publish", "controller",
           "command -> hw")
@@ -126,12 +128,15 @@ class Recorder:
 
     def __init__(self, node, controller: str):
         from ball_tracker_msgs.msg import BallState
+        from geometry_msgs.msg import Vector3Stamped
         from pal_statistics_msgs.msg import Statistics
         from rclpy.qos import QoSProfile, qos_profile_sensor_data
         from rosgraph_msgs.msg import Clock
         from sensor_msgs.msg import CameraInfo
         from std_msgs.msg import Float64MultiArray, Header
         from trajectory_msgs.msg import JointTrajectory
+
+        from ball_balance.benchmark.wall_latency import CameraToCommand
 
         self.recording = False
         self.commands_seen = 0                # before recording too: the graph is up
@@ -142,6 +147,7 @@ class Recorder:
         self.commands = []                    # (written wall ns, received wall ns), in order
         self.tracker = {}                     # stamp -> {stage: ms}
         self.clock = []                       # (wall s, sim s) of each /clock while recording
+        self.monitor = CameraToCommand()      # the live monitor's camera-to-command, same samples
         node.create_subscription(Header, "/sim/latency_trace", self.on_trace, QoSProfile(depth=100))
         node.create_subscription(CameraInfo, "/camera/camera_info", self.on_camera_info, qos_profile_sensor_data)
         node.create_subscription(BallState, "/ball_state", self.on_state, qos_profile_sensor_data)
@@ -152,6 +158,7 @@ class Recorder:
                                      self.on_command, 10)
         node.create_subscription(Statistics, "/ball_tracker/statistics/full", self.on_statistics, 100)
         node.create_subscription(Clock, "/clock", self.on_clock, QoSProfile(depth=1))
+        node.create_subscription(Vector3Stamped, "/plate_cmd", self.on_plate_cmd, 10)
 
     @staticmethod
     def stamp_ns(stamp) -> int:
@@ -172,15 +179,21 @@ class Recorder:
     def on_state(self, msg, info):
         if self.recording:
             self.state[self.stamp_ns(msg.header.stamp)] = (info["source_timestamp"], info["received_timestamp"])
+            self.monitor.add_state(self.stamp_ns(msg.header.stamp) * 1e-9, info["source_timestamp"] * 1e-9)
+
+    def on_plate_cmd(self, msg, info):
+        if self.recording:
+            self.monitor.add_command(info["source_timestamp"] * 1e-9)
 
     def on_command(self, msg, info):
         self.commands_seen += 1
         if self.recording:
             self.commands.append((info["source_timestamp"], info["received_timestamp"]))
 
-    def on_clock(self, msg):
+    def on_clock(self, msg, info):
         if self.recording:
             self.clock.append((time.monotonic(), msg.clock.sec + msg.clock.nanosec * 1e-9))
+        self.monitor.add_clock(msg.clock.sec + msg.clock.nanosec * 1e-9, info["source_timestamp"] * 1e-9)
 
     def sim_seconds(self) -> tuple[float, float]:
         """(simulated s, wall s) between the first and the last /clock received while recording."""
@@ -224,6 +237,7 @@ class Recorder:
                    REFERENCE[0]: (state[1] - state[0]) * ms,
                    REFERENCE[1]: (command_received - command_written) * ms,
                    "capture -> hardware write": (hardware[j] - captured) * ms,
+                   "capture -> command written": (command_written - captured) * ms,
                    "capture -> /ball_state written": (state[0] - captured) * ms}
             rows.append(row)
         return rows
@@ -251,51 +265,27 @@ def main() -> int:
                         help="override a config/<controller>.yaml value (repeatable), e.g. control_trigger:=ball_state")
     args = parser.parse_args()
 
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-
     lease = DomainLease()
     env = ros_env(lease.domain_id)
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as workdir:
         processes = start_graph(args, env, Path(workdir))
-        context = rclpy.Context()
-        rclpy.init(args=[], context=context, domain_id=lease.domain_id)  # not our options
-        node = rclpy.create_node("latency_budget_bench", context=context)
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        recorder = Recorder(node, args.controller)
+        graph = Graph(lease.domain_id, "latency_budget_bench")
+        recorder = Recorder(graph.node, args.controller)
         try:
-            deadline = time.monotonic() + 120.0      # start-up on a busy machine
-            while recorder.commands_seen == 0 and time.monotonic() < deadline:
-                executor.spin_once(timeout_sec=0.05)
-            end = time.monotonic() + args.warmup_s
-            while time.monotonic() < end:
-                executor.spin_once(timeout_sec=0.05)
+            graph.wait_until(lambda: recorder.commands_seen > 0, 120.0)  # start-up on a busy machine
+            graph.spin_for(args.warmup_s)
             names = ("manager", "tracker", "controller")
             cpu0 = {name: process_cpu(p.pid) for name, p in zip(names, processes, strict=False)}
             cpu0["camera"] = cpu_seconds(processes[0].pid) - cpu0["manager"]
             recorder.recording = True
-            end = time.monotonic() + args.seconds
-            while time.monotonic() < end:
-                executor.spin_once(timeout_sec=0.05)
+            graph.spin_for(args.seconds)
             cpu = {name: process_cpu(p.pid) - cpu0[name] for name, p in zip(names, processes, strict=False)}
             cpu["camera"] = cpu_seconds(processes[0].pid) - cpu["manager"] - cpu0["manager"] - cpu0["camera"]
             load = os.getloadavg()[0]
         finally:
-            executor.shutdown()
-            node.destroy_node()
-            context.try_shutdown()
-            for process in processes:
-                try:
-                    os.killpg(process.pid, signal.SIGINT)
-                except ProcessLookupError:
-                    pass
-            for process in processes:
-                try:
-                    process.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    os.killpg(process.pid, signal.SIGKILL)
+            graph.close()
+            stop_groups(processes, grace_s=10.0)
             lease.release()
         rows = recorder.chains()
     frames = len(recorder.trace["capture"])
@@ -319,11 +309,20 @@ def main() -> int:
         print("no frame followed end to end (is the controller engaged? see the process logs)")
         return 1
     print(f"\n{'stage':<38}{'median ms':>10}{'p95 ms':>9}")
-    for stage in (*STAGES, "capture -> /ball_state written", "capture -> hardware write", *REFERENCE):
+    for stage in (*STAGES, "capture -> /ball_state written", "capture -> command written", "capture -> hardware write",
+                  *REFERENCE):
         values = np.array([r[stage] for r in rows])
         if stage in ("capture -> /ball_state written", REFERENCE[0]):
             print("-" * 57)
         print(f"{stage:<38}{np.median(values):>10.2f}{np.percentile(values, 95):>9.2f}")
+    monitor_ms = 1e3 * recorder.monitor.latencies_s()
+    command_ms = np.array([r["capture -> command written"] for r in rows])
+    if monitor_ms.size:
+        print(f"\nlive monitor's camera-to-command (stamp via /clock -> /plate_cmd written), {monitor_ms.size} states: "
+              f"mean {np.mean(monitor_ms):.2f}, median {np.median(monitor_ms):.2f}, p95 "
+              f"{np.percentile(monitor_ms, 95):.2f} ms; here capture -> command written: mean "
+              f"{np.mean(command_ms):.2f}, median {np.median(command_ms):.2f}, "
+              f"p95 {np.percentile(command_ms, 95):.2f} ms")
     return 0
 
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -26,7 +25,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "test"))
 from controller_manager_py.realtime import set_process_realtime_priority  # noqa: E402
-from harness import DomainLease, ros_env  # noqa: E402
+from harness import DomainLease, Graph, ros_env, stop_groups  # noqa: E402
 
 BUSY = "while True:\n    pass\n"
 
@@ -45,9 +44,7 @@ def main() -> int:
     parser.add_argument("--priority", type=int, default=10, help="SCHED_FIFO priority of this measuring process")
     args = parser.parse_args()
 
-    import rclpy
     from ball_tracker_msgs.msg import BallState
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import CameraInfo
@@ -64,11 +61,8 @@ def main() -> int:
     graph = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                              start_new_session=True)
     busy = [subprocess.Popen([sys.executable, "-c", BUSY]) for _ in range(args.busy)]
-    context = rclpy.Context()
-    rclpy.init(args=[], context=context, domain_id=lease.domain_id)
-    node = rclpy.create_node("live_rtf_bench", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
+    graph_node = Graph(lease.domain_id, "live_rtf_bench")
+    node = graph_node.node
     # SCHED_FIFO (below the graph's 19-45) for every thread, DDS receive threads too: normally
     # scheduled beside a busy process, this process lost samples and counted frames that were there
     if not set_process_realtime_priority(args.priority):
@@ -91,31 +85,17 @@ def main() -> int:
                              QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                                         reliability=ReliabilityPolicy.RELIABLE))
     try:
-        deadline = time.monotonic() + 180.0          # start-up on a busy machine
-        while not stamps and time.monotonic() < deadline and graph.poll() is None:
-            executor.spin_once(timeout_sec=0.05)
-        end = time.monotonic() + args.warmup_s
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.05)
+        graph_node.wait_until(lambda: stamps or graph.poll() is not None, 180.0)  # start-up on a busy machine
+        graph_node.spin_for(args.warmup_s)
         recording = True
-        end = time.monotonic() + args.seconds
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.05)
+        graph_node.spin_for(args.seconds)
         recording = False
         load = os.getloadavg()[0]
     finally:
-        executor.shutdown()
-        node.destroy_node()
-        context.try_shutdown()
+        graph_node.close()
         for process in busy:
             process.kill()
-        try:
-            os.killpg(graph.pid, signal.SIGINT)
-            graph.wait(timeout=20)
-        except ProcessLookupError:
-            pass
-        except subprocess.TimeoutExpired:
-            os.killpg(graph.pid, signal.SIGKILL)
+        stop_groups([graph], grace_s=20.0)
         lease.release()
     print(f"scripts/sim_balance.sh --controller {args.controller}, camera {args.rate:.0f} Hz {args.width}x"
           f"{args.height}, {args.busy} busy process(es), {args.seconds:.0f} s; load average {load_before:.1f} "

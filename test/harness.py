@@ -114,20 +114,25 @@ class Launcher:
                               stdin=None if input is not None else subprocess.DEVNULL)
 
     def stop_all(self, grace_s: float = 5.0) -> None:
-        for process in self.processes:
-            if process.running:
-                _signal_group(process.popen, signal.SIGINT)
-        deadline = time.monotonic() + grace_s
-        for process in self.processes:
-            try:
-                process.popen.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                pass
-            if process.running:
-                _signal_group(process.popen, signal.SIGKILL)
-                process.popen.wait(timeout=5)
-            else:
-                _signal_group(process.popen, signal.SIGKILL)  # strays left in its group
+        stop_groups([process.popen for process in self.processes], grace_s)
+
+
+def stop_groups(popens: Sequence[subprocess.Popen], grace_s: float = 5.0) -> None:
+    """Ctrl-C each process group (started with start_new_session), SIGKILL what is left after grace_s."""
+    for popen in popens:
+        if popen.poll() is None:
+            _signal_group(popen, signal.SIGINT)
+    deadline = time.monotonic() + grace_s
+    for popen in popens:
+        try:
+            popen.wait(timeout=max(0.1, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            pass
+        if popen.poll() is None:
+            _signal_group(popen, signal.SIGKILL)
+            popen.wait(timeout=5)
+        else:
+            _signal_group(popen, signal.SIGKILL)  # strays left in its group
 
 
 def _signal_group(popen: subprocess.Popen, sig: int) -> None:
@@ -147,17 +152,27 @@ class Graph:
         os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
         os.environ.pop("ROS_LOCALHOST_ONLY", None)
         self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
+        rclpy.init(args=[], context=self.context, domain_id=domain_id)  # not the caller's argv
         self.node = rclpy.create_node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
 
-    def spin_until(self, condition: Callable[[], bool], timeout: float, what: str = "condition") -> None:
+    def wait_until(self, condition: Callable[[], bool], timeout: float) -> bool:
+        """Spin until condition() holds (True) or timeout passes (False)."""
         deadline = time.monotonic() + timeout
         while not condition():
-            if time.monotonic() > deadline:
-                raise TimeoutError(f"timed out after {timeout:.0f} s waiting for {what}")
-            self.executor.spin_once(timeout_sec=0.05)
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return False
+            self.executor.spin_once(timeout_sec=min(0.05, remaining))
+        return True
+
+    def spin_until(self, condition: Callable[[], bool], timeout: float, what: str = "condition") -> None:
+        if not self.wait_until(condition, timeout):
+            raise TimeoutError(f"timed out after {timeout:.0f} s waiting for {what}")
+
+    def spin_for(self, seconds: float) -> None:
+        self.wait_until(lambda: False, seconds)
 
     def wait_for_topic(self, topic: str, timeout: float = 20.0) -> None:
         self.spin_until(lambda: any(n == topic for n, _ in self.node.get_topic_names_and_types()),
