@@ -5,9 +5,11 @@ scripts/run_demo.sh (the artifacts), and for the live-graph benchmark cells.
     python -m ball_balance.benchmark.live --duration 30 --out artifacts/demo --video-s 8
 
 Subscribes /sim/ball_truth (true ball, plate frame), /ball_state (tracker), /ball_reference,
-/plate_cmd, /sim/ball_dropped and, for the video, /camera/image_raw or the tracker's overlay
+/plate_cmd, /sim/ball_dropped, /clock and, for the video, /camera/image_raw or the tracker's overlay
 (/ball_tracker/debug_image); metrics count from the controller's engagement. With use_sim_time the
-duration is simulated time. Exit code 0 when the ball stayed on the plate, 1 when it dropped,
+duration is simulated time. Camera-to-command is wall-clock time (wall_latency.py): each frame's
+capture (its stamp, mapped to the wall clock through /clock) -> the first /plate_cmd written
+after its /ball_state. Exit code 0 when the ball stayed on the plate, 1 when it dropped,
 2 when nothing arrived.
 """
 from __future__ import annotations
@@ -20,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ball_balance.benchmark.metrics import episode_metrics
+from ball_balance.benchmark.wall_latency import CameraToCommand, source_wall_s
 
 REFERENCE_FRESH_S = 0.1   # /ball_reference older than this: the controller is not engaged
 
@@ -30,11 +33,12 @@ class LiveRecorder:
         from ball_tracker_msgs.msg import BallState
         from geometry_msgs.msg import PointStamped, Vector3Stamped
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+        from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Bool
 
         self.node = node
         self.truth, self.est, self.ref, self.cmd = [], [], [], []
-        self.latency = []      # /plate_cmd stamp - capture stamp of the newest /ball_state then (s)
+        self.latency = CameraToCommand()   # wall clock, from the DDS samples' write times
         self.dropped = False
         self.frames = []       # (t, bgr image)
         self.video_s, self.video_start_s, self.video_fps = video_s, video_start_s, video_fps
@@ -43,6 +47,7 @@ class LiveRecorder:
         node.create_subscription(BallState, "/ball_state", self.on_state, qos_profile_sensor_data)
         node.create_subscription(PointStamped, "/ball_reference", self.on_reference, 10)
         node.create_subscription(Vector3Stamped, "/plate_cmd", self.on_cmd, 10)
+        node.create_subscription(Clock, "/clock", self.on_clock, QoSProfile(depth=10))
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         node.create_subscription(Bool, "/sim/ball_dropped", self.on_dropped, latched)
@@ -63,16 +68,20 @@ class LiveRecorder:
             self.t0 = self._t(msg)
         self.truth.append((self._t(msg), msg.x, msg.y))
 
-    def on_state(self, msg) -> None:
+    def on_state(self, msg, info) -> None:
         self.est.append((self._t(msg), msg.x, msg.y, msg.vx, msg.vy, msg.tracking_valid, msg.markers_found))
+        if self.ref:   # from engagement on
+            self.latency.add_state(self._t(msg), source_wall_s(info))
+
+    def on_clock(self, msg, info) -> None:
+        self.latency.add_clock(msg.clock.sec + msg.clock.nanosec * 1e-9, source_wall_s(info))
 
     def on_reference(self, msg) -> None:
         self.ref.append((self._t(msg), msg.point.x, msg.point.y))
 
-    def on_cmd(self, msg) -> None:
+    def on_cmd(self, msg, info) -> None:
         self.cmd.append((self._t(msg), msg.vector.x, msg.vector.y))
-        if self.est and self.ref:
-            self.latency.append(self._t(msg) - self.est[-1][0])
+        self.latency.add_command(source_wall_s(info))
 
     def on_dropped(self, msg) -> None:
         self.dropped = self.dropped or bool(msg.data)
@@ -132,10 +141,11 @@ class LiveRecorder:
         if s is None:
             return None
         m = episode_metrics(s, self.dropped, float(s["t"][-1]))
-        if self.latency:
-            # camera-to-command: capture stamp of the state in hand -> command stamp (sim time)
-            m["latency_s"] = float(np.mean(self.latency))
-            m["latency_p95_s"] = float(np.percentile(self.latency, 95))
+        latency = self.latency.latencies_s()
+        if latency.size:
+            # camera-to-command, wall clock: frame captured -> the command acting on it written
+            m["latency_s"] = float(np.mean(latency))
+            m["latency_p95_s"] = float(np.percentile(latency, 95))
         if self.est:
             est = np.array(self.est, dtype=float)
             m["tracking_valid_fraction"] = float(np.mean(est[:, 5]))
@@ -222,7 +232,9 @@ def format_metrics(m) -> str:
     return (f"drop {'YES' if m['drop'] else 'no'} | RMSE {1e3 * m['rmse_m']:.1f} mm | after 5 s "
             f"{1e3 * m['rmse_steady_m']:.1f} mm | settled to 5 mm at "
             f"{m['settle_s']:.1f} s | peak tilt {math.degrees(m['peak_tilt_rad']):.1f} deg | "
-            f"tilt rate RMS {m['smoothness_rad_s']:.2f} rad/s | camera-to-command {1e3 * m['latency_s']:.0f} ms")
+            f"tilt rate RMS {m['smoothness_rad_s']:.2f} rad/s | camera-to-command (wall clock) " +
+            (f"mean {1e3 * m['latency_s']:.1f} ms, p95 {1e3 * m['latency_p95_s']:.1f} ms"
+             if math.isfinite(m.get("latency_p95_s", math.nan)) else "-"))
 
 
 def main(argv=None) -> int:

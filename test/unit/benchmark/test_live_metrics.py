@@ -3,6 +3,7 @@ as error against the last reference, and shows in engaged_frac."""
 import numpy as np
 
 from ball_balance.benchmark.live import LiveRecorder
+from ball_balance.benchmark.wall_latency import CameraToCommand
 
 
 def recorder(ref_times):
@@ -10,7 +11,7 @@ def recorder(ref_times):
     t = np.arange(0.0, 4.0, 0.01)
     rec.truth = [(ti, 0.02, 0.0) for ti in t]   # ball 20 mm off the target throughout
     rec.ref = [(ti, 0.0, 0.0) for ti in ref_times]
-    rec.cmd, rec.est, rec.latency, rec.dropped, rec.t0 = [], [], [], False, 0.0
+    rec.cmd, rec.est, rec.latency, rec.dropped, rec.t0 = [], [], CameraToCommand(), False, 0.0
     return rec
 
 
