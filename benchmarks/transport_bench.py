@@ -11,12 +11,16 @@
    per-frame stages from its ~/statistics (transport: DDS write -> DDS receipt; take:
    receipt -> callback; decode; track; publish), and frames it skipped: stale (a newer one
    waited; only with image_queue_depth > 1) and never delivered (sequence gaps: lost, or
-   replaced in the tracker's DDS queue of 1 by a newer one while it was busy).
+   replaced in the tracker's DDS queue of 1 by a newer one while it was busy). Then, per case,
+   the whole chain split at the DDS samples' own write/receipt times: camera write (stamp ->
+   image written), image transport, tracker take, track+publish (-> /ball_state written),
+   state transport (-> receipt here), receiver take (-> callback here), as median / p99 /
+   mean over the slowest 2 % of frames: where the tail comes from.
 2. BallState one hop (--ball-state): a publisher process at --rate Hz, sensor data and
    reliable QoS, receipt - send time.
 
 usage: python benchmarks/transport_bench.py [--seconds 5] [--image-rate 60]
-           [--cases cyclone-be-640,...] [--tracker-param thread_priority:=0] [--realtime 30]
+           [--cases cyclone-be-640,...] [--tracker-param thread_priority:=0] [--realtime 30 [--receiver-only]]
            [--ball-state [--rate 100]]
 Cases: {cyclone,fastdds}-{be,rel}-{640,960}; default all eight.
 """
@@ -79,11 +83,12 @@ def quantile(sorted_values: list, q: float) -> float:
 
 # -- 1. images through the tracker -------------------------------------------------------------
 def image_case(case: str, seconds: float, rate: float, frame_dir: Path, dds_defaults: bool = False,
-               tracker_params: tuple = (), realtime: int = 0) -> dict:
+               tracker_params: tuple = (), realtime: int = 0, receiver_only: bool = False) -> dict:
     """One case: start the tracker and a publisher, count and time the answers.
     `dds_defaults`: both without the project's DDS settings (what they fix); `tracker_params`:
     "name:=value" overrides of config/ball_tracker.yaml; `realtime` > 0: the publisher and
-    this receiving process run SCHED_FIFO at that priority."""
+    this receiving process run SCHED_FIFO at that priority (`receiver_only`: this process
+    alone)."""
     from pal_statistics_msgs.msg import Statistics
     from rclpy.executors import SingleThreadedExecutor
 
@@ -114,23 +119,29 @@ def image_case(case: str, seconds: float, rate: float, frame_dir: Path, dds_defa
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     latencies_ms, stages, skipped = [], {s: [] for s in TRACKER_STAGES}, {"stale": 0, "gaps": 0}
+    received, tracker_values = {}, {}   # frame stamp ns -> (callback, DDS written, DDS received) / statistics
 
-    def on_state(state):
+    def on_state(state, info):
+        callback_ns = time.time_ns()
         stamp_ns = state.header.stamp.sec * 1_000_000_000 + state.header.stamp.nanosec
-        latencies_ms.append((time.time_ns() - stamp_ns) / 1e6)
+        latencies_ms.append((callback_ns - stamp_ns) / 1e6)
+        received[round(stamp_ns / STAMP_KEY_NS)] = (stamp_ns, callback_ns, info["source_timestamp"],
+                                                    info["received_timestamp"])
 
     def on_statistics(msg):
         values = {s.name: s.value for s in msg.statistics}
         for stage in TRACKER_STAGES:
             stages[stage].append(values.get(stage, float("nan")))
         skipped.update(stale=values.get("stale_frames", 0), gaps=values.get("skipped_frames", 0))
+        if "stamp_s" in values:
+            tracker_values[round(values["stamp_s"] * 1e9 / STAMP_KEY_NS)] = values
 
     node.create_subscription(BallState, "/ball_state", on_state, qos_profile_sensor_data)
     node.create_subscription(Statistics, "/ball_tracker/statistics/full", on_statistics, 100)
     deadline = time.monotonic() + 30
     while node.count_publishers("/ball_state") == 0 and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.1)
-    if realtime > 0:
+    if realtime > 0 and not receiver_only:
         cmd = ["chrt", "-f", str(realtime)]
     else:
         cmd = []
@@ -154,11 +165,51 @@ def image_case(case: str, seconds: float, rate: float, frame_dir: Path, dds_defa
     os.killpg(tracker.pid, 2)
     tracker.wait(timeout=10)
     lease.release()
-    return {"sent": sent, "latencies_ms": sorted(latencies_ms), "stages": stages, "skipped": skipped}
+    return {"sent": sent, "latencies_ms": sorted(latencies_ms), "stages": stages, "skipped": skipped,
+            "chain": chain_stages(received, tracker_values)}
+
+
+STAMP_KEY_NS = 100_000   # frames matched by stamp to 0.1 ms: the statistics carry it as float s (0.2 us steps)
+CHAIN = ("camera write", "image transport", "tracker take", "track+publish", "state transport", "receiver take")
+
+
+def chain_stages(received: dict, tracker_values: dict) -> list:
+    """Per frame followed end to end: image stamp -> /ball_state callback here, split at the
+    DDS samples' own wall-clock times (one host, one clock), ms: stamp -> image written (the
+    publisher: conversion, serialisation, write), image write -> receipt in the tracker, ->
+    its callback, -> /ball_state written (decode, track, /plate_pose and /ball_state
+    publish), -> receipt here, -> callback here."""
+    rows = []
+    for key, (stamp_ns, callback_ns, written_ns, delivered_ns) in received.items():
+        values = tracker_values.get(key)
+        if values is None or "age_at_receipt_ms" not in values:
+            continue
+        at_tracker_ms = values["age_at_receipt_ms"]            # stamp -> tracker callback
+        rows.append({"camera write": at_tracker_ms - values["take_ms"] - values["transport_ms"],
+                     "image transport": values["transport_ms"], "tracker take": values["take_ms"],
+                     "track+publish": (written_ns - stamp_ns) / 1e6 - at_tracker_ms,
+                     "state transport": (delivered_ns - written_ns) / 1e6,
+                     "receiver take": (callback_ns - delivered_ns) / 1e6,
+                     "total": (callback_ns - stamp_ns) / 1e6})
+    return rows
+
+
+def print_chain(case: str, rows: list) -> None:
+    """Median and p99 of each stage, and each stage's mean over the slowest 2 % of frames
+    (where the tail comes from)."""
+    if not rows:
+        return
+    slowest = sorted(rows, key=lambda r: r["total"])[-max(1, len(rows) // 50):]
+    cells = []
+    for stage in (*CHAIN, "total"):
+        values = sorted(r[stage] for r in rows)
+        cells.append(f"{stage} {quantile(values, 0.5):.2f}/{quantile(values, 0.99):.2f}/"
+                     f"{np.mean([r[stage] for r in slowest]):.2f}")
+    print(f"  {case}: per stage, median/p99/mean of the slowest 2 % ({len(rows)} frames), ms: " + ", ".join(cells))
 
 
 def images(cases, seconds: float, rate: float, dds_defaults: bool, tracker_params: tuple = (),
-           realtime: int = 0) -> None:
+           realtime: int = 0, receiver_only: bool = False) -> None:
     settings = "DDS defaults, without config/dds" if dds_defaults else "config/dds"
     settings += "".join(f", {param}" for param in tracker_params)
     if realtime > 0:
@@ -166,14 +217,16 @@ def images(cases, seconds: float, rate: float, dds_defaults: bool, tracker_param
 
         if not set_process_realtime_priority(realtime):   # rclpy's threads, started later, inherit it
             sys.exit("--realtime: SCHED_FIFO refused (needs CAP_SYS_NICE or an rtprio limit)")
-        settings += f", publisher and receiver SCHED_FIFO {realtime}"
+        settings += f", {'receiver' if receiver_only else 'publisher and receiver'} SCHED_FIFO {realtime}"
     print(f"\n1. camera frames -> ball_tracker -> /ball_state in this process, {rate:.0f} Hz for {seconds:.0f} s "
           f"per case, {settings} (load average {os.getloadavg()[0]:.1f})")
     print(f"{'case':<18}{'answered':>16}{'median ms':>10}{'p95':>7}{'p99':>7}{'max':>7}{'stale':>6}{'gaps':>5}"
           f"   tracker stages, median ms: {' / '.join(s[:-3] for s in TRACKER_STAGES)}")
+    chains = []
     with tempfile.TemporaryDirectory() as frame_dir:
         for case in cases:
-            r = image_case(case, seconds, rate, Path(frame_dir), dds_defaults, tracker_params, realtime)
+            r = image_case(case, seconds, rate, Path(frame_dir), dds_defaults, tracker_params, realtime,
+                           receiver_only)
             lat, sent = r["latencies_ms"], r["sent"]
             answered = f"{len(lat)}/{sent} ({100.0 * len(lat) / sent:.1f}%)" if sent else "publisher failed"
             medians = " / ".join(f"{np.nanmedian(r['stages'][s]):.2f}" if r["stages"][s] else "-"
@@ -182,6 +235,9 @@ def images(cases, seconds: float, rate: float, dds_defaults: bool, tracker_param
                   f"{quantile(lat, 0.99):>7.2f}{(lat[-1] if lat else float('nan')):>7.2f}"
                   f"{r['skipped']['stale']:>6.0f}{r['skipped']['gaps']:>5.0f}   {medians}",
                   flush=True)
+            chains.append((case, r["chain"]))
+    for case, rows in chains:
+        print_chain(case, rows)
 
 
 # -- 2. BallState one hop --------------------------------------------------------------------
@@ -257,12 +313,15 @@ def main():
     parser.add_argument("--realtime", type=int, default=0, metavar="PRIORITY",
                         help="the camera publisher and this receiving process run SCHED_FIFO at this priority, as "
                              "a real-time graph runs its camera driver and controller (0: normal scheduling)")
+    parser.add_argument("--receiver-only", action="store_true",
+                        help="with --realtime: only this receiving process (as the project's controllers run), the "
+                             "camera publisher normally scheduled (a camera driver started without chrt)")
     parser.add_argument("--ball-state", action="store_true", help="also the BallState one-hop section")
     parser.add_argument("--rate", type=float, default=100.0, help="BallState rate")
     args = parser.parse_args()
     if not args.no_images:
         images([c for c in args.cases.split(",") if c], args.seconds, args.image_rate, args.dds_defaults,
-               tuple(args.tracker_param), args.realtime)
+               tuple(args.tracker_param), args.realtime, args.receiver_only)
     if args.ball_state:
         ball_state(args.rate, args.seconds)
 
