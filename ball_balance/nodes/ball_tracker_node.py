@@ -89,10 +89,11 @@ NODE_SCHEMA = (
           "s", 0.05, 3600.0),
     Param("opencv_threads", 1, "OpenCV worker threads (1: ~1.4 ms per 640x480 frame, leaves cores to others)",
           "", 1, 64),
-    Param("thread_priority", 0,
+    Param("thread_priority", 40,
           "SCHED_FIFO priority (1-99) of every thread of the tracker (its DDS receive threads, the executor "
-          "that takes and tracks frames, a capture thread), so that a busy machine does not delay a frame; 0: normal "
-          "scheduling. Needs CAP_SYS_NICE or an rtprio limit (else one warning, normal scheduling)", "", 0, 99),
+          "that takes and tracks frames, a capture thread), so that a busy machine does not delay a frame; below "
+          "the controllers' 45, above the simulated camera's 30; 0: normal scheduling. Needs CAP_SYS_NICE or an "
+          "rtprio limit (else one warning, normal scheduling)", "", 0, 99),
 )
 SCHEMA = SOURCE_SCHEMA + TRACKER_SCHEMA + NODE_SCHEMA
 
