@@ -38,6 +38,9 @@ SUBSTEP_S = 0.005
 SUBSTEPS = int(round(CONTROL_DT_S / SUBSTEP_S))
 CAMERA_RATE_HZ = 30.0
 REFERENCES = ("stationary", "circle", "figure_eight")
+# the privileged law whose tilt is the label (PlateBatch.teacher_tilt): "pid" the PID itself on
+# the true state with the true gain and bias, "pd" a stiffer PD law (wn, zeta) on the true state
+TEACHERS = ("pid", "pd")
 # the PID parameters the residual is trained on top of (recorded in the model, checked at run time)
 BASE_PID_KEYS = ("kp", "ki", "kd", "i_limit_rad", "i_zone_m", "deadband_m", "antiwindup_time_s", "max_tilt_cmd_rad",
                  "rolling_factor", "gravity_m_s2", "derivative_filter_s", "adapt_pid_feedback", "adapt_plant_gain",
@@ -282,6 +285,56 @@ class BatchPlantEstimator:
             self.offset[ok] = np.clip(d_new, -cfg.offset_max_m_s2, cfg.offset_max_m_s2)
 
 
+class BatchDelayEstimator:
+    """ball_balance.control.prediction.DelayEstimator over a batch of plates: the same
+    least-squares alignment of the measured plate tilt with the commanded tilt over a sliding
+    window, every `update_every` ticks, for every plate at once (its settings copied from a
+    DelayEstimator, the one source of them)."""
+
+    def __init__(self, batch: int, single):
+        self.b, self.period_s, self.max_lag = batch, single.period_s, single.max_lag
+        self.n = single._cmd.maxlen
+        self.update_every, self.blend, self.min_excitation = single.update_every, single.blend, single.min_excitation
+        self.min_window, self.replace_start = single.min_window, single.replace_start
+        self.estimate_s = np.full(batch, float(single.estimate_s))
+        self.converged = np.zeros(batch, bool)
+        self.cmd = np.zeros((batch, self.n, 2))     # oldest first, the newest in the last row
+        self.meas = np.zeros((batch, self.n, 2))
+        self.length = 0
+        self.count = 0
+
+    def add(self, u_cmd, tilt_measured) -> np.ndarray:
+        """One tick's commanded and measured tilts (b, 2) [rad]; returns the estimates (b,) [s]."""
+        self.cmd[:, :-1], self.meas[:, :-1] = self.cmd[:, 1:], self.meas[:, 1:]
+        self.cmd[:, -1], self.meas[:, -1] = u_cmd, tilt_measured
+        self.length = min(self.length + 1, self.n)
+        self.count += 1
+        if self.count % self.update_every == 0 and self.length - self.max_lag >= self.min_window:
+            self._update()
+        return self.estimate_s
+
+    def _update(self) -> None:
+        n, length = self.n, self.length
+        cmd, meas = self.cmd[:, n - length:], self.meas[:, n - length:]
+        window = length - self.max_lag
+        excited = cmd[:, -window:].reshape(self.b, -1).std(1) >= self.min_excitation
+        target = meas[:, -window:]
+        costs = np.stack([np.mean((target - cmd[:, length - window - lag:length - lag]) ** 2, axis=(1, 2))
+                          for lag in range(self.max_lag + 1)], 1)
+        best = np.argmin(costs, 1)
+        rows = np.arange(self.b)
+        c0 = costs[rows, np.maximum(best - 1, 0)]
+        c1 = costs[rows, best]
+        c2 = costs[rows, np.minimum(best + 1, self.max_lag)]
+        denom = c0 - 2 * c1 + c2
+        inner = (best > 0) & (best < self.max_lag) & (denom > 0)
+        frac = np.where(inner, 0.5 * (c0 - c2) / np.where(inner, denom, 1.0), 0.0)
+        measured = (best + frac) * self.period_s
+        weight = np.where(self.converged | (not self.replace_start), self.blend, 1.0)
+        self.estimate_s = np.where(excited, self.estimate_s + weight * (measured - self.estimate_s), self.estimate_s)
+        self.converged |= excited
+
+
 class PlateBatch:
     """`batch` episodes of `duration_s`, stepped together. Use:
 
@@ -291,8 +344,11 @@ class PlateBatch:
 
     def __init__(self, batch: int, seed: int, ranges: DomainRanges = DomainRanges(),
                  nominal: Optional[Nominal] = None, duration_s: float = 20.0, action_scale_rad: float = 0.1,
-                 teacher_wn: float = 4.0, teacher_zeta: float = 0.85, tracker_cfg=None):
-        self.b, self.ranges = batch, ranges
+                 teacher_wn: float = 4.0, teacher_zeta: float = 0.85, tracker_cfg=None, teacher: str = "pid",
+                 pid_overrides=()):
+        if teacher not in TEACHERS:
+            raise ValueError(f"teacher = {teacher!r} must be one of {TEACHERS}")
+        self.b, self.ranges, self.teacher = batch, ranges, teacher
         self.nom = Nominal.from_config() if nominal is None else nominal
         self.rng = np.random.default_rng(seed)
         self.n_ticks = int(round(duration_s / CONTROL_DT_S))
@@ -300,18 +356,41 @@ class PlateBatch:
         self.wn, self.zeta = teacher_wn, teacher_zeta
         from ball_balance.benchmark.episode import controller_values
 
-        self.pid_values = controller_values("policy", "stationary")   # the PID under the policy
+        # the PID under the policy: config/policy.yaml over the schema (pid_overrides: (name, value) pairs
+        # over those, to try another base; a model is refused unless the configuration matches it)
+        self.pid_values = controller_values("policy", "stationary", tuple(pid_overrides))
         self.estimator_cfg = control_config.estimator_config(self.pid_values)
         self.scale_feedback = bool(self.pid_values["adapt_pid_feedback"])
-        if self.pid_values["actuation_delay_s"] != 0.0 or self.pid_values["estimate_actuation_delay"]:
-            raise ValueError("the training plant predicts over the state's age only: the policy's parameters "
-                             "must set actuation_delay_s 0 and estimate_actuation_delay false")
+        if not self.pid_values["latency_compensation"]:
+            raise ValueError("the training plant predicts the state as the pipeline does with latency_compensation")
+        if not np.isclose(self.pid_values["control_rate_hz"] * CONTROL_DT_S, 1.0):
+            raise ValueError(f"the training plant steps at {1 / CONTROL_DT_S:.0f} Hz: control_rate_hz must be that")
+        # the pipeline's command -> plate delay: predicted over besides the state's age, the
+        # configured value or its online estimate (control/prediction.py DelayEstimator)
+        self.delay_settings = self._delay_estimator()
+        self.max_delay_s = max(self.pid_values["actuation_delay_s"],
+                               self.delay_settings.max_lag * CONTROL_DT_S if self.pid_values["estimate_actuation_delay"]
+                               else 0.0)
         pad = int(0.5 / CONTROL_DT_S) + 2   # the teacher looks ahead up to its latency + lag
         self.refs = np.stack([reference_table(k, self.n_ticks + pad) for k in REFERENCES])   # (R, n, 3, 2)
         self.builder = ObservationBuilder(batch)
         self.tracker_cfg = tracker_config() if tracker_cfg is None else tracker_cfg
         # the known acceleration the tracker derives from /plate_cmd (the law's tilt)
         self.tracker_k_g = self.tracker_cfg.rolling_factor * GRAVITY_M_S2
+
+    def _delay_estimator(self):
+        from ball_balance.control.prediction import DelayEstimator
+
+        v = self.pid_values
+        return DelayEstimator(v["actuation_delay_s"], CONTROL_DT_S, min_window_s=v["actuation_delay_min_window_s"],
+                              replace_start=v["actuation_delay_replace_start"])
+
+    @property
+    def actuation_delay_s(self) -> np.ndarray:
+        """The delay (b,) the pipeline predicts over besides the state's age (control/pipeline.py)."""
+        if self.pid_values["estimate_actuation_delay"]:
+            return self.delay.estimate_s
+        return np.full(self.b, float(self.pid_values["actuation_delay_s"]))
 
     # ---- episode start ---------------------------------------------------------------
     def reset(self) -> np.ndarray:
@@ -336,8 +415,8 @@ class PlateBatch:
         self.x = np.stack([radius * np.cos(angle), radius * np.sin(angle)], 1)
         self.v = np.stack([speed * np.cos(heading), speed * np.sin(heading)], 1)
         self.theta = np.zeros((b, 2))          # plate tilt
-        self.hist_len = int(np.ceil((max(r.latency_s[1], self.tracker_cfg.plate_cmd_delay_s)
-                                     + Nominal.max_prediction_s) / CONTROL_DT_S)) + 4
+        self.hist_len = int(np.ceil((max(r.latency_s[1], self.tracker_cfg.plate_cmd_delay_s, self.max_delay_s)
+                                     + max(Nominal.max_prediction_s, n.max_prediction_s)) / CONTROL_DT_S)) + 4
         self.cmd_hist = np.zeros((b, 2, self.hist_len))   # shaped commands by tick (ring, index tick % len)
         self.law_hist = np.zeros((b, 2, self.hist_len))   # the law's tilts (/plate_cmd) by tick
         self.cmd = np.zeros((b, 2))            # last shaped command
@@ -357,6 +436,10 @@ class PlateBatch:
         self.sq_err = np.zeros(b)
         self.n_err = np.zeros(b)
         self.pid = BatchPid((b, 2), self.pid_values, self.nom.k_g, self.nom.u_max_rad)
+        self.delay = BatchDelayEstimator(b, self._delay_estimator())
+        # the PID teacher's own integral and derivative filter, stepped every tick on the truth
+        self.teacher_pid = BatchPid((b, 2), self.pid_values, self.nom.k_g, self.nom.u_max_rad)
+        self.u_teacher = np.zeros((b, 2))
         capacity = int(np.ceil(self.estimator_cfg.window_s * CAMERA_RATE_HZ)) + 8
         self.estimator = BatchPlantEstimator(b, self.estimator_cfg, self.nom.k_g, capacity)
         self.tilt_p = np.zeros((b, 2))         # double and single integral of the plate tilt reached
@@ -402,20 +485,23 @@ class PlateBatch:
         return -self.tracker_k_g * np.sin(self.law_hist[:, :, j % self.hist_len])
 
     def _predicted_state(self):
-        """The pipeline's latency prediction: the state at its stamp carried to now over the
-        commanded tilts (the plant estimate's k g and disturbance, no actuation delay:
-        config/policy.yaml)."""
+        """The pipeline's latency prediction (control/prediction.py predict): the state at its
+        stamp carried over the commanded tilts to now + the actuation delay (at most
+        max_prediction_s past the stamp), the command issued at tick j acting from j dt + delay
+        on; with the plant estimate's k g and disturbance."""
         t = self.time_s
-        age = np.clip(t - self.obs_stamp, 0.0, None)
-        start = t - np.minimum(age, self.nom.max_prediction_s)
-        start = np.where(np.isfinite(start), start, t)
+        delay = self.actuation_delay_s
+        have = np.isfinite(self.obs_stamp)
+        stamp = np.where(have, self.obs_stamp, t)
+        age = np.clip(t - stamp, 0.0, None)
+        horizon = np.minimum(t + delay, stamp + self.nom.max_prediction_s)
         x, v = self.obs_x.copy(), self.obs_v.copy()
-        n_back = int(np.ceil(self.nom.max_prediction_s / CONTROL_DT_S)) + 1
+        n_back = int(np.ceil((self.nom.max_prediction_s + self.max_delay_s) / CONTROL_DT_S)) + 2
         for j in range(self.tick - n_back, self.tick):
             if j < 0:
                 continue
-            seg0 = np.maximum(j * CONTROL_DT_S, start)
-            seg1 = np.full(self.b, (j + 1) * CONTROL_DT_S)
+            seg0 = np.maximum(j * CONTROL_DT_S + delay, stamp)
+            seg1 = horizon if j == self.tick - 1 else np.minimum((j + 1) * CONTROL_DT_S + delay, horizon)
             h = np.clip(seg1 - seg0, 0.0, None)[:, None]
             a = -self.estimator.k_g[:, None] * self.cmd_hist[:, :, j % self.hist_len] + self.estimator.offset
             x = x + v * h + 0.5 * a * h * h
@@ -429,7 +515,7 @@ class PlateBatch:
             self.t_engaged = self.tick
         self.engaged = have & self.alive
         x, v, age = self._predicted_state()
-        ref = self._ref(0)
+        ref = self._ref_ahead(self.actuation_delay_s)
         self.e, self.ve = x - ref[:, 0], v - ref[:, 1]
         self.a_ref = ref[:, 2]
         # the PID as the pipeline runs it (control/pipeline.py adapted_pid_step): the estimate
@@ -440,6 +526,8 @@ class PlateBatch:
                                    gain_scale=scale, u_bias=self.estimator.offset / k_est)
         self.u_pid = np.where(self.engaged[:, None], self.u_pid, 0.0)
         self.age = np.where(have, age, 0.0)
+        if self.teacher == "pid":
+            self.u_teacher = self._pid_teacher()
         return self.builder.build(self.e, self.ve, -self.a_ref / self.nom.k_g, self.u_pid, self.age)
 
     def _ref(self, ahead_ticks) -> np.ndarray:
@@ -449,10 +537,20 @@ class PlateBatch:
         idx = np.broadcast_to(idx, (self.b,))
         return self.refs[self.ref_kind, idx]
 
+    def _ref_ahead(self, ahead_s) -> np.ndarray:
+        """(b, 3, 2) reference p, v, a ahead_s (b,) after this tick, linear between ticks."""
+        whole = np.floor(np.asarray(ahead_s) / CONTROL_DT_S + 1e-9)
+        frac = (np.asarray(ahead_s) / CONTROL_DT_S - whole)[:, None, None]
+        return (1.0 - frac) * self._ref(whole) + frac * self._ref(whole + 1)
+
     # ---- the label -------------------------------------------------------------------
     def teacher_tilt(self) -> np.ndarray:
-        """Tilt (b, 2) of a PD law on the true state predicted exactly to when this tick's
-        command reaches the plate (latency + servo lag), with the true k g and plate bias."""
+        """The label: the tilt (b, 2) a privileged law commands this tick (`teacher`)."""
+        return self.u_teacher if self.teacher == "pid" else self._pd_teacher()
+
+    def _true_prediction(self):
+        """The true state predicted exactly to when this tick's command reaches the plate
+        (latency + servo lag), and the reference there: (x, v, ref (b, 3, 2))."""
         horizon = self.latency + self.servo_lag
         k_max = int(np.ceil(horizon.max() / SUBSTEP_S)) + 1
         k_each = np.round(horizon / SUBSTEP_S).astype(int)
@@ -463,7 +561,24 @@ class PlateBatch:
             x, v, th = self._substep(x, v, th, tau, include_now=False)
             hit = (k_each == k)[:, None]
             px, pv = np.where(hit, x, px), np.where(hit, v, pv)
-        ref = self._ref(np.round(horizon / CONTROL_DT_S))
+        return px, pv, self._ref(np.round(horizon / CONTROL_DT_S))
+
+    def _pid_teacher(self) -> np.ndarray:
+        """The PID as the pipeline runs it, but on the true state predicted exactly over the
+        latency and servo lag, with the true k g (feed-forward, feedback scale) and the true
+        plate bias as its disturbance tilt: where the running PID's estimates are right the
+        label equals its tilt and the correction to learn is zero."""
+        x, v, ref = self._true_prediction()
+        k_true = self.k_g_true
+        scale = np.minimum(1.0, self.nom.k_g / k_true) if self.scale_feedback else 1.0
+        u = self.teacher_pid.step(x - ref[:, 0], v - ref[:, 1], ref[:, 2] * (self.nom.k_g / k_true), CONTROL_DT_S,
+                                  gain_scale=scale, u_bias=-self.bias)
+        return np.where(self.engaged[:, None], u, 0.0)
+
+    def _pd_teacher(self) -> np.ndarray:
+        """Tilt (b, 2) of a PD law on the true state predicted exactly to when this tick's
+        command reaches the plate (latency + servo lag), with the true k g and plate bias."""
+        px, pv, ref = self._true_prediction()
         e, ve = px - ref[:, 0], pv - ref[:, 1]
         acc = -self.wn ** 2 * e - 2 * self.zeta * self.wn * ve + ref[:, 2]
         u = -acc / self.k_g_true - self.bias
@@ -511,6 +626,8 @@ class PlateBatch:
         cmd = cmd * np.minimum(1.0, self.nom.max_total_tilt_rad / np.maximum(total, 1e-12))
         self.cmd = cmd
         self.cmd_hist[:, :, self.tick % self.hist_len] = cmd
+        if self.pid_values["estimate_actuation_delay"]:
+            self.delay.add(cmd, self.theta)   # the measured joints' tilt at this tick
         t0 = self.time_s
         # the tilt reached, as the measured joints give it each tick (the plant estimate's input)
         self.tilt_p += self.tilt_v * CONTROL_DT_S + 0.5 * self.theta * CONTROL_DT_S ** 2

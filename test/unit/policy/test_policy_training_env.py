@@ -8,7 +8,14 @@ from ball_balance.benchmark.episode import controller_values
 from ball_balance.control import config as control_config
 from ball_balance.control.estimation import PlantEstimator
 from ball_balance.control.pid import AxisPid
-from ball_balance.policy.env import BatchPid, BatchPlantEstimator, DomainRanges, PlateBatch
+from ball_balance.policy.env import (
+    CONTROL_DT_S,
+    BatchDelayEstimator,
+    BatchPid,
+    BatchPlantEstimator,
+    DomainRanges,
+    PlateBatch,
+)
 
 
 def test_batch_pid_is_the_axis_pid():
@@ -72,6 +79,72 @@ def test_batch_plant_estimator_is_the_plant_estimator():
     np.testing.assert_allclose(batch.k_g, [e.k_g for e in single], rtol=2e-3)
     np.testing.assert_allclose(batch.offset, [e.offset for e in single], atol=2e-3)
     np.testing.assert_allclose(batch.k_g, k_true, rtol=0.05)
+
+
+def test_batch_delay_estimator_is_the_delay_estimator():
+    """The batched command -> plate delay estimate follows control/prediction.py's on the same
+    commanded and measured tilts, a plate that stops moving (no update) included."""
+    from ball_balance.control.prediction import DelayEstimator
+
+    b, lags = 4, [0, 3, 7, 12]
+    single = [DelayEstimator(0.03, 0.02) for _ in range(b)]
+    batch = BatchDelayEstimator(b, DelayEstimator(0.03, 0.02))
+    rng = np.random.default_rng(0)
+    cmds = []
+    for n in range(600):
+        w = np.arange(1, b + 1) * n * 0.02
+        u = 0.02 * np.stack([np.sin(0.7 * w), np.cos(0.5 * w)], 1)
+        if n > 400:
+            u[0] = 0.0
+        cmds.append(u)
+        meas = np.stack([cmds[max(0, n - lags[i])][i] for i in range(b)]) + rng.normal(0, 1e-4, (b, 2))
+        got = batch.add(u, meas)
+        np.testing.assert_allclose(got, [single[i].add(u[i], meas[i]) for i in range(b)], atol=1e-12)
+    np.testing.assert_allclose(got[1:], np.array(lags[1:]) * 0.02, atol=0.005)
+
+
+def test_plant_prediction_is_the_pipelines():
+    """With an actuation delay estimated online, the plant predicts the state as
+    control/prediction.py predict does over the same commanded tilts."""
+    from ball_balance.control.prediction import TiltHistory, predict
+
+    b = 6
+    env = PlateBatch(b, 3, pid_overrides=(("actuation_delay_s", 0.03), ("estimate_actuation_delay", True)),
+                     duration_s=5.0)
+    env.reset()
+    history = [TiltHistory(1000) for _ in range(b)]
+    checked = 0
+    while not env.finished:
+        x, v, _ = env._predicted_state()
+        for i in np.flatnonzero(np.isfinite(env.obs_stamp)):
+            delay, stamp = env.actuation_delay_s[i], env.obs_stamp[i]
+            horizon = min(env.time_s + delay, stamp + env.nom.max_prediction_s)
+            p, pv = predict(env.obs_x[i], env.obs_v[i], stamp, horizon, history[i], env.estimator.k_g[i], delay,
+                            env.estimator.offset[i])
+            np.testing.assert_allclose(np.concatenate([x[i], v[i]]), np.concatenate([p, pv]), atol=1e-12)
+            checked += 1
+        env.step()
+        for i in range(b):
+            history[i].record((env.tick - 1) * CONTROL_DT_S, *env.cmd_hist[i, :, (env.tick - 1) % env.hist_len])
+    assert checked > 200 * b
+    # the estimate finds the episodes' camera-to-command latency plus servo lag
+    np.testing.assert_allclose(env.actuation_delay_s, env.latency + env.servo_lag, atol=0.015)
+
+
+def test_pid_teacher_is_the_pid_where_its_estimates_are_exact():
+    """The PID teacher is the running PID on the true state: with no latency, noise, lag, bias
+    or gain error its label stays close to the PID's own tilt (the correction to learn ~ 0)."""
+    calm = DomainRanges(gravity_scale=(1.0, 1.0), solid_ball_prob=0.0, latency_s=(0.0, 0.0),
+                        detection_noise_m=(0.0, 0.0), frame_drop_prob=(0.0, 0.0), servo_lag_s=(0.003, 0.003),
+                        tilt_bias_rad=(0.0, 0.0), gain_error=(1.0, 1.0), push_prob_per_s=0.0)
+    env = PlateBatch(8, seed=2, ranges=calm, duration_s=8.0, teacher="pid")
+    env.reset()
+    labels = []
+    while not env.finished:
+        if env.time_s > 3.0:
+            labels.append(np.abs(env.teacher_tilt() - env.u_pid))
+        env.step()
+    assert env.alive.all() and np.mean(labels) < 0.0015
 
 
 def test_pid_alone_balances_the_nominal_plant():
