@@ -298,7 +298,8 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
             dataclasses.replace(tracker_cfg, meas_noise_m=max(tracker_cfg.meas_noise_m, noise))
         kalman = BallKalman.from_config(kalman_cfg)
         plate_cmds = PlateCommandInput(values["rolling_factor"] * values["gravity_m_s2"],
-                                       tracker_cfg.plate_cmd_delay_s, tracker_cfg.plate_cmd_timeout_s)
+                                       tracker_cfg.plate_cmd_delay_s, tracker_cfg.plate_cmd_timeout_s,
+                                       lever_m=tracker_cfg.tilt_lever_m)
         world.knobs = knobs if knobs.detection_noise_m >= spec.fast_noise_floor_m else \
             dataclasses.replace(knobs, detection_noise_m=spec.fast_noise_floor_m)
 
@@ -358,8 +359,11 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
                 fields_ = (tr.x, tr.y, tr.vx, tr.vy, True, 4 - len(hidden), 0.0)
             else:
                 zx, zy = world.detected_ball()
-                accel = plate_cmds.acceleration(stamp) if tracker_cfg.use_plate_cmd else None
-                est = kalman.step(stamp, (zx, zy), accel)
+                accel = lever = None
+                if tracker_cfg.use_plate_cmd:
+                    accel = plate_cmds.acceleration(stamp)
+                    lever = plate_cmds.lever_offset(stamp)
+                est = kalman.step(stamp, (zx, zy), accel, lever)
                 visible = tuple(m for m in range(4) if m not in hidden)
                 std = fast_position_std_m(visible, world.config.camera, tracker_cfg.corner_noise_px)
                 fields_ = (est.x, est.y, est.vx, est.vy, est.valid, len(visible), std)

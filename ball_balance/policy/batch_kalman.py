@@ -13,9 +13,11 @@ batch against BallKalman on the same detections.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
-from ball_balance.vision.kalman import CHI2_1_MEDIAN
+from ball_balance.vision.kalman import CHI2_1_MEDIAN, MANEUVER_MAX_NIS
 
 DIM = 5
 
@@ -28,6 +30,14 @@ class BatchBallKalman:
         self.b, self.cfg = batch, cfg
         # a detection beyond maneuver_sigma widens its frame's prediction
         self.maneuver_sigma = cfg.maneuver_sigma
+        # ... and, while the model had agreed, the velocity of a constant-velocity filter run
+        # alongside for maneuver_hold_s (BallKalman.fast)
+        self.hold_until = np.full(batch, -np.inf)
+        self.fast = None
+        if cfg.maneuver_hold_s > 0.0 and cfg.maneuver_sigma > 0.0:
+            self.fast = BatchBallKalman(batch, dataclasses.replace(
+                cfg, use_plate_cmd=False, estimate_input_gain=False, adaptive_meas_noise=False, consistency_time_s=0.0,
+                maneuver_sigma=0.0, cmd_accel_noise_m_s2=cfg.accel_noise_m_s2))
         self.last_dt = np.zeros(batch)                 # (dt, q) of each ball's last prediction
         self.last_q = np.zeros(batch)
         self.sigma_a = cfg.accel_noise_m_s2
@@ -112,10 +122,22 @@ class BatchBallKalman:
             sigma = np.clip(np.sqrt(med / CHI2_1_MEDIAN), self.noise_min, self.noise_max)
             self.r[i] = sigma ** 2
 
-    def step(self, t: float, z: np.ndarray, det: np.ndarray, accel=None):
+    def step(self, t: float, z: np.ndarray, det: np.ndarray, accel=None, lever=None):
         """Frame at stamp t: detections z (b, 2) where det (b,) is set (the others are not
         stepped: a dropped frame, as the benchmark's fast mode skips it); accel (b, 2) the known
-        acceleration or None. Returns (position (b, 2), velocity (b, 2), valid (b,)) after it."""
+        acceleration or None; lever (b, 2) the tilt's lever offset (BallKalman.step) or None.
+        Returns (position (b, 2), velocity (b, 2), valid (b,)) after it."""
+        pos, vel, valid = self._step(t, z if lever is None else z - lever, det, accel)
+        if lever is not None:   # tracked the detections less the lever, reported with it
+            pos = pos + lever
+        if self.fast is not None:   # after a push: the constant-velocity filter's velocity
+            self.fast.r = self.r.copy()
+            _, fast_vel, fast_valid = self.fast.step(t, z, det)
+            use = valid & fast_valid & (t <= self.hold_until)
+            vel[use] = fast_vel[use]
+        return pos, vel, valid
+
+    def _step(self, t: float, z: np.ndarray, det: np.ndarray, accel=None):
         if self.adaptive:
             self._adapt_noise(t, z, accel, det)
         dt = np.where(self.init, t - self.t_last, 0.0)
@@ -147,6 +169,8 @@ class BatchBallKalman:
             distance = np.sqrt(np.maximum(d2, 0.0))
             if self.maneuver_sigma > 0.0:
                 widen = run & (distance > self.maneuver_sigma) & (dt > 0.0)
+                self.hold_until = np.where(widen & (self.nis <= MANEUVER_MAX_NIS), t + self.cfg.maneuver_hold_s,
+                                           self.hold_until)
                 if widen.any() and self._widen(widen):
                     p = self.p
                     s00, s01, s11 = p[:, 0, 0] + r, p[:, 0, 1], p[:, 1, 1] + r

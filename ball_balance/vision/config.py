@@ -90,6 +90,10 @@ TRACKER_SCHEMA = (
     Param("plate_cmd_timeout_s", 0.2, "ignore the commanded tilts when the last is older than this", "s", 0.0, 10.0),
     Param("plate_cmd_delay_s", 0.0, "the plate reaches a commanded tilt this long after it is received",
           "s", 0.0, 1.0),
+    Param("tilt_lever_m", pg.BALL_RADIUS_M + pg.ROLLING_FACTOR_SHELL * pg.PLATE_THICKNESS_M / 2.0,
+          "the ball's plate-frame position moves this much per rad of plate tilt besides its rolling: "
+          "ball radius + rolling factor x depth of the tilt axis below the plate's surface (the default: "
+          "a shell on a plate tilting about its mid-plane); 0 = not modelled", "m", 0.0, 1.0),
     Param("cmd_accel_noise_m_s2", 0.1,
           "white-noise acceleration (1 sigma) of the process model while a commanded tilt is known "
           "(accel_noise_m_s2 without one)", "m/s^2", 1e-4, 1000.0),
@@ -102,9 +106,13 @@ TRACKER_SCHEMA = (
     Param("consistency_time_s", 0.3,
           "time constant of the running innovation consistency that raises cmd_accel_noise_m_s2 (up to "
           "accel_noise_m_s2) while the detections disagree with the model; 0 = off", "s", 0.0, 60.0),
-    Param("maneuver_sigma", 4.0,
+    Param("maneuver_sigma", 3.5,
           "a detection farther than this Mahalanobis distance re-predicts its frame with accel_noise_m_s2 "
           "(a push the commanded tilt does not explain); 0 = off", "", 0.0, 1000.0),
+    Param("maneuver_hold_s", 1.0,
+          "after such a detection (while the model had agreed with the detections), report for this long "
+          "the velocity of a constant-velocity filter with accel_noise_m_s2 run alongside, which takes up "
+          "a push within a frame or two; 0 = off", "s", 0.0, 10.0),
     Param("adaptive_meas_noise", True,
           "estimate the measurement noise online from the detections' scatter, within "
           "[meas_noise_m, meas_noise_max_m]"),
@@ -147,6 +155,7 @@ class TrackerConfig:
     use_plate_cmd: bool
     plate_cmd_timeout_s: float
     plate_cmd_delay_s: float
+    tilt_lever_m: float
     cmd_accel_noise_m_s2: float
     estimate_input_gain: bool
     input_gain_bounds: Tuple[float, float]
@@ -154,6 +163,7 @@ class TrackerConfig:
     input_gain_rate_per_s: float
     consistency_time_s: float
     maneuver_sigma: float
+    maneuver_hold_s: float
     adaptive_meas_noise: bool
     meas_noise_max_m: float
     meas_noise_window_frames: int

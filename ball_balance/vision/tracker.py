@@ -91,7 +91,7 @@ class BallTracker:
         self._K_estimated: Optional[np.ndarray] = None
         self._K_nominal: Optional[np.ndarray] = None     # pose covariance without intrinsics
         self.plate_cmds = PlateCommandInput(cfg.rolling_factor * GRAVITY_M_S2, cfg.plate_cmd_delay_s,
-                                            cfg.plate_cmd_timeout_s)
+                                            cfg.plate_cmd_timeout_s, lever_m=cfg.tilt_lever_m)
         self.frames = 0
         self.rejected_off_plate = 0
 
@@ -149,8 +149,10 @@ class BallTracker:
         t4 = clock()
         timings["ball"] = t4 - t3
 
-        accel = self.known_acceleration(stamp_s if now_s is None else now_s)
-        estimate = self.kalman.step(stamp_s, z, accel)
+        cmd_s = stamp_s if now_s is None else now_s
+        accel = self.known_acceleration(cmd_s)
+        lever = self.plate_cmds.lever_offset(cmd_s) if accel is not None else None
+        estimate = self.kalman.step(stamp_s, z, accel, lever)
         result.x, result.y, result.vx, result.vy = estimate.x, estimate.y, estimate.vx, estimate.vy
         result.ball_found, result.tracking_valid = estimate.fresh, estimate.valid
         t5 = clock()
