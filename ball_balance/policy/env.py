@@ -377,6 +377,7 @@ class PlateBatch:
         self.tracker_cfg = tracker_config() if tracker_cfg is None else tracker_cfg
         # the known acceleration the tracker derives from /plate_cmd (the law's tilt)
         self.tracker_k_g = self.tracker_cfg.rolling_factor * GRAVITY_M_S2
+        self.lever_m = float(getattr(self.tracker_cfg, "tilt_lever_m", 0.0))
 
     def _delay_estimator(self):
         from ball_balance.control.prediction import DelayEstimator
@@ -462,7 +463,13 @@ class PlateBatch:
             self.next_frame += 1.0 / CAMERA_RATE_HZ
             arrived = self.rng.random(self.b) >= self.drop_p
             z = self.x + self.rng.normal(0.0, 1.0, (self.b, 2)) * self.noise[:, None]
-            est_x, est_v, valid = self.kalman.step(t, z, arrived, self._known_acceleration(t))
+            # the ball's centre sits above the tilt axis: the plate's tilt moves its plate-frame
+            # position by tilt_lever_m u (the tracker takes it out with the commanded tilt)
+            z = z + self.lever_m * self.theta
+            u_known = self._known_tilt(t)
+            accel = None if u_known is None else -self.tracker_k_g * np.sin(u_known)
+            lever = None if u_known is None or self.lever_m == 0.0 else self.lever_m * u_known
+            est_x, est_v, valid = self.kalman.step(t, z, arrived, accel, lever)
             self.pending.append((t + self.nom.vision_delay_s, est_x, est_v, t, valid,
                                  self.tilt_p.copy(), self.tilt_v.copy()))
         while self.pending and self.pending[0][0] <= t + 1e-9:
@@ -472,17 +479,17 @@ class PlateBatch:
             # the pipeline adds each new state it controls on to the plant estimate
             self.estimator.add_state(np.full(self.b, stamp), ex, tilt_p, tilt_v, valid & self.alive)
 
-    def _known_acceleration(self, t):
-        """What the tracker's PlateCommandInput gives at a frame stamped t: -k g sin(u) of the
-        law's tilt in force plate_cmd_delay_s before t (commands arrive once per tick, after
-        the tick's frames), None before the first command, without use_plate_cmd or past the
-        timeout."""
+    def _known_tilt(self, t):
+        """What the tracker's PlateCommandInput takes at a frame stamped t (its acceleration is
+        -k g sin(u), its lever offset tilt_lever_m u): the law's tilt in force plate_cmd_delay_s
+        before t (commands arrive once per tick, after the tick's frames), None before the first
+        command, without use_plate_cmd or past the timeout."""
         cfg = self.tracker_cfg
         if not cfg.use_plate_cmd or self.tick == 0 or t - (self.tick - 1) * CONTROL_DT_S > cfg.plate_cmd_timeout_s:
             return None
         j = int(np.floor((t - cfg.plate_cmd_delay_s) / CONTROL_DT_S + 1e-9))
         j = min(max(j, 0, self.tick - self.hist_len + 1), self.tick - 1)
-        return -self.tracker_k_g * np.sin(self.law_hist[:, :, j % self.hist_len])
+        return self.law_hist[:, :, j % self.hist_len]
 
     def _predicted_state(self):
         """The pipeline's latency prediction (control/prediction.py predict): the state at its
@@ -555,13 +562,14 @@ class PlateBatch:
         k_max = int(np.ceil(horizon.max() / SUBSTEP_S)) + 1
         k_each = np.round(horizon / SUBSTEP_S).astype(int)
         x, v, th = self.x.copy(), self.v.copy(), self.theta.copy()
-        px, pv = x.copy(), v.copy()
+        px, pv, pth = x.copy(), v.copy(), th.copy()
         for k in range(1, k_max + 1):
             tau = self.time_s + (k - 1) * SUBSTEP_S
             x, v, th = self._substep(x, v, th, tau, include_now=False)
             hit = (k_each == k)[:, None]
-            px, pv = np.where(hit, x, px), np.where(hit, v, pv)
-        return px, pv, self._ref(np.round(horizon / CONTROL_DT_S))
+            px, pv, pth = np.where(hit, x, px), np.where(hit, v, pv), np.where(hit, th, pth)
+        # the position as the tracker reports it: with the plate tilt's lever
+        return px + self.lever_m * pth, pv, self._ref(np.round(horizon / CONTROL_DT_S))
 
     def _pid_teacher(self) -> np.ndarray:
         """The PID as the pipeline runs it, but on the true state predicted exactly over the
