@@ -21,6 +21,8 @@ class BallBlob:
     radius_px: float     # sqrt(area / pi)
     circularity: float   # 4 pi area / perimeter^2, 1 for a disc
     area_px: float
+    # bounding box of its contour, full-image pixels (x0, y0, x1, y1), end exclusive
+    bbox_px: Optional[Tuple[int, int, int, int]] = None
 
 
 class BallSegmenter:
@@ -79,5 +81,7 @@ class BallSegmenter:
             if score > best_score:
                 u = moments["m10"] / moments["m00"] + x0
                 v = moments["m01"] / moments["m00"] + y0
-                best, best_score = BallBlob(u, v, radius, circularity, area), score
+                bx, by, bw, bh = cv2.boundingRect(contour)
+                best, best_score = BallBlob(u, v, radius, circularity, area,
+                                            (bx + x0, by + y0, bx + x0 + bw, by + y0 + bh)), score
         return best

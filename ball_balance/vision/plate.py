@@ -7,8 +7,9 @@ by the overhead camera, z along the normal toward the camera.
 Life of a `PlateLocator`:
 - start-up: full-image marker search; once all markers are seen for `startup_frames`
   frames without moving, their averaged corners give the reference fit H_full (locked);
-- locked: markers are searched in small windows around their predicted positions (a
-  full-image search every `full_scan_period` frames while one is missing); all markers
+- locked: markers are searched in small windows around their predicted positions, with
+  one adaptive-threshold pass, all of OpenCV's where it missed (a full-image search every
+  `full_scan_period` frames while one is missing); all markers
   refit H_full as a homography; with some hidden (a hand or the arm over them) and
   intrinsics known, the plate pose is fitted with a prior that the plate pivots about its
   centre (`fit_pose_with_pivot_prior`; 6 pose parameters instead of 8 homography ones: with
@@ -36,20 +37,32 @@ STARTUP_PATIENCE = 3       # x startup_frames frames of a moving plate: lock on 
 Window = Tuple[int, int, int, int]   # x0, y0, x1, y1 (pixels, end exclusive)
 
 
+# in a window around a predicted marker one adaptive-threshold pass (block size in px, the
+# largest of OpenCV's default 3/13/23: on rendered frames its corners give the same plate
+# fit as all three) finds it; the three passes cost 2x as much and run only where that one
+# pass missed its marker
+WINDOW_THRESHOLD_BLOCK_PX = 23
+
+
 class MarkerDetector:
     """DICT_4X4_50 detection with sub-pixel corners, on the whole image or in windows."""
 
     def __init__(self):
-        params = cv2.aruco.DetectorParameters()
-        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-        params.cornerRefinementWinSize = 3
         dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
-        self._detector = cv2.aruco.ArucoDetector(dictionary, params)
+        self._detector = cv2.aruco.ArucoDetector(dictionary, _detector_parameters())
+        single = _detector_parameters()
+        single.adaptiveThreshWinSizeMin = single.adaptiveThreshWinSizeMax = WINDOW_THRESHOLD_BLOCK_PX
+        self._window_detector = cv2.aruco.ArucoDetector(dictionary, single)
+        self.window_fallbacks = 0   # windows where the single pass missed and all passes ran
 
     def detect(self, image: np.ndarray) -> Dict[int, np.ndarray]:
         """Markers in the whole image (grey, or BGR converted here): id -> corners (4, 2)
         float64 pixels, OpenCV order."""
-        corners, ids, _ = self._detector.detectMarkers(_gray(image))
+        return self._detect(self._detector, image)
+
+    @staticmethod
+    def _detect(detector, image: np.ndarray) -> Dict[int, np.ndarray]:
+        corners, ids, _ = detector.detectMarkers(_gray(image))
         found: Dict[int, np.ndarray] = {}
         if ids is not None:
             for marker_id, c in zip(ids.ravel(), corners):
@@ -58,15 +71,27 @@ class MarkerDetector:
 
     def detect_in_windows(self, image: np.ndarray, windows: Dict[int, Window]) -> Dict[int, np.ndarray]:
         """Look for each expected marker id only inside its window (a BGR image is converted
-        to grey window by window: a few percent of the frame instead of all of it)."""
+        to grey window by window: a few percent of the frame instead of all of it). One
+        threshold pass first, all of them where it missed the marker."""
         found: Dict[int, np.ndarray] = {}
         for marker_id, (x0, y0, x1, y1) in windows.items():
             if x1 - x0 < 8 or y1 - y0 < 8:
                 continue
-            corners = self.detect(image[y0:y1, x0:x1]).get(marker_id)
+            grey = _gray(image[y0:y1, x0:x1])
+            corners = self._detect(self._window_detector, grey).get(marker_id)
+            if corners is None:
+                self.window_fallbacks += 1
+                corners = self._detect(self._detector, grey).get(marker_id)
             if corners is not None:
                 found[marker_id] = corners + (x0, y0)
         return found
+
+
+def _detector_parameters():
+    params = cv2.aruco.DetectorParameters()
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    params.cornerRefinementWinSize = 3
+    return params
 
 
 def _gray(image: np.ndarray) -> np.ndarray:
@@ -161,6 +186,7 @@ class PlateLocator:
         self.marker_ids: List[int] = [m for m, _, _ in geometry.marker_centres_m]
         # marker id -> its corners (4, 2) in plate metres, OpenCV corner order
         self.marker_corners_P = {m: np.array(geometry.marker_corners_m(m)) for m in self.marker_ids}
+        self._all_corners_P = np.concatenate([self.marker_corners_P[m] for m in self.marker_ids])
         self.detector = MarkerDetector()
         self.H_full: Optional[np.ndarray] = None   # reference fit (start-up average or >= 3 markers)
         self.K: Optional[np.ndarray] = None        # intrinsics, when known: 1-2 marker pose fit
@@ -207,15 +233,14 @@ class PlateLocator:
 
     def _windows(self, shape) -> Dict[int, Window]:
         height, width = shape[:2]
-        windows = {}
-        for m, corners_P in self.marker_corners_P.items():
-            corners_I = apply_homography(self.H_IP, corners_P)
-            side_px = np.max(np.ptp(corners_I, axis=0))
-            pad = side_px * self.marker_roi_margin
-            x0, y0 = np.floor(corners_I.min(axis=0) - pad).astype(int)
-            x1, y1 = np.ceil(corners_I.max(axis=0) + pad).astype(int)
-            windows[m] = (max(x0, 0), max(y0, 0), min(x1, width), min(y1, height))
-        return windows
+        # all markers' corners through H_IP at once: (markers, 4, 2)
+        corners_I = apply_homography(self.H_IP, self._all_corners_P).reshape(len(self.marker_ids), 4, 2)
+        low, high = corners_I.min(axis=1), corners_I.max(axis=1)
+        pad = (high - low).max(axis=1, keepdims=True) * self.marker_roi_margin   # marker sides
+        low = np.floor(low - pad).astype(int).tolist()
+        high = np.ceil(high + pad).astype(int).tolist()
+        return {m: (max(x0, 0), max(y0, 0), min(x1, width), min(y1, height))
+                for m, (x0, y0), (x1, y1) in zip(self.marker_ids, low, high)}
 
     # -- homography ------------------------------------------------------------------------
     def update(self, markers: Dict[int, np.ndarray], stamp_s: float) -> bool:

@@ -1,8 +1,9 @@
 """The ball tracker pipeline: one BGR frame + its capture stamp -> the ball's plate-frame state.
 
 Stages (each timed, see `STAGES`): optional undistortion of the image, ArUco marker
-search, plate homography, ball segmentation inside the plate's image region with mapping
-to plate metres, Kalman filter. Pure Python + OpenCV + filterpy, no ROS.
+search, plate homography, ball segmentation (in a window around the last frame's blob,
+the plate's whole image region when there was none or the ball left that window) with
+mapping to plate metres, Kalman filter. Pure Python + OpenCV + filterpy, no ROS.
 
 Parallax: the camera sees the ball's centre 20 mm above the plate, so the plate-plane
 homography alone would put it too far from the point under the camera (by r/C_z of the
@@ -42,6 +43,11 @@ from ball_balance.vision.pose_quality import ball_position_std_m, pose_covarianc
 # 60 degree horizontal field of view (f = 0.866 x width); the figure scales little with it
 NOMINAL_FOCAL_PER_WIDTH = 0.5 / math.tan(math.radians(30.0))
 PRIOR_INFORMATION = np.diag([PIVOT_PRIOR_SIGMA_T_M ** -2] * 3 + [PIVOT_PRIOR_SIGMA_ROT_RAD ** -2] * 3)
+
+# once the ball was found, the next frame is segmented only in a square around it, this many
+# largest ball radii from its centre (~1/6 of the plate's image region at the default radius
+# range): the ball may move 2 radii per frame before the whole plate must be searched again
+BALL_WINDOW_RADII = 3.0
 
 STAGES = ("undistort", "markers", "homography", "ball", "filter", "total")
 
@@ -94,6 +100,8 @@ class BallTracker:
                                             cfg.plate_cmd_timeout_s, lever_m=cfg.tilt_lever_m)
         self.frames = 0
         self.rejected_off_plate = 0
+        self._last_ball_px: Optional[Tuple[float, float]] = None   # last frame's blob centre (u, v)
+        self.ball_window_fallbacks = 0    # ball not wholly inside its window: the plate searched
 
     # -- inputs besides frames --------------------------------------------------------------------
     def set_camera(self, camera: Optional[CameraModel]) -> None:
@@ -146,6 +154,8 @@ class BallTracker:
         z = None
         if result.plate_visible:
             z = self._measure_ball(image_bgr, result)
+        else:
+            self._last_ball_px = None
         t4 = clock()
         timings["ball"] = t4 - t3
 
@@ -164,8 +174,12 @@ class BallTracker:
         cfg, plate = self.config, self.plate
         px_per_m = plate.px_per_m()
         r_min, r_max = cfg.ball_radius_range_m
-        window = plate.plate_window(image_bgr.shape, cfg.plate_margin_m)
-        blob = self.segmenter.find(image_bgr, window, (r_min * px_per_m, r_max * px_per_m))
+        plate_window = plate.plate_window(image_bgr.shape, cfg.plate_margin_m)
+        radius_range_px = (r_min * px_per_m, r_max * px_per_m)
+        blob = self._find_ball_near_last(image_bgr, plate_window, radius_range_px)
+        if blob is None:
+            blob = self.segmenter.find(image_bgr, plate_window, radius_range_px)
+        self._last_ball_px = (blob.u, blob.v) if blob is not None else None
         if blob is None:
             return None
         result.blob = blob
@@ -179,6 +193,30 @@ class BallTracker:
             return None
         result.measurement_m = (x, y)
         return (x, y)
+
+    def _find_ball_near_last(self, image_bgr: np.ndarray, plate_window, radius_range_px) -> Optional[BallBlob]:
+        """The ball in a window around where the last frame found it (same colour test, a
+        fraction of the pixels), or None when there was none, or the blob found is not wholly
+        inside the window (it moved farther, or is cut by the window's edge): the caller
+        searches the whole plate then."""
+        if self._last_ball_px is None:
+            return None
+        u, v = self._last_ball_px
+        half = BALL_WINDOW_RADII * radius_range_px[1]
+        px0, py0, px1, py1 = plate_window
+        window = (max(int(u - half), px0), max(int(v - half), py0),
+                  min(int(u + half) + 1, px1), min(int(v + half) + 1, py1))
+        if window == tuple(plate_window):
+            return None
+        blob = self.segmenter.find(image_bgr, window, radius_range_px)
+        # a blob within the opening kernel of an inner window edge may be cut by it
+        edge = max(self.config.morph_kernel_px, 1) + 1
+        if blob is None or not all(
+                inner == outer or abs(b - inner) >= edge
+                for b, inner, outer in zip(blob.bbox_px, window, plate_window)):
+            self.ball_window_fallbacks += 1
+            return None
+        return blob
 
     def pixel_to_plate(self, uv: np.ndarray) -> Tuple[float, float]:
         """Undistorted pixel of the ball centre -> plate (x, y) of the ball centre (m)."""

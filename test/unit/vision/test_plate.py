@@ -119,3 +119,25 @@ def test_focal_length_and_camera_centre_from_an_oblique_view():
 def test_focal_length_unknown_from_a_fronto_parallel_view():
     camera = SyntheticCamera()
     assert estimate_focal_px(camera.H_IP, ((camera.width - 1) / 2, (camera.height - 1) / 2)) is None
+
+
+class _FindsNothing:
+    def detectMarkers(self, image):
+        return (), None, ()
+
+
+def test_marker_windows_use_one_threshold_pass_and_all_passes_where_it_misses():
+    image, truth = SyntheticScene().render(None, noise_std=2.0)
+    locator = PlateLocator(PlateGeometry(), startup_frames=3)
+    lock(locator, image, 3)
+    windows = locator._windows(image.shape)
+    detector = locator.detector
+    one_pass = detector.detect_in_windows(image, windows)
+    assert sorted(one_pass) == [0, 1, 2, 3] and detector.window_fallbacks == 0
+    detector._window_detector = _FindsNothing()          # the single pass misses every marker
+    all_passes = detector.detect_in_windows(image, windows)
+    assert sorted(all_passes) == [0, 1, 2, 3] and detector.window_fallbacks == 4
+    for marker_id, corners_px in all_passes.items():
+        expected_px = apply_homography(truth["H_IP"], np.array(PlateGeometry().marker_corners_m(marker_id)))
+        assert np.max(np.linalg.norm(corners_px - expected_px, axis=1)) < 1.0
+        assert np.max(np.abs(corners_px - one_pass[marker_id])) < 0.05

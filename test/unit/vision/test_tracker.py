@@ -162,3 +162,22 @@ def test_debug_overlay_draws_on_a_copy():
     overlay = draw_overlay(image, tracker.plate, r)
     assert overlay.shape == image.shape and np.count_nonzero(overlay != image) > 500
     assert image is not overlay
+
+
+def test_ball_window_finds_what_the_whole_plate_search_finds_and_falls_back_after_a_jump():
+    scene, tracker = make()
+    path = circle(10, radius=0.12) + [(-0.15, -0.16)] * 3    # then a jump of ~0.25 m
+    run(scene, tracker, path[:1] * 3)
+    cfg = tracker.config
+    rng = np.random.default_rng(3)
+    for i, xy in enumerate(path):
+        fallbacks = tracker.ball_window_fallbacks
+        image, _ = scene.render(xy, noise_std=3.0, rng=rng)
+        r = tracker.process(image, (3 + i) / FPS)
+        px_per_m = tracker.plate.px_per_m()
+        whole = tracker.segmenter.find(image, tracker.plate.plate_window(image.shape, cfg.plate_margin_m),
+                                       tuple(px_per_m * m for m in cfg.ball_radius_range_m))
+        assert r.blob is not None and (r.blob.u, r.blob.v) == pytest.approx((whole.u, whole.v), abs=1e-9)
+        # the window around the last blob served every frame but the one after the jump
+        assert tracker.ball_window_fallbacks - fallbacks == (1 if i == 10 else 0)
+    assert r.measurement_m == pytest.approx((-0.15, -0.16), abs=0.002)
