@@ -87,7 +87,7 @@ NODE_SCHEMA = (
           "(each costs ~0.3 ms to take)", "frames", 1, 100),
     Param("camera_timeout_s", 1.0, "warn when no frame arrives for this long (camera stopped or died)",
           "s", 0.05, 3600.0),
-    Param("opencv_threads", 1, "OpenCV worker threads (1: ~1.4 ms per 640x480 frame, leaves cores to others)",
+    Param("opencv_threads", 1, "OpenCV worker threads (1: about 1.1-1.9 ms per 640x480 frame, leaves cores to others)",
           "", 1, 64),
     Param("thread_priority", 40,
           "SCHED_FIFO priority (1-99) of every thread of the tracker (its DDS receive threads, the executor "
