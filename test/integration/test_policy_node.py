@@ -29,7 +29,7 @@ def test_policy_node_tilts_toward_the_ball_with_finite_six_joint_commands(launch
     (cmd,) = graph.collect(Vector3Stamped, "/plate_cmd", timeout=10, predicate=lambda m: m.vector.x != 0.0)
     assert cmd.header.frame_id == "plate_center"
     # ball held at +x, -y: the plate tilts to send it back (positive u_x, negative u_y)
-    later = graph.collect(Float64MultiArray, "/forward_position_controller/commands", count=40, timeout=15)
+    later = graph.collect(Float64MultiArray, "/forward_position_controller/commands", count=30, timeout=15)
     u_x, u_y = _kinematics().tilt_of(np.array(later[-1].data))
     assert u_x > 0.01 and u_y < -0.005
 
