@@ -162,22 +162,14 @@ class BatchBallKalman:
         if run.any():
             p, r = self.p, self.r
             y = z - self.x[:, :2]
-            s00, s01, s11 = p[:, 0, 0] + r, p[:, 0, 1], p[:, 1, 1] + r
-            det_s = s00 * s11 - s01 * s01
-            inv = np.stack([np.stack([s11, -s01], -1), np.stack([-s01, s00], -1)], -2) / det_s[:, None, None]
-            d2 = np.einsum("bi,bij,bj->b", y, inv, y)
-            distance = np.sqrt(np.maximum(d2, 0.0))
+            inv, distance = self._innovation(y)
             if self.maneuver_sigma > 0.0:
                 widen = run & (distance > self.maneuver_sigma) & (dt > 0.0)
                 self.hold_until = np.where(widen & (self.nis <= MANEUVER_MAX_NIS), t + self.cfg.maneuver_hold_s,
                                            self.hold_until)
                 if widen.any() and self._widen(widen):
-                    p = self.p
-                    s00, s01, s11 = p[:, 0, 0] + r, p[:, 0, 1], p[:, 1, 1] + r
-                    det_s = s00 * s11 - s01 * s01
-                    inv = np.stack([np.stack([s11, -s01], -1), np.stack([-s01, s00], -1)], -2) / det_s[:, None, None]
-                    distance = np.where(widen, np.sqrt(np.maximum(np.einsum("bi,bij,bj->b", y, inv, y), 0.0)),
-                                        distance)
+                    inv, widened_distance = self._innovation(y)
+                    distance = np.where(widen, widened_distance, distance)
             gate = self.cfg.gate_sigma
             if self.cfg.consistency_time_s > 0.0:
                 alpha = np.minimum(1.0, dt / self.cfg.consistency_time_s)
@@ -202,6 +194,15 @@ class BatchBallKalman:
             valid |= run & ~lost
             self._reset(lost)
         return self.x[:, :2].copy(), self.x[:, 2:4].copy(), valid
+
+    def _innovation(self, y: np.ndarray):
+        """S^-1 (b, 2, 2) of the innovation y (b, 2) under the current P and R, and its
+        Mahalanobis distance sqrt(y^T S^-1 y) (b,)."""
+        p, r = self.p, self.r
+        s00, s01, s11 = p[:, 0, 0] + r, p[:, 0, 1], p[:, 1, 1] + r
+        det_s = s00 * s11 - s01 * s01
+        inv = np.stack([np.stack([s11, -s01], -1), np.stack([-s01, s00], -1)], -2) / det_s[:, None, None]
+        return inv, np.sqrt(np.maximum(np.einsum("bi,bij,bj->b", y, inv, y), 0.0))
 
     def _widen(self, mask) -> bool:
         """BallKalman._widen_last_prediction for the balls in mask (a push the commanded tilt does
