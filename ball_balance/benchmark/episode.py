@@ -361,8 +361,7 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
                 zx, zy = world.detected_ball()
                 accel = lever = None
                 if tracker_cfg.use_plate_cmd:
-                    accel = plate_cmds.acceleration(stamp)
-                    lever = plate_cmds.lever_offset(stamp)
+                    accel, lever = plate_cmds.inputs(stamp)
                 est = kalman.step(stamp, (zx, zy), accel, lever)
                 visible = tuple(m for m in range(4) if m not in hidden)
                 std = fast_position_std_m(visible, world.config.camera, tracker_cfg.corner_noise_px)

@@ -155,17 +155,21 @@ class PlateCommandInput:
 
     def acceleration(self, now_s: float) -> Optional[Tuple[float, float]]:
         """(a_x, a_y) in m/s^2 at now_s, or None."""
-        u = self.tilt(now_s)
-        if u is None:
-            return None
-        return (-self.k_g * float(np.sin(u[0])), -self.k_g * float(np.sin(u[1])))
+        return self.inputs(now_s)[0]
 
     def lever_offset(self, now_s: float) -> Optional[Tuple[float, float]]:
         """(lever_m u_x, lever_m u_y) in m at now_s, or None (no lever, no recent command)."""
-        u = self.tilt(now_s) if self.lever_m != 0.0 else None
+        return self.inputs(now_s)[1]
+
+    def inputs(self, now_s: float) -> Tuple[Optional[Tuple[float, float]], Optional[Tuple[float, float]]]:
+        """(acceleration, lever offset) at now_s, as acceleration() and lever_offset(), from one
+        look-up of the tilt in force (BallKalman.step takes both)."""
+        u = self.tilt(now_s)
         if u is None:
-            return None
-        return (self.lever_m * float(u[0]), self.lever_m * float(u[1]))
+            return None, None
+        accel = (-self.k_g * float(np.sin(u[0])), -self.k_g * float(np.sin(u[1])))
+        lever = (self.lever_m * float(u[0]), self.lever_m * float(u[1])) if self.lever_m != 0.0 else None
+        return accel, lever
 
 
 class BallKalman:

@@ -118,9 +118,14 @@ class BallTracker:
     def known_acceleration(self, now_s: float) -> Optional[Tuple[float, float]]:
         """x'' = -k g sin(u_x), y'' = -k g sin(u_y) of the command in force `plate_cmd_delay_s`
         before now_s, from a recent enough command stream, else None."""
+        return self.known_inputs(now_s)[0]
+
+    def known_inputs(self, now_s: float):
+        """(known acceleration, the tilt's lever offset) at now_s (PlateCommandInput.inputs), or
+        (None, None) without a recent command or with use_plate_cmd off."""
         if not self.config.use_plate_cmd:
-            return None
-        return self.plate_cmds.acceleration(now_s)
+            return None, None
+        return self.plate_cmds.inputs(now_s)
 
     # -- the pipeline ----------------------------------------------------------------------------
     def process(self, image_bgr: np.ndarray, stamp_s: float, now_s: Optional[float] = None) -> TrackerResult:
@@ -160,8 +165,7 @@ class BallTracker:
         timings["ball"] = t4 - t3
 
         cmd_s = stamp_s if now_s is None else now_s
-        accel = self.known_acceleration(cmd_s)
-        lever = self.plate_cmds.lever_offset(cmd_s) if accel is not None else None
+        accel, lever = self.known_inputs(cmd_s)
         estimate = self.kalman.step(stamp_s, z, accel, lever)
         result.x, result.y, result.vx, result.vy = estimate.x, estimate.y, estimate.vx, estimate.vy
         result.ball_found, result.tracking_valid = estimate.fresh, estimate.valid
