@@ -378,7 +378,7 @@ class PlateBatch:
         self.tracker_cfg = tracker_config() if tracker_cfg is None else tracker_cfg
         # the known acceleration the tracker derives from /plate_cmd (the law's tilt)
         self.tracker_k_g = self.tracker_cfg.rolling_factor * GRAVITY_M_S2
-        self.lever_m = float(getattr(self.tracker_cfg, "tilt_lever_m", 0.0))
+        self.lever_m = float(self.tracker_cfg.tilt_lever_m)
 
     def _delay_estimator(self):
         from ball_balance.control.prediction import DelayEstimator
