@@ -41,7 +41,10 @@ def test_sim_balance_with_a_duration_ends_when_the_controller_manager_dies(launc
     os.kill(manager, signal.SIGKILL)
     assert graph.wait(timeout=60) == 3, graph.output()
     assert "sim_balance.sh: sim exited; stopping the graph" in graph.output()
-    assert session_pids(graph, "ball_balance") == []
+    # the killed manager's camera renderer (a child of the manager, not of the script) sees its
+    # pipe close and shuts its DDS participant down on its own: on a loaded machine that can
+    # outlast the script by a moment, so its end is awaited with a deadline
+    wait_for(lambda: session_pids(graph, "ball_balance") == [], 20, "the graph's processes to end")
 
 
 def test_a_second_ctrl_c_stops_the_graph_without_a_traceback(launcher):
