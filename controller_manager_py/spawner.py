@@ -6,7 +6,8 @@ Same command line as ros2_control's spawner (the common options):
             [--activate-as-group] [--controller-manager-timeout S] [--switch-timeout S]
             [-u | --unload-on-kill]
 Exits 0 when every controller reached the requested state, 1 otherwise (one line why).
-With --unload-on-kill it then waits; Ctrl-C/SIGTERM deactivates and unloads them.
+With --unload-on-kill it then waits; Ctrl-C/SIGTERM, then or while spawning, deactivates and unloads
+them and exits 0.
 """
 from __future__ import annotations
 
@@ -127,9 +128,9 @@ class Spawner:
 
     def unload(self) -> None:
         """Deactivate (best effort) and unload this spawner's controllers."""
-        names = list(self.args.controller_names)
-        request = SwitchController.Request(deactivate_controllers=[n for n, s in self.loaded().items()
-                                                                   if n in names and s == "active"],
+        loaded = self.loaded()
+        names = [n for n in self.args.controller_names if n in loaded]  # Ctrl-C may come before all were loaded
+        request = SwitchController.Request(deactivate_controllers=[n for n in names if loaded[n] == "active"],
                                            strictness=SwitchController.Request.BEST_EFFORT)
         if request.deactivate_controllers:
             self.call(SwitchController, "switch_controller", request, self.args.switch_timeout + 5.0)
@@ -149,13 +150,16 @@ def main(args=None):
     code = 0
     spawner = Spawner(node, options)
     try:
-        spawner.run()
         if options.unload_on_kill:
+            # Ctrl-C while still spawning unloads too: the controllers live only as long as this process
             try:
+                spawner.run()
                 while True:
                     time.sleep(1.0)
             except KeyboardInterrupt:
                 spawner.unload()
+        else:
+            spawner.run()
     except SpawnError as error:
         print(f"spawner: {error}", file=sys.stderr)
         code = 1

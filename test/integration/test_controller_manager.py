@@ -172,6 +172,13 @@ def test_description_from_topic_and_the_spawner(launcher, graph, tmp_path):
     os.killpg(spawner.popen.pid, signal.SIGINT)
     assert spawner.wait(timeout=20) == 0, spawner.output()
     assert "jsb_tmp" not in controllers(graph)
+    # Ctrl-C while it is still spawning (loaded, perhaps not yet active) unloads as well
+    spawner = launcher.start([executable("spawner"), "jsb_tmp2", "-t", "joint_state_broadcaster/JointStateBroadcaster",
+                              "--unload-on-kill"], name="spawner_u2")
+    graph.spin_until(lambda: "jsb_tmp2" in controllers(graph), 20, "jsb_tmp2 loaded")
+    os.killpg(spawner.popen.pid, signal.SIGINT)
+    assert spawner.wait(timeout=20) == 0, spawner.output()
+    assert "jsb_tmp2" not in controllers(graph)
     run = launcher.run([executable("spawner"), "nonexistent_controller"], timeout=30)
     assert run.returncode == 1 and "failed loading controller 'nonexistent_controller'" in run.stderr
 
