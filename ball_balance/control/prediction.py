@@ -65,35 +65,63 @@ def predict(pos_m: np.ndarray, vel_m_s: np.ndarray, t_from_s: float, t_to_s: flo
     return p, v
 
 
-class DelayEstimator:
+class _DelayAlignment:
+    """What the delay estimators share: the estimate and how an alignment is taken in.
+
+    The start value is a guess, not evidence: the first alignment replaces it outright
+    (`replace_start`), later ones are blended in (`blend`). Nothing changes while the commands
+    barely move (std below `min_excitation_rad`): a still plate says nothing about delay.
+    """
+
+    def __init__(self, initial_s: float, blend: float, min_excitation_rad: float, replace_start: bool):
+        self.estimate_s = initial_s
+        self.converged = False          # True once a first alignment has been taken in
+        self.replace_start = replace_start
+        self.blend, self.min_excitation = blend, min_excitation_rad
+
+    @staticmethod
+    def _best(costs) -> float:
+        """Index of the least cost, refined by a parabola through its neighbours."""
+        best = int(np.argmin(costs))
+        frac = 0.0
+        if 0 < best < len(costs) - 1:
+            c0, c1, c2 = costs[best - 1], costs[best], costs[best + 1]
+            denom = c0 - 2 * c1 + c2
+            frac = 0.5 * (c0 - c2) / denom if denom > 0 else 0.0
+        return best + frac
+
+    def _take(self, measured_s: float) -> None:
+        weight = self.blend if self.converged or not self.replace_start else 1.0
+        self.estimate_s += weight * (measured_s - self.estimate_s)
+        self.converged = True
+
+
+class DelayEstimator(_DelayAlignment):
     """Online estimate of the command -> plate delay from the commanded tilts and the tilts
     measured from /joint_states (FK), by least-squares alignment over a sliding window.
 
     Every `update_every` samples, for each candidate delay d on a grid (0..max_delay_s),
     cost(d) = mean |tilt_measured(t) - u_cmd(t - d)|^2 over the last `window_s`; the argmin
     is blended into the estimate (`blend`). Nothing changes while the commands barely move
-    (std below `min_excitation_rad`): a still plate says nothing about delay.
+    (std below `min_excitation_rad`).
 
-    The start value is a guess, not evidence: estimating begins as soon as `min_window_s` of
-    commands (plus the longest lag) are stored, over the window filled so far, and the first
-    alignment replaces the start value outright (`replace_start`). (Waiting for the full
-    window and blending from the start value left a 0.2 s delay estimated at 0.03 s for 3.3 s
-    and at 0.17 s after 4 s, and the MPC, planning for the wrong delay, dropped the ball;
-    docs/control.md.)
+    Estimating begins as soon as `min_window_s` of commands (plus the longest lag) are stored,
+    over the window filled so far, and the first alignment replaces the start value outright
+    (`replace_start`). (Waiting for the full window and blending from the start value left a
+    0.2 s delay estimated at 0.03 s for 3.3 s and at 0.17 s after 4 s, and the MPC, planning
+    for the wrong delay, dropped the ball; docs/control.md.)
     """
 
     def __init__(self, initial_s: float, period_s: float, max_delay_s: float = 0.3, window_s: float = 3.0,
                  update_every: int = 25, blend: float = 0.5, min_excitation_rad: float = 0.003,
                  min_window_s: float = 0.6, replace_start: bool = True):
-        self.estimate_s = initial_s
-        self.converged = False          # True once a first alignment has been taken in
-        self.replace_start = replace_start
+        super().__init__(initial_s, blend, min_excitation_rad, replace_start)
         self.period_s = period_s
         self.max_lag = int(round(max_delay_s / period_s))
         n = int(round(window_s / period_s)) + self.max_lag + 1
         self._cmd: Deque[np.ndarray] = deque(maxlen=n)
         self._meas: Deque[np.ndarray] = deque(maxlen=n)
-        self.update_every, self.blend, self.min_excitation = update_every, blend, min_excitation_rad
+        self.update_every = update_every
         self.min_window = max(2, int(round(min(min_window_s, window_s) / period_s)))
         self._count = 0
 
@@ -118,14 +146,87 @@ class DelayEstimator:
         target = meas[-window:]
         costs = [np.mean((target - cmd[len(cmd) - window - lag:len(cmd) - lag]) ** 2)
                  for lag in range(self.max_lag + 1)]
-        best = int(np.argmin(costs))
-        # sub-sample refinement: parabola through the neighbours
-        frac = 0.0
-        if 0 < best < self.max_lag:
-            c0, c1, c2 = costs[best - 1], costs[best], costs[best + 1]
-            denom = c0 - 2 * c1 + c2
-            frac = 0.5 * (c0 - c2) / denom if denom > 0 else 0.0
-        measured = (best + frac) * self.period_s
-        weight = self.blend if self.converged or not self.replace_start else 1.0
-        self.estimate_s += weight * (measured - self.estimate_s)
-        self.converged = True
+        self._take(self._best(costs) * self.period_s)
+
+
+class StampedDelayEstimator(_DelayAlignment):
+    """The command -> plate delay from tilts measured at irregular instants (camera frames:
+    drops, stamp jitter, lost markers) against the command history, looked up by time.
+
+    `add(t, tilt, command_times, commands)` stores the measured tilt (u_x, u_y) [rad] at t [s];
+    every `update_period_s` the samples of the last `window_s` are aligned with the command in
+    force at t - d for each candidate d on a grid of `step_s` over 0..max_delay_s. The
+    alignment is a correlation per axis (each signal less its window mean, divided by its
+    spread): the measured tilt may be offset (a camera not level, a reference pose that is not
+    the level plate) and scaled (a camera that does not look straight down, a plate that does
+    not reach the full command), neither moves the best delay. The axes are weighted by the
+    commands' variance; an axis whose commands barely move (`min_excitation_rad`) is left out,
+    and with neither nothing changes. The best delay is taken in only when its correlation
+    reaches `min_correlation` (a plate measured too noisily, or not following the commands,
+    says nothing either). Alignment starts once `min_window_s` of samples are in.
+    """
+
+    def __init__(self, initial_s: float, max_delay_s: float = 0.3, window_s: float = 3.0, step_s: float = 0.005,
+                 update_period_s: float = 0.25, blend: float = 0.5, min_excitation_rad: float = 0.003,
+                 min_window_s: float = 1.0, min_correlation: float = 0.5, replace_start: bool = True):
+        super().__init__(initial_s, blend, min_excitation_rad, replace_start)
+        self.delays_s = np.arange(0.0, max_delay_s + 0.5 * step_s, step_s)
+        self.window_s, self.min_window_s = window_s, min(min_window_s, window_s)
+        self.update_period_s = update_period_s
+        self.min_correlation = min_correlation
+        self.correlation = float("nan")   # of the last alignment's best delay
+        self._t: Deque[float] = deque()
+        self._meas: Deque[Tuple[float, float]] = deque()
+        self._next_update_s = -np.inf
+
+    def reset(self) -> None:
+        """Forget the samples (the estimate stays)."""
+        self._t.clear()
+        self._meas.clear()
+        self._next_update_s = -np.inf
+
+    def add(self, t_s: float, tilt_measured, command_times_s, commands) -> float:
+        """A measured tilt (u_x, u_y) [rad] at t_s, with the command history (times [s],
+        increasing, and (u_x, u_y) rows [rad]) on the same clock; returns the estimate [s]."""
+        if self._t and not t_s > self._t[-1]:
+            if t_s < self._t[-1] - self.window_s:      # the clock went back: start again
+                self.reset()
+            else:
+                return self.estimate_s                 # a repeated or out-of-order stamp
+        self._t.append(float(t_s))
+        self._meas.append((float(tilt_measured[0]), float(tilt_measured[1])))
+        while self._t[0] < t_s - self.window_s:
+            self._t.popleft()
+            self._meas.popleft()
+        if t_s >= self._next_update_s:
+            self._update(np.asarray(command_times_s, dtype=float), np.asarray(commands, dtype=float))
+        return self.estimate_s
+
+    def _update(self, cmd_t: np.ndarray, cmd_u: np.ndarray) -> None:
+        t, meas = np.array(self._t), np.array(self._meas)
+        if len(cmd_t) < 2:
+            return
+        # samples whose every candidate look-up falls inside the command history
+        keep = t - self.delays_s[-1] >= cmd_t[0]
+        if not keep.any() or t[-1] - t[keep][0] < self.min_window_s or keep.sum() < 10:
+            return
+        self._next_update_s = t[-1] + self.update_period_s
+        t, meas = t[keep], meas[keep]
+        idx = np.searchsorted(cmd_t, t[None, :] - self.delays_s[:, None], side="right") - 1
+        u = cmd_u[idx]                                       # (delays, samples, 2)
+        u = u - u.mean(axis=1, keepdims=True)
+        m = meas - meas.mean(axis=0)
+        spread = np.sqrt(np.mean(u ** 2, axis=1))             # (delays, 2)
+        weights = np.where(spread[0] >= self.min_excitation, spread[0] ** 2, 0.0)
+        m_spread = np.sqrt(np.mean(m ** 2, axis=0))
+        if not weights.any() or not (m_spread[weights > 0.0] > 0.0).all():
+            return
+        corr = np.mean(u * m[None], axis=1) / np.maximum(spread * m_spread, 1e-12)
+        score = corr @ weights / weights.sum()
+        costs = 1.0 - score
+        best = self._best(costs)
+        self.correlation = float(score[int(np.argmin(costs))])
+        if self.correlation < self.min_correlation:
+            return
+        step = self.delays_s[1] - self.delays_s[0] if len(self.delays_s) > 1 else 0.0
+        self._take(best * step)

@@ -36,7 +36,8 @@ Outputs
                  the covariance to the ball-position error it causes).
   ~/debug_image  sensor_msgs/Image bgr8 overlay, only with `publish_debug_image`.
   ~/statistics/{full,names,values} (pal_statistics_msgs, the controller manager's
-                 StatisticsRegistry): per-stage times (ms) and counters; names latched
+                 StatisticsRegistry): per-stage times (ms) and counters (plate_cmd_delay_ms: the
+                 command -> plate delay the filter uses, estimate_plate_cmd_delay); names latched
                  (transient local), full/values sent per frame only while someone subscribes.
 A camera that stops (no frame for `camera_timeout_s`, a dead driver) is reported once with a
 warning, and its return with an info line.
@@ -386,7 +387,9 @@ class BallTrackerNode(Node):
         counters.update({"stamp_s": lambda: self._last_result.stamp_s,    # the frame these values are of
                          "stale_frames": lambda: self.stale_frames, "skipped_frames": lambda: self.skipped_frames,
                          "out_of_order_frames": lambda: self.out_of_order_frames,
-                         "position_std_mm": lambda: 1e3 * self._last_result.position_std_m})
+                         "position_std_mm": lambda: 1e3 * self._last_result.position_std_m,
+                         # the command -> plate delay the filter uses (estimated or configured)
+                         "plate_cmd_delay_ms": lambda: 1e3 * t.plate_cmds.delay_s})
         frame = [(f"{what}_ms", frame_ms(what)) for what in self._frame_times]
         return [(f"{stage}_ms", stage_ms(stage)) for stage in STAGES] + frame + list(counters.items())
 

@@ -88,8 +88,14 @@ TRACKER_SCHEMA = (
     Param("max_dt_s", 0.5, "a gap between frames longer than this resets the track", "s", 0.001, 60.0),
     Param("use_plate_cmd", True, "use the commanded tilt on /plate_cmd as known acceleration"),
     Param("plate_cmd_timeout_s", 0.2, "ignore the commanded tilts when the last is older than this", "s", 0.0, 10.0),
-    Param("plate_cmd_delay_s", 0.0, "the plate reaches a commanded tilt this long after it is received",
-          "s", 0.0, 1.0),
+    Param("plate_cmd_delay_s", 0.0, "the plate reaches a commanded tilt this long after it is received "
+          "(with estimate_plate_cmd_delay: the start value)", "s", 0.0, 1.0),
+    Param("estimate_plate_cmd_delay", True,
+          "measure that delay online: the plate's tilt from its marker pose, aligned with the commands' "
+          "history (keeps the current value while the plate is still or its pose is lost)"),
+    Param("plate_cmd_delay_max_s", 0.3, "longest delay the estimate considers", "s", 0.01, 1.0),
+    Param("plate_cmd_delay_window_s", 3.0, "the estimate aligns the tilts and commands of this long a window",
+          "s", 0.5, 30.0),
     Param("tilt_lever_m", pg.BALL_RADIUS_M + pg.ROLLING_FACTOR_SHELL * pg.PLATE_THICKNESS_M / 2.0,
           "the ball's plate-frame position moves this much per rad of plate tilt besides its rolling: "
           "ball radius + rolling factor x depth of the tilt axis below the plate's surface (the default: "
@@ -155,6 +161,9 @@ class TrackerConfig:
     use_plate_cmd: bool
     plate_cmd_timeout_s: float
     plate_cmd_delay_s: float
+    estimate_plate_cmd_delay: bool
+    plate_cmd_delay_max_s: float
+    plate_cmd_delay_window_s: float
     tilt_lever_m: float
     cmd_accel_noise_m_s2: float
     estimate_input_gain: bool

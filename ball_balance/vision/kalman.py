@@ -41,6 +41,12 @@ later, slowed the controllers' recovery. So `fast`, a plain constant-velocity fi
 after such a detection its velocity is the one reported, unless the model had disagreed with
 the detections before it (MANEUVER_MAX_NIS: a long delay or a wrong gain, not a push).
 
+Delay: the plate reaches a command some time after the tracker receives it (the arm's latency
+and servo lag, 0.03-0.2 s in the benchmark's latency domains); the known acceleration and the
+lever use the command in force `delay_s` before the frame. With `estimate_plate_cmd_delay`
+`CommandDelayFromTilt` measures it: the plate's tilt from its marker pose each frame, aligned
+with the command history over candidate delays (control/prediction.py StampedDelayEstimator).
+
 A detection whose Mahalanobis distance sqrt(y^T S^-1 y) exceeds `gate_sigma` is ignored
 (an outlier). Without a usable detection the filter coasts (predicts) for up to
 `max_coast_frames` frames, still valid; then the track is dropped and the next detection
@@ -50,12 +56,16 @@ estimates describe the camera and the plant, not the track: they survive a dropp
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections import deque
 from dataclasses import dataclass
 from typing import Deque, Optional, Tuple
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
+
+from ball_balance.control.prediction import StampedDelayEstimator
+from ball_balance.rotations import matrix_to_rotvec
 
 CHI2_1_MEDIAN = 0.45493642311957283   # median of a chi-square variable with one degree of freedom
 # a detection beyond maneuver_sigma starts the maneuver hold only while the running innovation
@@ -127,7 +137,7 @@ class PlateCommandInput:
     causes: the ball's centre sits above the tilt axis and the ball rolls on the plate, so
     tilting the plate by u moves the centre by lever_m u in plate coordinates (BallKalman)."""
 
-    def __init__(self, k_g_m_s2: float, delay_s: float = 0.0, timeout_s: float = 0.2, max_len: int = 256,
+    def __init__(self, k_g_m_s2: float, delay_s: float = 0.0, timeout_s: float = 0.2, max_len: int = 512,
                  lever_m: float = 0.0):
         self.k_g = k_g_m_s2
         self.delay_s = delay_s
@@ -141,9 +151,18 @@ class PlateCommandInput:
             self._commands.clear()
         self._commands.append((t_s, u_x, u_y))
 
+    def recent(self, now_s: float) -> bool:
+        """A command arrived within `timeout_s` of now_s (a controller is running)."""
+        return bool(self._commands) and abs(now_s - self._commands[-1][0]) <= self.timeout_s
+
+    def history(self) -> Tuple[np.ndarray, np.ndarray]:
+        """The stored commands: receipt times (s, increasing) and (u_x, u_y) rows (rad)."""
+        rows = np.array(self._commands, dtype=float).reshape(-1, 3)
+        return rows[:, 0], rows[:, 1:]
+
     def tilt(self, now_s: float) -> Optional[Tuple[float, float]]:
         """(u_x, u_y) in rad in force `delay_s` before now_s, or None (no recent command)."""
-        if not self._commands or abs(now_s - self._commands[-1][0]) > self.timeout_s:
+        if not self.recent(now_s):
             return None
         at = now_s - self.delay_s
         u_x, u_y = self._commands[0][1:]
@@ -170,6 +189,62 @@ class PlateCommandInput:
         accel = (-self.k_g * float(np.sin(u[0])), -self.k_g * float(np.sin(u[1])))
         lever = (self.lever_m * float(u[0]), self.lever_m * float(u[1])) if self.lever_m != 0.0 else None
         return accel, lever
+
+
+def plate_tilt_rad(R_ref: np.ndarray, R: np.ndarray) -> Tuple[float, float]:
+    """(u_x, u_y) [rad] of the plate at rotation R relative to R_ref, both the plate's rotation
+    in one fixed frame (camera or world), in the commands' convention (control/kinematics.py:
+    the plate-frame rotation vector is (u_y, -u_x, 0)). R_ref^T R does not depend on that frame,
+    so a camera that is not level or looks at the plate obliquely measures the same tilts."""
+    w = matrix_to_rotvec(np.asarray(R_ref).T @ np.asarray(R))
+    return float(-w[1]), float(w[0])
+
+
+class CommandDelayFromTilt:
+    """Sets `commands.delay_s` (PlateCommandInput) to the delay the plate's measured tilt shows.
+
+    Each frame with a plate pose gives the tilt relative to a reference pose (the first one,
+    taken again when the plate seems to have turned by more than `REANCHOR_RAD`, i.e. the
+    camera moved); while commands arrive, a StampedDelayEstimator aligns those tilts with the
+    command history. Its correlation per axis ignores the reference's offset and the scale; a
+    still plate (commands that barely move) or a noisy or lost pose keeps the current value."""
+
+    REANCHOR_RAD = 0.5
+
+    def __init__(self, commands: PlateCommandInput, estimator: StampedDelayEstimator):
+        self.commands = commands
+        self.estimator = estimator
+        self.commands.delay_s = estimator.estimate_s
+        self._R_ref: Optional[np.ndarray] = None
+
+    @classmethod
+    def from_config(cls, cfg, commands: PlateCommandInput) -> CommandDelayFromTilt:
+        """The estimate a TrackerConfig describes, starting from plate_cmd_delay_s."""
+        return cls(commands, StampedDelayEstimator(cfg.plate_cmd_delay_s, cfg.plate_cmd_delay_max_s,
+                                                   cfg.plate_cmd_delay_window_s))
+
+    @property
+    def delay_s(self) -> float:
+        return self.estimator.estimate_s
+
+    def add_rotation(self, t_s: float, R: np.ndarray) -> float:
+        """The plate's rotation R (3x3, in a fixed frame) measured at t_s, on the commands'
+        clock; returns the delay in use (s)."""
+        if self._R_ref is None:
+            self._R_ref = np.array(R, dtype=float)
+        tilt = plate_tilt_rad(self._R_ref, R)
+        if math.hypot(*tilt) > self.REANCHOR_RAD:
+            self._R_ref = np.array(R, dtype=float)
+            self.estimator.reset()
+            return self.delay_s
+        return self.add_tilt(t_s, tilt)
+
+    def add_tilt(self, t_s: float, tilt: Tuple[float, float]) -> float:
+        """A measured tilt (u_x, u_y) [rad, any constant offset] at t_s; returns the delay (s)."""
+        if self.commands.recent(t_s):
+            times, values = self.commands.history()
+            self.commands.delay_s = self.estimator.add(t_s, tilt, times, values)
+        return self.delay_s
 
 
 class BallKalman:

@@ -11,6 +11,11 @@ distance, several mm at the plate edge). With intrinsics K (calibration file, ca
 or estimated from an oblique view of the plate) the camera centre C_P is recovered from
 the homography and the ray is intersected with the plane z = r instead.
 
+Delay: with `estimate_plate_cmd_delay` each frame's plate pose also gives the plate's tilt,
+aligned with the /plate_cmd history to measure how long after a command the plate follows it
+(ball_balance.vision.kalman.CommandDelayFromTilt); the filter's known acceleration and tilt
+lever then use the command in force that long before the frame.
+
 Pose quality: each frame with markers also yields the plate pose in the camera and its
 covariance from the corner fit (`ball_balance.vision.pose_quality`), reduced to
 `position_std_m`, the ball-position error that pose can cause (math.inf without markers).
@@ -28,7 +33,7 @@ from ball_balance.plate_geometry import GRAVITY_M_S2
 from ball_balance.vision.ball_segmentation import BallBlob, BallSegmenter
 from ball_balance.vision.camera import CameraModel, Undistorter
 from ball_balance.vision.config import TrackerConfig
-from ball_balance.vision.kalman import BallKalman, PlateCommandInput
+from ball_balance.vision.kalman import BallKalman, CommandDelayFromTilt, PlateCommandInput
 from ball_balance.vision.plate import (
     FULL_FIT_MIN_MARKERS,
     PIVOT_PRIOR_SIGMA_ROT_RAD,
@@ -98,6 +103,9 @@ class BallTracker:
         self._K_nominal: Optional[np.ndarray] = None     # pose covariance without intrinsics
         self.plate_cmds = PlateCommandInput(cfg.rolling_factor * GRAVITY_M_S2, cfg.plate_cmd_delay_s,
                                             cfg.plate_cmd_timeout_s, lever_m=cfg.tilt_lever_m)
+        # the delay the plate's measured tilt shows (None: plate_cmd_delay_s as configured)
+        self.plate_cmd_delay = CommandDelayFromTilt.from_config(cfg, self.plate_cmds) \
+            if cfg.estimate_plate_cmd_delay and cfg.use_plate_cmd else None
         self.frames = 0
         self.rejected_off_plate = 0
         self._last_ball_px: Optional[Tuple[float, float]] = None   # last frame's blob centre (u, v)
@@ -117,7 +125,7 @@ class BallTracker:
 
     def known_acceleration(self, now_s: float) -> Optional[Tuple[float, float]]:
         """x'' = -k g sin(u_x), y'' = -k g sin(u_y) of the command in force `plate_cmd_delay_s`
-        before now_s, from a recent enough command stream, else None."""
+        (or its estimate) before now_s, from a recent enough command stream, else None."""
         return self.known_inputs(now_s)[0]
 
     def known_inputs(self, now_s: float):
@@ -165,6 +173,8 @@ class BallTracker:
         timings["ball"] = t4 - t3
 
         cmd_s = stamp_s if now_s is None else now_s
+        if self.plate_cmd_delay is not None and result.plate_pose is not None:
+            self.plate_cmd_delay.add_rotation(cmd_s, result.plate_pose[0])
         accel, lever = self.known_inputs(cmd_s)
         estimate = self.kalman.step(stamp_s, z, accel, lever)
         result.x, result.y, result.vx, result.vy = estimate.x, estimate.y, estimate.vx, estimate.vy
