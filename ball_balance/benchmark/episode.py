@@ -228,24 +228,22 @@ def _observation(x, y, vx, vy, valid, markers, age_s, position_std_m):
 
 
 _OBSERVATION_FIELDS = {f.name for f in dataclasses.fields(BallObservation)}
-_STD_CACHE: Dict[tuple, float] = {}
+_COVARIANCE_CACHE: Dict[tuple, Optional[np.ndarray]] = {}
 
 
-def fast_position_std_m(visible: Tuple[int, ...], camera, corner_noise_px: float) -> float:
-    """Fast mode's stand-in for the tracker's position_std_m: the ball-position error the
-    plate pose fitted to the `visible` markers' corners would cause (the tracker's own model,
-    ball_balance.vision.pose_quality, at the nominal overhead pose; the 1-2 marker fit with
-    its pivot prior), so the controllers judge a hand over markers as in vision mode."""
+def fast_pose_covariance(visible: Tuple[int, ...], camera, corner_noise_px: float) -> Optional[np.ndarray]:
+    """The covariance (6x6, ball_balance.vision.pose_quality) of the plate pose the tracker
+    would fit to the `visible` markers' corners at the nominal overhead pose (the 1-2 marker
+    fit with its pivot prior); None without markers."""
     key = (visible, camera, corner_noise_px)
-    if key not in _STD_CACHE:
+    if key not in _COVARIANCE_CACHE:
         from ball_balance.plate_geometry import PlateGeometry
         from ball_balance.sim.config import camera_intrinsics
         from ball_balance.vision import pose_quality, tracker
         from ball_balance.vision.plate import FULL_FIT_MIN_MARKERS
 
-        if not visible:
-            _STD_CACHE[key] = math.inf
-        else:
+        covariance = None
+        if visible:
             geometry = PlateGeometry()
             fx, fy, cx, cy = camera_intrinsics(camera)
             K = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
@@ -254,8 +252,30 @@ def fast_position_std_m(visible: Tuple[int, ...], camera, corner_noise_px: float
             covariance = pose_quality.pose_covariance(points, K, pose_quality.R_CP_OVERHEAD,
                                                       np.array([0.0, 0.0, camera.height_above_plate_m]),
                                                       corner_noise_px, prior)
-            _STD_CACHE[key] = pose_quality.ball_position_std_m(covariance, camera.height_above_plate_m)
-    return _STD_CACHE[key]
+        _COVARIANCE_CACHE[key] = covariance
+    return _COVARIANCE_CACHE[key]
+
+
+def fast_position_std_m(visible: Tuple[int, ...], camera, corner_noise_px: float) -> float:
+    """Fast mode's stand-in for the tracker's position_std_m: the ball-position error the
+    plate pose fitted to the `visible` markers' corners would cause (the tracker's own model,
+    ball_balance.vision.pose_quality), so the controllers judge a hand over markers as in
+    vision mode."""
+    from ball_balance.vision import pose_quality
+
+    covariance = fast_pose_covariance(visible, camera, corner_noise_px)
+    if covariance is None:
+        return math.inf
+    return pose_quality.ball_position_std_m(covariance, camera.height_above_plate_m)
+
+
+def fast_tilt_std_rad(visible: Tuple[int, ...], camera, corner_noise_px: float) -> float:
+    """Fast mode's noise of the plate tilt the tracker measures from its pose fit (1 sigma per
+    axis, rad: the fit's rotation about the camera's x and y axes); inf without markers."""
+    covariance = fast_pose_covariance(visible, camera, corner_noise_px)
+    if covariance is None:
+        return math.inf
+    return float(np.sqrt(0.5 * (covariance[3, 3] + covariance[4, 4])))
 
 
 def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
@@ -264,7 +284,7 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
     from ball_balance.sim.world import SimWorld
     from ball_balance.vision.camera import CameraModel
     from ball_balance.vision.config import TrackerConfig
-    from ball_balance.vision.kalman import BallKalman, PlateCommandInput
+    from ball_balance.vision.kalman import BallKalman, CommandDelayFromTilt, PlateCommandInput, plate_tilt_rad
     from ball_balance.vision.tracker import BallTracker
 
     values = controller_values(spec.controller, spec.reference, spec.overrides)
@@ -300,6 +320,12 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
         plate_cmds = PlateCommandInput(values["rolling_factor"] * values["gravity_m_s2"],
                                        tracker_cfg.plate_cmd_delay_s, tracker_cfg.plate_cmd_timeout_s,
                                        lever_m=tracker_cfg.tilt_lever_m)
+        # the tracker's delay estimate, fed the plate's true tilt (from the level home pose) plus
+        # the noise its pose fit would have
+        plate_delay = CommandDelayFromTilt.from_config(tracker_cfg, plate_cmds) \
+            if tracker_cfg.estimate_plate_cmd_delay and tracker_cfg.use_plate_cmd else None
+        R_home = world.plate_pose()[1]
+        tilt_rng = np.random.default_rng(spec.seed + 32452843)   # its own: the camera's draws stay as they were
         world.knobs = knobs if knobs.detection_noise_m >= spec.fast_noise_floor_m else \
             dataclasses.replace(knobs, detection_noise_m=spec.fast_noise_floor_m)
 
@@ -359,11 +385,15 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
                 fields_ = (tr.x, tr.y, tr.vx, tr.vy, True, 4 - len(hidden), 0.0)
             else:
                 zx, zy = world.detected_ball()
+                visible = tuple(m for m in range(4) if m not in hidden)
+                if plate_delay is not None and visible:
+                    tilt_std = fast_tilt_std_rad(visible, world.config.camera, tracker_cfg.corner_noise_px)
+                    tilt = np.asarray(plate_tilt_rad(R_home, world.plate_pose()[1]))
+                    plate_delay.add_tilt(stamp, tilt + tilt_rng.normal(0.0, tilt_std, 2))
                 accel = lever = None
                 if tracker_cfg.use_plate_cmd:
                     accel, lever = plate_cmds.inputs(stamp)
                 est = kalman.step(stamp, (zx, zy), accel, lever)
-                visible = tuple(m for m in range(4) if m not in hidden)
                 std = fast_position_std_m(visible, world.config.camera, tracker_cfg.corner_noise_px)
                 fields_ = (est.x, est.y, est.vx, est.vy, est.valid, len(visible), std)
             pending.append((t + spec.vision_delay_s, fields_, stamp))
@@ -426,6 +456,11 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
         metrics["qp_p50_us"] = float(np.percentile(qp_times, 50) * 1e6)
         metrics["qp_p99_us"] = float(np.percentile(qp_times, 99) * 1e6)
     metrics["delay_estimate_s"] = pipeline.actuation_delay_s
+    # the delay the tracker's filter used at the end (its estimate, or plate_cmd_delay_s)
+    if tracker is not None:
+        metrics["tracker_delay_s"] = tracker.plate_cmds.delay_s
+    elif kalman is not None:
+        metrics["tracker_delay_s"] = plate_cmds.delay_s
     metrics["qp_fallbacks"] = float(pipeline.mpc.failures if pipeline.mpc is not None else 0)
     world.close()
     return EpisodeResult(spec, metrics, series if spec.record else None, frames)

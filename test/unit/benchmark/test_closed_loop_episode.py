@@ -113,3 +113,15 @@ def test_fast_mode_reports_the_pose_uncertainty_of_the_visible_markers():
     stds = [fast_position_std_m(visible, CameraConfig(), 0.3) for visible in ((0, 1, 2, 3), (0, 1, 2), (0, 3), (2,))]
     assert stds == sorted(stds) and 0.0 < stds[0] < 0.001
     assert fast_position_std_m((), CameraConfig(), 0.3) == math.inf
+
+
+@pytest.mark.parametrize("mode", ["fast", "vision"])
+def test_tracker_filter_takes_the_delay_the_plate_shows(mode):
+    # 200 ms latency: the tracker's filter ends with the plate's delay (latency + servo lag),
+    # measured from the plate's tilt (fast: the truth plus the pose fit's noise; vision: its pose)
+    spec = EpisodeSpec(controller="pid", domain="latency_200ms", reference="circle", seed=1, duration_s=4.0,
+                       mode=mode)
+    assert 0.19 <= run_episode(spec).metrics["tracker_delay_s"] <= 0.24
+    fixed = dataclasses.replace(spec, mode="fast", tracker_overrides=(("estimate_plate_cmd_delay", False),
+                                                                      ("plate_cmd_delay_s", 0.05)))
+    assert run_episode(fixed).metrics["tracker_delay_s"] == 0.05
