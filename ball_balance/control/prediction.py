@@ -167,7 +167,7 @@ class StampedDelayEstimator(_DelayAlignment):
     """
 
     def __init__(self, initial_s: float, max_delay_s: float = 0.3, window_s: float = 3.0, step_s: float = 0.005,
-                 update_period_s: float = 0.25, blend: float = 0.5, min_excitation_rad: float = 0.003,
+                 update_period_s: float = 0.25, blend: float = 0.2, min_excitation_rad: float = 0.003,
                  min_window_s: float = 1.0, min_correlation: float = 0.5, replace_start: bool = True):
         super().__init__(initial_s, blend, min_excitation_rad, replace_start)
         self.delays_s = np.arange(0.0, max_delay_s + 0.5 * step_s, step_s)
