@@ -9,7 +9,7 @@ the constant disturbance d: nominal, or the online estimate of control/estimatio
 from __future__ import annotations
 
 from collections import deque
-from typing import Deque, Tuple
+from typing import Callable, Deque, Tuple
 
 import numpy as np
 
@@ -153,7 +153,7 @@ class StampedDelayEstimator(_DelayAlignment):
     """The command -> plate delay from tilts measured at irregular instants (camera frames:
     drops, stamp jitter, lost markers) against the command history, looked up by time.
 
-    `add(t, tilt, command_times, commands)` stores the measured tilt (u_x, u_y) [rad] at t [s];
+    `add(t, tilt, command_history)` stores the measured tilt (u_x, u_y) [rad] at t [s];
     every `update_period_s` the samples of the last `window_s` are aligned with the command in
     force at t - d for each candidate d on a grid of `step_s` over 0..max_delay_s. The
     alignment is a correlation per axis (each signal less its window mean, divided by its
@@ -185,9 +185,10 @@ class StampedDelayEstimator(_DelayAlignment):
         self._meas.clear()
         self._next_update_s = -np.inf
 
-    def add(self, t_s: float, tilt_measured, command_times_s, commands) -> float:
-        """A measured tilt (u_x, u_y) [rad] at t_s, with the command history (times [s],
-        increasing, and (u_x, u_y) rows [rad]) on the same clock; returns the estimate [s]."""
+    def add(self, t_s: float, tilt_measured, command_history: Callable[[], Tuple[np.ndarray, np.ndarray]]) -> float:
+        """A measured tilt (u_x, u_y) [rad] at t_s; `command_history()` gives the commands (times
+        [s], increasing, on the same clock, and (u_x, u_y) rows [rad]), called only when an
+        alignment is due (building it costs more than the rest of a frame). Returns the estimate [s]."""
         if self._t and not t_s > self._t[-1]:
             if t_s < self._t[-1] - self.window_s:      # the clock went back: start again
                 self.reset()
@@ -199,7 +200,8 @@ class StampedDelayEstimator(_DelayAlignment):
             self._t.popleft()
             self._meas.popleft()
         if t_s >= self._next_update_s:
-            self._update(np.asarray(command_times_s, dtype=float), np.asarray(commands, dtype=float))
+            times, values = command_history()
+            self._update(np.asarray(times, dtype=float), np.asarray(values, dtype=float))
         return self.estimate_s
 
     def _update(self, cmd_t: np.ndarray, cmd_u: np.ndarray) -> None:

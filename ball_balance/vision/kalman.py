@@ -242,8 +242,7 @@ class CommandDelayFromTilt:
     def add_tilt(self, t_s: float, tilt: Tuple[float, float]) -> float:
         """A measured tilt (u_x, u_y) [rad, any constant offset] at t_s; returns the delay (s)."""
         if self.commands.recent(t_s):
-            times, values = self.commands.history()
-            self.commands.delay_s = self.estimator.add(t_s, tilt, times, values)
+            self.commands.delay_s = self.estimator.add(t_s, tilt, self.commands.history)
         return self.delay_s
 
 

@@ -91,11 +91,13 @@ def test_no_commands_no_estimate():
 
 def test_estimator_ignores_repeated_stamps_and_restarts_when_the_clock_goes_back():
     est = StampedDelayEstimator(0.05, window_s=1.0)
-    times, values = np.array([0.0, 1.0]), np.zeros((2, 2))
-    est.add(0.5, (0.0, 0.0), times, values)
-    est.add(0.5, (1.0, 1.0), times, values)
+    def history():
+        return np.array([0.0, 1.0]), np.zeros((2, 2))
+
+    est.add(0.5, (0.0, 0.0), history)
+    est.add(0.5, (1.0, 1.0), history)
     assert len(est._t) == 1
-    est.add(-5.0, (0.0, 0.0), times, values)
+    est.add(-5.0, (0.0, 0.0), history)
     assert list(est._t) == [-5.0]
 
 
