@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 import time
 from pathlib import Path
@@ -35,7 +36,8 @@ def parse_variant(text: str):
     """NAME:param=value,... -> (name, controller overrides, tracker overrides)."""
     name, _, body = text.partition(":")
     overrides, tracker = [], []
-    for item in filter(None, (part.strip() for part in body.split(","))):
+    # commas inside [...] belong to a list value (input_gain_bounds=[0.3,2.5])
+    for item in filter(None, (part.strip() for part in re.split(r",(?![^\[]*\])", body))):
         key, sep, value = item.partition("=")
         if not sep:
             raise SystemExit(f"variant '{text}': '{item}' is not param=value")
