@@ -100,7 +100,7 @@ TRACKER_SCHEMA = (
           "the ball's plate-frame position moves this much per rad of plate tilt besides its rolling: "
           "ball radius + rolling factor x depth of the tilt axis below the plate's surface (the default: "
           "a shell on a plate tilting about its mid-plane); 0 = not modelled", "m", 0.0, 1.0),
-    Param("cmd_accel_noise_m_s2", 0.1,
+    Param("cmd_accel_noise_m_s2", 0.05,
           "white-noise acceleration (1 sigma) of the process model while a commanded tilt is known "
           "(accel_noise_m_s2 without one)", "m/s^2", 1e-4, 1000.0),
     Param("estimate_input_gain", True,
