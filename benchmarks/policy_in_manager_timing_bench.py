@@ -6,7 +6,7 @@ case's controller, while this process publishes a ball moving on the plate to /b
 60 Hz (wall-clock stamps, as a camera would) and `--busy` other processes each keep a core
 busy. Cases:
 
-  forward_position_controller   the node path's controller in the manager, fed at 50 Hz (baseline)
+  forward_position_controller   the node path's controller in the manager, fed at 60 Hz (baseline)
   ball_balance_controller       config/ur_controllers_policy.yaml: the policy engaged, each step in
                                 the controller's worker thread (async_step, SCHED_FIFO 45, on the
                                 loop's CPU), targets written every cycle
@@ -68,7 +68,7 @@ def params_file(controller: str, overrides: dict) -> dict:
 
 
 def drive(driver: Driver, controller: str, seconds: float) -> tuple:
-    """Ball states at 60 Hz (and forward commands at 50 Hz for the baseline); 3 s warm-up (the
+    """Ball states at 60 Hz (and forward commands at 60 Hz, the nodes' rate, for the baseline); 3 s warm-up (the
     policy homes, sees the ball and engages), then `seconds`. Returns the window and the policy
     controller's last introspection values."""
     from ball_tracker_msgs.msg import BallState
@@ -103,7 +103,7 @@ def drive(driver: Driver, controller: str, seconds: float) -> tuple:
         forward.publish(Float64MultiArray(data=[q + 0.02 * math.sin(a + i) for i, q in enumerate(HOME_POSITIONS_RAD)]))
     node.create_timer(1.0 / 60.0, on_ball_timer)
     if controller == "forward_position_controller":
-        node.create_timer(1.0 / 50.0, on_forward_timer)
+        node.create_timer(1.0 / 60.0, on_forward_timer)
     driver.spin_for(3.0)
     start = time.monotonic()
     driver.spin_for(seconds)

@@ -10,9 +10,13 @@ Parameters: every parameter of the balance nodes (ball_balance/control/config.py
 schema: reference, PID gains, MPC weights, policy model, safety, shaping) except the nodes'
 own triggering (control_trigger, peer_timeout_s: joint states never go missing here), plus
 `async_step`. Two rates:
-  - `control_rate_hz` (50): a pipeline step (safety, prediction, tilt law, IK, shaping) every
-    1/control_rate_hz of the manager's time, as the nodes' timer; the policy's history and
-    the shaping's step limit are per step, and the model's rate is checked against it.
+  - `control_rate_hz` (the schema's 50; config/ur_controllers_policy.yaml 60, the policy's): a
+    pipeline step (safety, prediction, tilt law, IK, shaping) every 1/control_rate_hz of the
+    manager's time, as the nodes' timer; the policy's history and the shaping's step limit are
+    per step, and the model's rate is checked against it. The steps keep to that grid: each
+    runs at the first update at or after its time, so with an update rate that is not a whole
+    multiple (500 Hz and 60 Hz) a step is up to one update period late, never drifts, and the
+    average rate is control_rate_hz.
   - `update_rate` (0: the manager's, 500 Hz): every update writes the newest step's joint
     target to the six command interfaces, moved towards it within the URDF joint velocity
     limits for that update's period (manager/joint_limits.JointLimiter). Why every update: the
@@ -28,7 +32,7 @@ inference or the MPC's solve; the step's target is written from the first update
 ready. A step due while the previous one still runs is missed (`missed_steps`, the target is
 kept). Leave the manager's `is_async` false: update() itself is a few microseconds.
 The pipeline (and the policy model) is built at configure, where a model that does not fit
-(or an update rate that is not a multiple of control_rate_hz) is refused with one line; it
+(or an update rate below control_rate_hz) is refused with one line; it
 starts over from the measured joints on every activation and when the clock goes back (a
 simulation reset).
 
@@ -140,9 +144,9 @@ class BallBalanceController(ControllerInterface):
         self.values = values
         self.throttle = Throttle(self.get_logger())
         control_hz, update_hz = values["control_rate_hz"], self.update_rate or self.manager_update_rate
-        if update_hz and (update_hz < control_hz or abs(update_hz / control_hz - round(update_hz / control_hz)) > 1e-9):
-            self.get_logger().error(f"{self.name}: update_rate {update_hz} Hz must be a whole multiple of "
-                                    f"control_rate_hz {control_hz:g} Hz (the joint targets are written every update)")
+        if update_hz and update_hz < control_hz:
+            self.get_logger().error(f"{self.name}: update_rate {update_hz} Hz must be at least control_rate_hz "
+                                    f"{control_hz:g} Hz (a step runs in an update)")
             return CallbackReturn.ERROR
         self._control_period_s = 1.0 / control_hz
         try:

@@ -3,15 +3,16 @@
 It models what stands between the controller and the ball in the MuJoCo simulation, at the
 rates the closed-loop benchmark uses (ball_balance/benchmark/episode.py):
 
-    camera 30 Hz (frames dropped with frame_drop_prob) -> detection noise -> the tracker's
-    Kalman filter as it runs (batch_kalman.py: its config, the commanded tilt as known
-    acceleration with its gain estimated, adaptive process and measurement noise) -> visible
-    vision_delay_s later ->
-    control tick 50 Hz: online plant estimate (k g and a constant disturbance, the pipeline's
-    control/estimation.py, batched) -> latency prediction over the state's age with that
-    estimate -> the PID as the pid node runs it (schema defaults, the estimate in its
-    feed-forward, disturbance tilt and feedback scale) + policy correction -> shaping
-    (tilt-rate limit per tick, total tilt limit) -> camera-to-command latency -> servo lag ->
+    camera 30 Hz (the benchmark's EpisodeSpec.camera_rate_hz; frames dropped with
+    frame_drop_prob) -> detection noise -> the tracker's Kalman filter as it runs
+    (batch_kalman.py: its config, the commanded tilt as known acceleration with its gain
+    estimated, adaptive process and measurement noise) -> visible vision_delay_s later ->
+    control tick 60 Hz (the PID node's rate; config/policy.yaml): online plant estimate (k g
+    and a constant disturbance, the pipeline's control/estimation.py, batched) -> latency
+    prediction over the state's age with that estimate -> the PID as the pid node runs it
+    (schema defaults, the estimate in its feed-forward, disturbance tilt and feedback scale)
+    + policy correction -> shaping (tilt-rate limit per tick, total tilt limit) ->
+    camera-to-command latency -> servo lag ->
     plate tilt -> x'' = -k g sin(tilt + bias)
 
 randomised per episode over `DomainRanges` (wider than the benchmark's extreme_dr). Each
@@ -33,10 +34,11 @@ from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACT
 from ball_balance.policy.batch_kalman import BatchBallKalman
 from ball_balance.policy.observation import ObservationBuilder
 
-CONTROL_DT_S = 0.02
-SUBSTEP_S = 0.005
-SUBSTEPS = int(round(CONTROL_DT_S / SUBSTEP_S))
-CAMERA_RATE_HZ = 30.0
+# the control tick: the PID node's rate (config/pid.yaml, 60 Hz); config/policy.yaml's
+# control_rate_hz must equal it (checked here) and the model records it (rate_hz, checked at run time)
+CONTROL_DT_S = 1.0 / 60.0
+SUBSTEPS = 4                          # the plant's integration steps per tick (a whole number)
+SUBSTEP_S = CONTROL_DT_S / SUBSTEPS
 REFERENCES = ("stationary", "circle", "figure_eight")
 # the privileged law whose tilt is the label (PlateBatch.teacher_tilt): "pid" the PID itself on
 # the true state with the true gain and bias, "pd" a stiffer PD law (wn, zeta) on the true state
@@ -50,6 +52,7 @@ BASE_PID_KEYS = ("kp", "ki", "kd", "i_limit_rad", "i_zone_m", "deadband_m", "ant
 # the tracker's filter parameters the plant models (recorded in the model's training metadata)
 TRACKER_FILTER_KEYS = ("meas_noise_m", "accel_noise_m_s2", "init_vel_std_m_s", "gate_sigma", "max_coast_frames",
                        "max_dt_s", "use_plate_cmd", "plate_cmd_timeout_s", "plate_cmd_delay_s",
+                       "estimate_plate_cmd_delay",
                        "cmd_accel_noise_m_s2", "estimate_input_gain", "input_gain_bounds", "input_gain_std",
                        "input_gain_rate_per_s", "consistency_time_s", "adaptive_meas_noise", "meas_noise_max_m",
                        "meas_noise_window_frames", "maneuver_sigma", "maneuver_hold_s", "tilt_lever_m",
@@ -91,14 +94,20 @@ class Nominal:
     vision_delay_s: float = 0.015
     max_prediction_s: float = 0.5
     fast_noise_floor_m: float = 0.0005   # the benchmark's fast mode: never less (pixel quantisation)
+    camera_rate_hz: float = 30.0
 
     @classmethod
     def from_config(cls) -> Nominal:
-        from ball_balance.benchmark.episode import controller_values
+        """The policy's parameters; the camera's rate, vision delay and noise floor as the
+        closed-loop benchmark's episodes have them (EpisodeSpec's defaults)."""
+        from ball_balance.benchmark.episode import EpisodeSpec, controller_values
 
         values = controller_values("policy", "stationary")
+        spec = EpisodeSpec()
         return cls(k_g=control_config.k_g(values), u_max_rad=values["max_tilt_cmd_rad"],
-                   max_total_tilt_rad=values["max_total_tilt_rad"], max_prediction_s=values["max_prediction_s"])
+                   max_total_tilt_rad=values["max_total_tilt_rad"], max_prediction_s=values["max_prediction_s"],
+                   vision_delay_s=spec.vision_delay_s, fast_noise_floor_m=spec.fast_noise_floor_m,
+                   camera_rate_hz=spec.camera_rate_hz)
 
 
 def tracker_config():
@@ -417,7 +426,16 @@ class PlateBatch:
         self.x = np.stack([radius * np.cos(angle), radius * np.sin(angle)], 1)
         self.v = np.stack([speed * np.cos(heading), speed * np.sin(heading)], 1)
         self.theta = np.zeros((b, 2))          # plate tilt
-        self.hist_len = int(np.ceil((max(r.latency_s[1], self.tracker_cfg.plate_cmd_delay_s, self.max_delay_s)
+        # the delay the tracker's filter looks the commands up with: with its online estimate
+        # (estimate_plate_cmd_delay: the plate's tilt from the markers against the command history)
+        # the episode's own command -> plate delay, latency + servo lag, as the estimate settles
+        # on it (its first second on the start value is not modelled); else the configured value
+        if self.tracker_cfg.estimate_plate_cmd_delay and self.tracker_cfg.use_plate_cmd:
+            self.plate_cmd_delay_s = self.latency + self.servo_lag
+        else:
+            self.plate_cmd_delay_s = np.full(b, float(self.tracker_cfg.plate_cmd_delay_s))
+        self.hist_len = int(np.ceil((max(r.latency_s[1] + r.servo_lag_s[1], self.tracker_cfg.plate_cmd_delay_s,
+                                         self.max_delay_s)
                                      + max(Nominal.max_prediction_s, n.max_prediction_s)) / CONTROL_DT_S)) + 4
         self.cmd_hist = np.zeros((b, 2, self.hist_len))   # shaped commands by tick (ring, index tick % len)
         self.law_hist = np.zeros((b, 2, self.hist_len))   # the law's tilts (/plate_cmd) by tick
@@ -435,6 +453,7 @@ class PlateBatch:
         self.t_engaged = None
         self.alive = np.ones(b, bool)
         self.engaged = np.zeros(b, bool)
+        self.last_push_s = np.full(b, -np.inf)
         self.sq_err = np.zeros(b)
         self.n_err = np.zeros(b)
         self.pid = BatchPid((b, 2), self.pid_values, self.nom.k_g, self.nom.u_max_rad)
@@ -442,7 +461,7 @@ class PlateBatch:
         # the PID teacher's own integral and derivative filter, stepped every tick on the truth
         self.teacher_pid = BatchPid((b, 2), self.pid_values, self.nom.k_g, self.nom.u_max_rad)
         self.u_teacher = np.zeros((b, 2))
-        capacity = int(np.ceil(self.estimator_cfg.window_s * CAMERA_RATE_HZ)) + 8
+        capacity = int(np.ceil(self.estimator_cfg.window_s * self.nom.camera_rate_hz)) + 8
         self.estimator = BatchPlantEstimator(b, self.estimator_cfg, self.nom.k_g, capacity)
         self.tilt_p = np.zeros((b, 2))         # double and single integral of the plate tilt reached
         self.tilt_v = np.zeros((b, 2))
@@ -461,7 +480,7 @@ class PlateBatch:
     def _camera(self) -> None:
         t = self.time_s
         while self.next_frame <= t + 1e-9:
-            self.next_frame += 1.0 / CAMERA_RATE_HZ
+            self.next_frame += 1.0 / self.nom.camera_rate_hz
             arrived = self.rng.random(self.b) >= self.drop_p
             z = self.x + self.rng.normal(0.0, 1.0, (self.b, 2)) * self.noise[:, None]
             # the ball's centre sits above the tilt axis: the plate's tilt moves its plate-frame
@@ -482,15 +501,16 @@ class PlateBatch:
 
     def _known_tilt(self, t):
         """What the tracker's PlateCommandInput takes at a frame stamped t (its acceleration is
-        -k g sin(u), its lever offset tilt_lever_m u): the law's tilt in force plate_cmd_delay_s
-        before t (commands arrive once per tick, after the tick's frames), None before the first
-        command, without use_plate_cmd or past the timeout."""
+        -k g sin(u), its lever offset tilt_lever_m u): the law's tilt in force the tracker's
+        delay (plate_cmd_delay_s, per episode) before t (commands arrive once per tick, after
+        the tick's frames), None before the first command, without use_plate_cmd or past the
+        timeout."""
         cfg = self.tracker_cfg
         if not cfg.use_plate_cmd or self.tick == 0 or t - (self.tick - 1) * CONTROL_DT_S > cfg.plate_cmd_timeout_s:
             return None
-        j = int(np.floor((t - cfg.plate_cmd_delay_s) / CONTROL_DT_S + 1e-9))
-        j = min(max(j, 0, self.tick - self.hist_len + 1), self.tick - 1)
-        return self.law_hist[:, :, j % self.hist_len]
+        j = np.floor((t - self.plate_cmd_delay_s) / CONTROL_DT_S + 1e-9).astype(int)
+        j = np.clip(j, max(0, self.tick - self.hist_len + 1), self.tick - 1)
+        return self.law_hist[np.arange(self.b), :, j % self.hist_len]
 
     def _predicted_state(self):
         """The pipeline's latency prediction (control/prediction.py predict): the state at its
@@ -593,6 +613,15 @@ class PlateBatch:
         u = -acc / self.k_g_true - self.bias
         return np.clip(u, -self.nom.u_max_rad, self.nom.u_max_rad)
 
+    def push_visible(self, frames: int) -> np.ndarray:
+        """Per episode (b,): False from a push until `frames` camera frames captured after it
+        can have reached the controller (frames camera periods + the vision delay). Before that
+        the teacher, on the true state, already answers a push the controller cannot see: a
+        label no observation explains (frames 0: always True)."""
+        if frames <= 0:
+            return np.ones(self.b, bool)
+        return self.time_s - self.last_push_s >= frames / self.nom.camera_rate_hz + self.nom.vision_delay_s - 1e-9
+
     def residual_label(self, tilt: np.ndarray) -> np.ndarray:
         """The action in [-1, 1] that makes the law command `tilt`."""
         return np.clip((tilt - self.u_pid) / self.action_scale, -1.0, 1.0)
@@ -650,6 +679,7 @@ class PlateBatch:
             speed = self.rng.uniform(*r.push_speed_m_s, self.b)
             ang = self.rng.uniform(0, 2 * np.pi, self.b)
             self.v += (push * speed)[:, None] * np.stack([np.cos(ang), np.sin(ang)], 1)
+            self.last_push_s = np.where(push, t0 + CONTROL_DT_S, self.last_push_s)
         self.tick += 1
         half = PLATE_SIDE_M / 2.0
         self.alive &= np.all(np.abs(self.x) <= half, axis=1)

@@ -19,7 +19,9 @@ rate limited (`max_rate` per second); clamped to the model's [low, high] and, fo
 the robot description, to their limits (manager/joint_limits.JointLimiter).
 
 Timing: the controller runs every cycle of its update rate; an inference is due every
-1/rate_hz of the model. With `async_inference` (default) it runs in a worker thread
+1/rate_hz of the model, on that grid (at an update rate that is not a whole multiple, at the
+first cycle at or after its time: up to one cycle late, the model's rate on average). With
+`async_inference` (default) it runs in a worker thread
 (manager/async_handler.AsyncHandler): update() hands over a copy of the observation and
 never waits; the result is used from the first cycle after it is ready. An inference due
 while the previous one still runs is missed: the last action is kept, and it is counted.
@@ -286,10 +288,15 @@ class OnnxPolicyController(ControllerInterface):
                 self.refused_observations += 1
             else:
                 self._action = self._result
-        # an inference is due at the model's rate
-        due = self._since_inference_s + 1e-9 >= 1.0 / self.runner.metadata.rate_hz
+        # an inference is due at the model's rate, on its grid: in a loop whose rate is not a
+        # whole multiple (a 60 Hz model at 500 Hz: every 8 or 9 cycles) the remainder carries
+        # over, so the average is the model's rate; after a gap (the first cycle) from now
+        model_period_s = 1.0 / self.runner.metadata.rate_hz
+        due = self._since_inference_s + 1e-9 >= model_period_s
         if due:
-            self._since_inference_s = 0.0
+            self._since_inference_s -= model_period_s
+            if not self._since_inference_s < model_period_s:
+                self._since_inference_s = 0.0
             for j, reader in enumerate(self._readers):
                 self._frame[j] = self._read(reader, inputs)
             age = _time.monotonic() - input_time if self._input_names else 0.0

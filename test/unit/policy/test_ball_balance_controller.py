@@ -16,7 +16,7 @@ from controller_manager_py.manager.controller_manager import ControllerError, Co
 
 ROOT = Path(__file__).resolve().parents[3]
 PLUGIN = "ball_balance_controllers/BallBalanceController"
-MANAGER_HZ, CONTROL_HZ = 500, 50
+MANAGER_HZ = 500
 COMMANDS = [f"{j}/position" for j in JOINT_NAMES]
 
 
@@ -41,6 +41,9 @@ def loaded(robot_description_xml: str = "", **kw) -> ControllerManager:
     return cm
 
 
+CONTROL_HZ = policy_values()["control_rate_hz"]   # 60: not a whole divisor of the manager's rate
+
+
 def spawn(**kw):
     cm = loaded(**kw)
     cm.configure_controller("ball")
@@ -49,16 +52,19 @@ def spawn(**kw):
 
 
 class Run:
-    """Synthetic time; a fresh ball state offered before every control step (as a 50 Hz camera)."""
+    """Synthetic time; a fresh ball state offered before every control step (a camera at the control rate)."""
 
     def __init__(self, cm, ctrl):
         self.cm, self.ctrl, self.t = cm, ctrl, 0.0
+        self.offered = 0
 
     def run(self, seconds: float, ball=None):
         for _ in range(int(round(seconds * MANAGER_HZ))):
             self.t += 1.0 / MANAGER_HZ
-            if ball is not None and int(round(self.t * MANAGER_HZ)) % (MANAGER_HZ // CONTROL_HZ) == 0:
+            frame = math.floor(self.t * CONTROL_HZ + 1e-9)
+            if ball is not None and frame != math.floor((self.t - 1.0 / MANAGER_HZ) * CONTROL_HZ + 1e-9):
                 self.ctrl.offer_ball_state(BallSample(*ball, self.t), self.t)
+                self.offered += 1
             self.cm.cycle(self.t, 1.0 / MANAGER_HZ)
 
     def commands(self):
@@ -84,15 +90,18 @@ def test_a_non_finite_ball_state_never_reaches_the_arm_it_is_held_and_counted():
     run.run(1.0)
     run.run(1.0, ball=(0.06, -0.04, 0.0, 0.0, True, 4))
     held = run.commands()
-    run.run(0.1, ball=(math.nan, 0.0, 0.0, 0.0, True, 4))   # 5 NaN states in a row
+    good = run.offered
+    run.run(0.1, ball=(math.nan, 0.0, 0.0, 0.0, True, 4))   # 6 NaN states in a row
     run.run(0.1, ball=(0.0, 0.0, math.inf, 0.0, True, 4))
-    assert ctrl.refusals["non_finite"] == 10 and ctrl.refused_ball_states == 10
+    bad = run.offered - good
+    assert bad >= 10
+    assert ctrl.refusals["non_finite"] == bad and ctrl.refused_ball_states == bad
     assert ctrl._ball.x == pytest.approx(0.06)              # the good state is still the one in use
     commands = run.commands()
     assert np.all(np.isfinite(commands))
     assert np.max(np.abs(commands - held)) < 0.1            # the arm stayed where it was (shaping steps)
     counters = dict((name, getter()) for name, getter in ctrl.introspection)
-    assert counters["refused_ball_states_non_finite"] == 10.0   # reaches /diagnostics (refused_*)
+    assert counters["refused_ball_states_non_finite"] == bad   # reaches /diagnostics (refused_*)
     run.run(1.0)                                            # no state at all: holding, then home
     assert ctrl.mode in (Mode.HOLDING, Mode.RETURNING, Mode.READY)
     assert np.all(np.isfinite(run.commands()))
@@ -160,8 +169,29 @@ def test_with_async_step_a_slow_step_never_holds_up_the_loop_it_is_missed_and_co
     assert ctrl._worker is None
 
 
-def test_an_update_rate_that_is_not_a_multiple_of_the_control_rate_is_refused_at_configure(caplog):
-    cm = loaded(update_rate=125)
+def test_steps_keep_the_control_rate_on_an_update_rate_that_is_not_a_whole_multiple_of_it():
+    """60 Hz steps in the 500 Hz manager: each at the first update at or after its time (8 or 9
+    updates apart), 60 per second, never drifting (the first step comes half a period after
+    the start, as after any gap)."""
+    cm, ctrl = spawn()
+    assert MANAGER_HZ % CONTROL_HZ != 0
+    steps = []
+    step = ctrl._step
+
+    def counted(time_s, period):
+        steps.append(time_s)
+        return step(time_s, period)
+    ctrl._step = counted
+    Run(cm, ctrl).run(2.0)
+    gaps = np.diff(steps)[1:]
+    assert abs(len(steps) - 2.0 * CONTROL_HZ) <= 1
+    assert np.all(gaps > 1.0 / CONTROL_HZ - 1.0 / MANAGER_HZ - 1e-9)
+    assert np.all(gaps < 1.0 / CONTROL_HZ + 1.0 / MANAGER_HZ + 1e-9)
+    assert steps[-1] - steps[1] == pytest.approx((len(steps) - 2) / CONTROL_HZ, abs=1.0 / MANAGER_HZ)
+
+
+def test_an_update_rate_below_the_control_rate_is_refused_at_configure(caplog):
+    cm = loaded(update_rate=int(CONTROL_HZ // 2))
     with pytest.raises(ControllerError, match="on_configure failed"):
         cm.configure_controller("ball")
-    assert any("whole multiple of control_rate_hz" in r.getMessage() for r in caplog.records)
+    assert any("must be at least control_rate_hz" in r.getMessage() for r in caplog.records)

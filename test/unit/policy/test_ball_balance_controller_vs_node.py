@@ -7,8 +7,9 @@
    cycle, moved within the URDF velocity limits, so the manager's limits stage (which writes
    its saturated value back, as ros2_control's does) never cuts a step short;
 3. lock-stepped in the MuJoCo arm, the in-manager controller is as smooth as the node's path
-   (pipeline at 50 Hz -> forward_position_controller). Before 2 was fixed the manager's stage
-   cut each 50 Hz step to 6.3 mrad: tilt-rate RMS 5.2 rad/s against 0.6 for the node's path.
+   (pipeline at the policy's rate -> forward_position_controller). Before 2 was fixed the
+   manager's stage cut each (then 50 Hz) step to 6.3 mrad: tilt-rate RMS 5.2 rad/s against 0.6
+   for the node's path.
 """
 import math
 from pathlib import Path
@@ -34,6 +35,9 @@ DT = 1.0 / MANAGER_HZ
 
 def section(path: str, name: str) -> dict:
     return yaml.safe_load((ROOT / path).read_text())[name]["ros__parameters"]
+
+
+CONTROL_HZ = section("config/ur_controllers_policy.yaml", "ball_balance_controller")["control_rate_hz"]
 
 
 def controller_values(**kw) -> dict:
@@ -102,7 +106,7 @@ def test_the_controller_and_the_node_give_the_policy_the_same_observations_tilts
             next_frame = t + 1.0 / CAMERA_HZ
             ctrl.offer_ball_state(ball_at(t), t)
         cm.cycle(t, DT)
-    assert len(steps) == pytest.approx(4 * 50, abs=1)
+    assert len(steps) == pytest.approx(4 * CONTROL_HZ, abs=1)
     assert len(seen_by_controller) > 100                  # the policy ran for most of it
 
     # the node: its pipeline stepped at the same ticks on the same states (ROS times in ns)
@@ -131,7 +135,17 @@ def test_every_step_target_reaches_the_hardware_and_the_manager_stage_never_clam
     ctrl = activated(cm, "ball", PLUGIN, controller_values())
     hardware = cm.rm.command_interfaces
     vmax = 3.14   # rad/s, the URDF velocity limit of every UR joint
-    t, previous, reached, big_steps = 0.0, None, 0, 0
+    t, previous = 0.0, None
+    before_steps = []   # at each step: (its previous target far from home, that target reached)
+    step = ctrl._step
+
+    def checked_step(time, period):
+        if ctrl._target is not None:   # the hardware holds what the previous cycle wrote
+            written = np.array([hardware[f"{j}/position"].value for j in JOINT_NAMES])
+            before_steps.append((np.max(np.abs(ctrl._target - ctrl.pipeline.kin.home_q)) > 0.02,
+                                 bool(np.allclose(written, ctrl._target, atol=1e-12))))
+        return step(time, period)
+    ctrl._step = checked_step
     for k in range(4 * MANAGER_HZ):
         t += DT
         if k % (MANAGER_HZ // CAMERA_HZ) == 0 and t > 0.5:
@@ -143,11 +157,10 @@ def test_every_step_target_reaches_the_hardware_and_the_manager_stage_never_clam
         if previous is not None:
             assert np.max(np.abs(written - previous)) <= vmax * DT + 1e-12
         previous = written
-        if ctrl._target is not None and (k + 1) % (MANAGER_HZ // 50) == 0:   # the cycle before the next step
-            big_steps += np.max(np.abs(ctrl.pipeline.q_cmd - ctrl.pipeline.kin.home_q)) > 0.02
-            reached += bool(np.allclose(written, ctrl._target, atol=1e-12))
+    big_steps = sum(far for far, _ in before_steps)
+    reached = sum(hit for _, hit in before_steps)
     assert big_steps > 50
-    assert reached >= 4 * 50 - 30          # every step's target was reached before the next (homing aside)
+    assert reached >= 4 * CONTROL_HZ - 30   # every step's target was reached before the next (homing aside)
     assert sum(comp.limiter.clamped for comp in cm.rm.components.values()) == 0
 
 
@@ -180,7 +193,7 @@ def test_in_the_mujoco_arm_the_controller_is_as_smooth_as_the_nodes_path():
             if in_manager:
                 u = ctrl.u
             elif now >= next_tick - 1e-9:
-                next_tick += 0.02
+                next_tick += 1.0 / CONTROL_HZ
                 obs = None if ball is None else BalanceControllerNode._observation(
                     BallState(x=ball.x, y=ball.y, vx=ball.vx, vy=ball.vy, tracking_valid=True, markers_found=4),
                     max(0.0, now - ball.stamp_s), 0.0)

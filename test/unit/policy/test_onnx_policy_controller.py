@@ -164,3 +164,18 @@ def test_refusal_reason_is_one_line_naming_the_missing_source(caplog):
         spawn(cm, inputs=[""])
     lines = [r.getMessage() for r in caplog.records if "no source" in r.getMessage()]
     assert len(lines) == 1 and "'target'" in lines[0] and "\n" not in lines[0]
+
+
+def test_inferences_keep_the_models_rate_in_a_loop_that_is_not_a_whole_multiple_of_it():
+    """A 100 Hz model in a 250 Hz loop: an inference every 2 or 3 cycles, 100 per second (as a
+    60 Hz model at the manager's 500 Hz), not one every 3 cycles (83 per second)."""
+    loop_hz = 250
+    cm = ControllerManager(loop_hz)
+    cm.load_robot_description((ROOT / "config" / "mock_ur.urdf").read_text())
+    ctrl = spawn(cm)
+    ctrl.set_inputs([0.2])
+    t = 0.0
+    for _ in range(2 * loop_hz):
+        t += 1.0 / loop_hz
+        cm.cycle(t, 1.0 / loop_hz)
+    assert abs(ctrl.inferences - 2 * 100) <= 1

@@ -25,9 +25,13 @@ def policy_values(**overrides):
     return dict(validate(control_config.POLICY_SCHEMA, values))
 
 
+def configured_rate_hz() -> float:
+    return float(policy_values()["control_rate_hz"])
+
+
 def load_ball_runner(path):
     return PolicyRunner.load(path, observation_names=flat_names(), action_kind=ACTION_KIND, action_count=2,
-                             rate_hz=50.0)
+                             rate_hz=configured_rate_hz())
 
 
 def test_exported_model_gives_the_training_time_actions_on_recorded_observations():
@@ -44,7 +48,7 @@ def test_shipped_model_metadata_says_how_it_was_made_and_how_to_run_it():
     assert len(md.observation.mean) == len(md.observation.std) == 2 * axis_size()
     assert md.action.kind == ACTION_KIND and md.action.size == 2
     assert all(s > 0 for s in md.action.scale) and md.action.low == [-0.15, -0.15]
-    assert md.rate_hz == 50.0
+    assert md.rate_hz == configured_rate_hz()
     training = md.training
     for key in ("seed", "commit", "domains", "method", "wall_time_s", "base_pid"):
         assert key in training, key
@@ -65,7 +69,7 @@ def test_model_trained_on_another_pid_is_refused():
 
 
 def test_model_at_another_rate_is_refused():
-    with pytest.raises(PolicyModelError, match="trained at 50 Hz, configured at 100 Hz"):
+    with pytest.raises(PolicyModelError, match=f"trained at {configured_rate_hz():g} Hz, configured at 100 Hz"):
         load_tilt_law(policy_values(control_rate_hz=100.0))
 
 

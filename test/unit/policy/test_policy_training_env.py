@@ -46,6 +46,21 @@ def test_the_policy_is_trained_on_the_pid_nodes_pid():
     assert env.estimator_cfg == control_config.estimator_config(policy)
 
 
+def test_the_plant_steps_at_the_pid_nodes_rate_and_the_benchmarks_camera_rate():
+    """The policy ticks as often as the PID node (config/pid.yaml), whole substeps per tick, and
+    the plant's camera runs at the closed-loop benchmark's rate."""
+    from ball_balance.benchmark.episode import EpisodeSpec
+    from ball_balance.policy.env import SUBSTEP_S, SUBSTEPS, Nominal
+
+    policy, pid = controller_values("policy", "stationary"), controller_values("pid", "stationary")
+    assert policy["control_rate_hz"] == pid["control_rate_hz"]
+    assert CONTROL_DT_S * policy["control_rate_hz"] == pytest.approx(1.0, abs=1e-12)
+    assert SUBSTEPS * SUBSTEP_S == pytest.approx(CONTROL_DT_S, abs=1e-15)
+    spec, nominal = EpisodeSpec(), Nominal.from_config()
+    assert (nominal.camera_rate_hz, nominal.vision_delay_s, nominal.fast_noise_floor_m) == \
+        (spec.camera_rate_hz, spec.vision_delay_s, spec.fast_noise_floor_m)
+
+
 def test_batch_plant_estimator_is_the_plant_estimator():
     """The batched estimate follows control/estimation.py on the same positions and tilts,
     a push (window restart) included."""
@@ -237,3 +252,45 @@ def test_batch_kalman_is_the_trackers_filter(overrides):
     assert worst < 1e-9
     if getattr(cfg, "maneuver_sigma", 0.0) > 0.0 and cfg.use_plate_cmd:
         assert sum(f.maneuver_count for f in single) > 0   # the pushes were taken as such
+
+
+def test_no_labels_between_a_push_and_the_frames_that_show_it():
+    """push_visible: False from a push until `frames` camera frames after it can have reached
+    the controller (the teacher answers the push at once, the student cannot see it yet)."""
+    ranges = dataclasses.replace(DomainRanges(), push_prob_per_s=3.0)
+    env = PlateBatch(8, seed=2, ranges=ranges, duration_s=3.0)
+    env.reset()
+    window_s = 2 / env.nom.camera_rate_hz + env.nom.vision_delay_s
+    seen_hidden = seen_after = False
+    while not env.finished:
+        since = env.time_s - env.last_push_s
+        visible = env.push_visible(2)
+        np.testing.assert_array_equal(visible, since >= window_s - 1e-9)
+        assert env.push_visible(0).all()
+        seen_hidden |= bool((~visible).any())
+        seen_after |= bool((visible & np.isfinite(env.last_push_s)).any())
+        env.step()
+    assert seen_hidden and seen_after
+
+
+def test_the_plants_filter_looks_the_commands_up_with_the_episodes_delay_when_the_tracker_estimates_it():
+    """With the tracker's online delay estimate the plant's filter takes the law's tilt in force
+    latency + servo lag before each frame (what the estimate settles on); without it, the
+    configured plate_cmd_delay_s."""
+    from ball_balance.policy.env import tracker_config
+
+    cfg = tracker_config()
+    assert cfg.estimate_plate_cmd_delay   # the configuration the policy is trained for
+    for estimate in (True, False):
+        tracker = dataclasses.replace(cfg, estimate_plate_cmd_delay=estimate, plate_cmd_delay_s=0.01)
+        env = PlateBatch(6, seed=4, duration_s=2.0, tracker_cfg=tracker)
+        env.reset()
+        want = env.latency + env.servo_lag if estimate else np.full(6, 0.01)
+        np.testing.assert_allclose(env.plate_cmd_delay_s, want)
+        while env.tick < 60:
+            env.step(tilt=np.random.default_rng(env.tick).normal(0.0, 0.05, (6, 2)))
+        t = env.time_s - 0.005
+        got = env._known_tilt(t)
+        for i in range(6):
+            j = min(int(np.floor((t - want[i]) / CONTROL_DT_S + 1e-9)), env.tick - 1)
+            np.testing.assert_array_equal(got[i], env.law_hist[i, :, j % env.hist_len])
