@@ -23,7 +23,9 @@ def test_batch_kalman_with_the_tilt_lever_is_the_trackers_filter():
         x, v = x + v * dt + 0.5 * accel * dt * dt, v + accel * dt
         if n == 100:
             v[1] += 0.15                                    # a push
-        z = x + lever + rng.normal(0, 0.001, (b, 2))
+        # detections a little better than the configured 1 mm: the running consistency stays well
+        # below MANEUVER_MAX_NIS before the push, so the push surely takes the hold under test
+        z = x + lever + rng.normal(0, 0.0007, (b, 2))
         det = rng.random(b) >= 0.1
         pos, vel, valid = batch.step(t, z, det, accel, lever)
         for i in np.flatnonzero(det):
