@@ -30,14 +30,6 @@ def _six(value) -> str | None:
     return None if len(value) == 6 else "must have 6 elements (one per joint)"
 
 
-def _adapt_time_constant(default_s: float) -> Param:
-    """Per controller: the PID's feed-forward needs the plant gain within seconds (5 s left it
-    at 0.8 of a half-gravity plant 5 s into a circle), the MPC's plan did better on full_dr
-    with the slower estimate (docs/control.md)."""
-    return Param("adapt_time_constant_s", default_s, "time constant with which fits move the plant estimate",
-                 "s", 0.05, 60.0, read_only=True)
-
-
 REFERENCE_SCHEMA = [
     Param("reference_kind", "stationary", "what the ball tracks", choices=KINDS),
     Param("reference_radius_m", 0.10, "circle/figure-eight radius, square half side, step amplitude", "m",
@@ -72,7 +64,6 @@ MPC_SCHEMA = [
     Param("mpc_r_du", MpcConfig.r_du, "weight on tilt change per step", "1/rad^2", 0.0, 1e6, read_only=True),
     Param("max_tilt_rate_rad_s", MpcConfig.du_max_rad_s, "tilt-rate constraint", "rad/s", 0.01, 20.0,
           read_only=True),
-    _adapt_time_constant(EstimatorConfig.tau_s),
 ]
 
 COMMON_SCHEMA = [
@@ -100,12 +91,17 @@ COMMON_SCHEMA = [
           "online (plate not level, tilt offset) and cancel it", read_only=True),
     Param("adapt_window_s", EstimatorConfig.window_s, "ball-state window of the plant estimate's least-squares "
           "fit", "s", 0.3, 10.0, read_only=True),
+    Param("adapt_time_constant_s", EstimatorConfig.tau_s, "time constant with which fits move the plant "
+          "estimate", "s", 0.05, 60.0, read_only=True),
     Param("adapt_gain_min_ratio", EstimatorConfig.gain_min_ratio, "lower bound of the estimated k*g, times "
           "rolling_factor * gravity_m_s2", "", 0.05, 1.0, read_only=True),
     Param("adapt_gain_max_ratio", EstimatorConfig.gain_max_ratio, "upper bound of the estimated k*g, times "
           "rolling_factor * gravity_m_s2", "", 1.0, 10.0, read_only=True),
     Param("adapt_max_disturbance_m_s2", EstimatorConfig.offset_max_m_s2, "bound on the estimated disturbance "
           "per axis", "m/s^2", 0.0, 5.0, read_only=True),
+    Param("engage_accel_m_s2", PipelineConfig.engage_accel_m_s2, "at each fresh engagement, lead the ball "
+          "from where it is into the reference, no faster than this acceleration (0: the reference at once, "
+          "however far the ball)", "m/s^2", 0.0, 10.0, read_only=True),
     Param("max_prediction_s", 0.5, "never extrapolate the state further than this", "s", 0.0, 1.0,
           read_only=True),
     Param("min_markers", 3, "markers needed in a frame to act when the tracker does not publish /plate_pose "
@@ -152,7 +148,6 @@ PID_ADAPT_SCHEMA = [
           "PID's feedback down by the configured over the estimated k*g (never up: on a weaker plant it keeps "
           "its tuned gains); false: the estimate sets only the feed-forward and the disturbance tilt",
           read_only=True),
-    _adapt_time_constant(2.0),
 ]
 
 PID_SCHEMA = COMMON_SCHEMA + REFERENCE_SCHEMA + PID_GAINS_SCHEMA + PID_ADAPT_SCHEMA
@@ -191,7 +186,7 @@ def pipeline_config(values: Mapping[str, Any], controller: str) -> PipelineConfi
         estimate_delay=values["estimate_actuation_delay"],
         delay_min_window_s=values["actuation_delay_min_window_s"],
         delay_replace_start=values["actuation_delay_replace_start"],
-        max_prediction_s=values["max_prediction_s"],
+        max_prediction_s=values["max_prediction_s"], engage_accel_m_s2=values["engage_accel_m_s2"],
         max_tilt_rad=values["max_tilt_cmd_rad"], brake_on_loss_s=values["brake_on_loss_s"],
         brake_time_constant_s=values["brake_time_constant_s"],
         pid=pid_gains(values) if controller == "pid" else PidGains(),

@@ -46,7 +46,7 @@ class EstimatorConfig:
     adapt_gain: bool = True             # estimate k_g online (else the nominal value is kept)
     adapt_offset: bool = True           # estimate the constant disturbance d
     window_s: float = 3.0               # regression window (long enough for the tilt to vary in it)
-    tau_s: float = 5.0                  # blend time constant of the estimate (slow: the plant is constant)
+    tau_s: float = 2.0                  # blend time constant of the estimate (docs/control.md)
     gain_min_ratio: float = 0.3         # k_g within [min, max] x nominal
     gain_max_ratio: float = 2.5
     offset_max_m_s2: float = 0.6        # |d| per axis at most (0.6 m/s^2: ~0.1 rad of tilt at 1 g)

@@ -48,7 +48,7 @@ class MpcConfig:
     q_pos: float = 150.0               # weight on position error [1/m^2]
     q_vel: float = 10.0                # weight on velocity error [1/(m/s)^2]
     r_u: float = 1.0                   # weight on (u - u_ff) [1/rad^2]
-    r_du: float = 400.0                # weight on (u_k - u_{k-1}) [1/rad^2]
+    r_du: float = 600.0                # weight on (u_k - u_{k-1}) [1/rad^2]
     u_max_rad: float = 0.15            # tilt limit
     du_max_rad_s: float = 1.5          # tilt-rate limit
     k_g: float = 0.6 * 9.81            # rolling factor * gravity [m/s^2 per rad]

@@ -28,7 +28,7 @@ from ball_balance.control.kinematics import PlateKinematics
 from ball_balance.control.mpc import MpcConfig, PlateMpc, preview
 from ball_balance.control.pid import PidGains, PlatePid
 from ball_balance.control.prediction import DelayEstimator, TiltHistory, predict
-from ball_balance.control.references import Reference, RefSample
+from ball_balance.control.references import Delayed, Reference, RefSample
 from ball_balance.control.safety import BallObservation, Mode, SafetyConfig, SafetySupervisor
 
 
@@ -44,6 +44,7 @@ class PipelineConfig:
     delay_replace_start: bool = True        # the first estimate replaces actuation_delay_s (a guess)
     max_prediction_s: float = 0.3           # never extrapolate further than this
     reference_resume_s: float = 2.0         # re-engaging within this of a loss continues the reference
+    engage_accel_m_s2: float = 0.2          # at a fresh engagement, lead the ball in from where it is (0: off)
     max_tilt_rad: float = 0.15              # per-axis tilt limit of the pipeline's own commands (braking)
     brake_on_loss_s: float = 0.6            # after losing the ball, brake its dead-reckoned motion this long (0: hold)
     brake_time_constant_s: float = 0.2      # braking decelerates the predicted velocity with this time constant
@@ -182,10 +183,14 @@ class ControlPipeline:
         self.u = np.zeros(2)
         self.t_engaged = 0.0
         self.t_last_active = -math.inf   # last tick ENGAGED or HOLDING
+        # the reference the law follows: self.reference, led in from the ball's position after a
+        # fresh engagement (engage_accel_m_s2); None until the first state after one
+        self._tracked: Optional[Reference] = reference
         self.refused_count = 0
 
     def set_reference(self, reference: Reference) -> None:
         self.reference = reference
+        self._tracked = reference
 
     @property
     def mpc(self) -> Optional[PlateMpc]:
@@ -224,6 +229,8 @@ class ControlPipeline:
             self.reset_controllers()
             if mode == Mode.ENGAGED and now_s - self.t_last_active > self.cfg.reference_resume_s:
                 self.t_engaged = now_s   # a fresh start: the reference begins again
+                if self.cfg.engage_accel_m_s2 > 0.0:
+                    self._tracked = None  # led in from the ball at the first state
         if mode in (Mode.ENGAGED, Mode.HOLDING):
             self.t_last_active = now_s
         ref = predicted = None
@@ -285,6 +292,17 @@ class ControlPipeline:
         u = np.clip(u, -cfg.max_tilt_rad, cfg.max_tilt_rad)
         return u, np.concatenate([pos, vel])
 
+    def _lead_in(self, obs: BallObservation) -> Reference:
+        """The reference led in from the ball's position: a smoothstep from there into the
+        reference (references.Delayed), long enough that its acceleration, 6 d / T^2 at the start
+        for a distance d, stays within engage_accel_m_s2. Started where the reference is, a ball
+        far from it got full tilt at once, before the delay and plant estimates had any data:
+        a strong plant with a long unknown delay then threw it off the plate."""
+        ball = np.array([obs.x, obs.y])
+        distance_m = float(np.linalg.norm(self.reference.sample(0.0).p - ball))
+        lead_s = math.sqrt(6.0 * distance_m / self.cfg.engage_accel_m_s2)
+        return Delayed(self.reference, 0.0, ball, lead_s) if lead_s > 0.0 else self.reference
+
     def _control(self, now_s: float, obs: BallObservation):
         cfg = self.cfg
         pos = np.array([obs.x, obs.y])
@@ -299,9 +317,11 @@ class ControlPipeline:
         if cfg.latency_compensation:
             horizon = min(now_s + delay, stamp + cfg.max_prediction_s)
             pos, vel = predict(pos, vel, stamp, horizon, self.history, k_g, delay, offset)
+        if self._tracked is None:
+            self._tracked = self._lead_in(obs)
         t_ref = now_s - self.t_engaged + (delay if cfg.latency_compensation else 0.0)
-        ref = self.reference.sample(t_ref)
-        ctx = TiltContext(now_s=now_s, t_ref_s=t_ref, pos_m=pos, vel_m_s=vel, ref=ref, reference=self.reference,
+        ref = self._tracked.sample(t_ref)
+        ctx = TiltContext(now_s=now_s, t_ref_s=t_ref, pos_m=pos, vel_m_s=vel, ref=ref, reference=self._tracked,
                           u_prev=self.u.copy(), dt_s=cfg.control_period_s, k_g=k_g,
                           accel_offset_m_s2=offset, obs=obs)
         u = np.asarray(self.law.tilt(ctx), dtype=float)

@@ -1,6 +1,7 @@
 """The whole tick (safety, prediction, controller, IK, shaping) on a plant driven by the
 tilt the commanded joints actually produce."""
 import math
+from collections import deque
 
 import numpy as np
 import pytest
@@ -92,8 +93,8 @@ def test_a_registered_tilt_law_drives_the_plate_through_the_same_pipeline():
     try:
         kin = PlateKinematics(Chain.from_urdf(URDF.read_text(), UR_JOINTS), LEVEL_HOME,
                               shaper=ShaperConfig(max_joint_step_rad=STEP))
-        pipe = ControlPipeline(PipelineConfig(controller="constant_for_test", law_params={"x": 1}), kin,
-                               Stationary())
+        pipe = ControlPipeline(PipelineConfig(controller="constant_for_test", law_params={"x": 1},
+                                              engage_accel_m_s2=0.0), kin, Stationary())
         plant = DelayedPlant(x0=(0.02, 0.0))
         q = np.array(LEVEL_HOME)
         for i in range(20):
@@ -174,3 +175,53 @@ def test_both_controllers_adapt_to_a_weaker_plant_and_a_tilted_plate(controller)
     adapted, pipe = _circle_error_on_a_half_gain_plant(controller, adapt=True)
     assert abs(pipe.plant.k_g - 0.5 * K_G) < 0.15 * K_G
     assert adapted < 0.6 * fixed
+
+
+def test_a_fresh_engagement_leads_the_reference_in_from_the_ball():
+    register_tilt_law("constant_for_lead_in", _ConstantLaw)
+    try:
+        pipe = _pipeline("constant_for_lead_in", engage_accel_m_s2=0.2, latency_compensation=False)
+        ball = (0.06, -0.045)                               # 75 mm from the centre
+        lead_s = math.sqrt(6.0 * 0.075 / 0.2)               # 1.5 s: 6 d / T^2 = 0.2 m/s^2
+        q = np.array(LEVEL_HOME)
+        for i in range(int((lead_s + 1.0) / DT)):
+            q = pipe.step(i * DT, _observe(DelayedPlant(x0=ball)), q).q_cmd
+        refs = [ctx.ref for ctx in pipe.law.contexts]
+        np.testing.assert_allclose(refs[0].p, ball, atol=1e-9)        # starts at the ball, at rest
+        np.testing.assert_allclose(refs[0].v, 0.0, atol=1e-9)
+        assert max(np.linalg.norm(r.a) for r in refs) <= 0.2 + 1e-9
+        steps = [np.linalg.norm(b.p - a.p) for a, b in zip(refs, refs[1:])]
+        assert max(steps) < 0.2 * DT                        # no jump on the way
+        np.testing.assert_allclose(refs[-1].p, (0.0, 0.0), atol=1e-12)   # then the reference itself
+        assert tuple(pipe.reference.sample(0.0).p) == (0.0, 0.0)         # which is unchanged
+    finally:
+        TILT_LAWS.pop("constant_for_lead_in")
+
+
+@pytest.mark.parametrize("controller", ["pid", "mpc"])
+def test_a_strong_plant_with_a_long_unknown_delay_is_not_thrown_at_engagement(controller):
+    """Twice the model's k g and 0.18 s from command to plate (the arm's joints show it that
+    late), the ball released 86 mm out: led in, it never rolls farther out than it started, and
+    the tilt stays small while the delay and gain estimates fill; at once, full tilt throws it
+    beyond its start before they have data."""
+    def run(engage_accel_m_s2):
+        pipe = _pipeline(controller, engage_accel_m_s2=engage_accel_m_s2)
+        plant = DelayedPlant(x0=(0.07, -0.05), delay_s=0.18, k_g=2.0 * K_G)
+        q = np.array(LEVEL_HOME)
+        sent = deque([q.copy()] * int(round(0.18 / DT)))   # joint states: the command 0.18 s ago
+        farthest, first_tilt = 0.0, 0.0
+        for i in range(int(8.0 / DT)):
+            result = pipe.step(i * DT, _observe(plant), sent[0])
+            sent.append(result.q_cmd.copy())
+            sent.popleft()
+            tilt = pipe.kin.tilt_of(result.q_cmd) if result.mode != Mode.HOMING else (0.0, 0.0)
+            plant.advance(tilt, DT)
+            farthest = max(farthest, float(np.linalg.norm(plant.p)))
+            if i * DT < 1.0:
+                first_tilt = max(first_tilt, float(np.max(np.abs(result.u))))
+        return farthest, first_tilt, float(np.linalg.norm(plant.p))
+
+    farthest, first_tilt, final = run(0.2)
+    assert farthest <= np.hypot(0.07, -0.05) + 1e-3 and first_tilt < 0.12 and final < 0.003
+    farthest_at_once, first_tilt_at_once, _ = run(0.0)
+    assert farthest_at_once > farthest + 0.02 and first_tilt_at_once == pytest.approx(0.15)
