@@ -44,7 +44,7 @@ from ..manager.loop import ControlLoop
 from ..manager.resource_manager import ResourceError
 from ..manager.switching import STRICT, SwitchError
 from ..parameters import Param, ParameterError, declare_parameters
-from ..realtime import lock_memory, set_cpu_affinity, set_realtime_priority
+from ..realtime import lock_memory, set_cpu_affinity, set_process_realtime_priority
 from .services import ControllerManagerServices
 from .statistics_publisher import StatisticsRegistry
 
@@ -76,8 +76,10 @@ SCHEMA = (
     Param("executor_on_loop_cpu", True, "the executor thread and the loop thread share one CPU (the first of "
           "cpu_affinity; with [-1] the last CPU the process may use): at its lower priority the executor cannot "
           "run, so cannot take Python's interpreter lock, while a cycle runs"),
-    Param("executor_thread_priority", 40, "SCHED_FIFO priority of the executor thread (0 = normal): a "
-          "preempted thread holding Python's interpreter lock would stall the loop", min=0, max=99),
+    Param("executor_thread_priority", 40, "SCHED_FIFO priority of the executor thread and of the threads "
+          "started before it, the middleware's receive threads among them (0 = normal): a preempted thread "
+          "holding Python's interpreter lock would stall the loop, and a starved receive thread delays "
+          "commands", min=0, max=99),
     Param("gil_switch_interval", 2e-5, "Python's thread switch interval: how long the loop waits for the "
           "interpreter after waking before it asks for it", unit="s", min=1e-6, max=0.01),
     Param("hold_interpreter", True, "the loop keeps Python's interpreter lock from its wake-up until it "
@@ -255,8 +257,14 @@ class ControllerManagerNode(Node):
             self.cm.switch_controller(started, [], STRICT)
         except SwitchError as error:
             self.get_logger().error(f"cannot activate {activate}: {error}")
-        if self.params["executor_thread_priority"] > 0:  # this callback runs in the executor thread
-            set_realtime_priority(self.params["executor_thread_priority"])
+        if self.params["executor_thread_priority"] > 0:
+            # this callback runs in the executor thread; the middleware's threads, started with
+            # the node, receive what the executor runs (command topics, services) and answer
+            # discovery: normally scheduled beside a SCHED_FIFO camera chain that filled both
+            # cores of a slow machine, they left the joint commands seconds late and a new
+            # subscriber (a bag recorder) unmatched for its whole recording. The loop thread,
+            # started below, sets its own priority.
+            set_process_realtime_priority(self.params["executor_thread_priority"])
         loop_cpus = [cpu for cpu in self.params["cpu_affinity"] if cpu >= 0]
         if self.params["executor_on_loop_cpu"]:
             loop_cpus = [shared_loop_cpu(loop_cpus)]
