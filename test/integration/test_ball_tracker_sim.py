@@ -10,6 +10,7 @@ from harness import ROOT, executable
 
 pytestmark = pytest.mark.integration
 MAX_TRUTH_GAP_NS = 30_000_000
+COMPARED = 5   # frames compared with the truth
 
 
 def stamp_ns(msg):
@@ -23,9 +24,15 @@ def test_tracker_on_the_simulated_camera_matches_the_truth(launcher, graph, tmp_
     truths = {}
     graph.node.create_subscription(BallState, "/sim/ball_truth", lambda m: truths.__setitem__(stamp_ns(m), m),
                                    qos_profile_sensor_data)
-    states = graph.collect(BallState, "/ball_state", count=5, qos=qos_profile_sensor_data, timeout=90,
-                           predicate=lambda m: m.ball_found)
+    # the truth subscription matches the simulator in its own time (seconds on a loaded machine):
+    # compare only frames captured after the first truth sample arrived
+    graph.spin_until(lambda: len(truths) >= 10, 90, "/sim/ball_truth")
+    first_truth_ns = min(truths)
+    states = graph.collect(BallState, "/ball_state", count=COMPARED * 2, qos=qos_profile_sensor_data, timeout=90,
+                           predicate=lambda m: m.ball_found and stamp_ns(m) > first_truth_ns)
+    graph.spin_for(0.5)   # the truth samples just after the last frames
     assert tracker.running
+    compared = 0
     for state in states:
         assert state.tracking_valid and state.markers_found == 4 and state.header.frame_id == "plate_center"
         # truth comes at its own rate (100 Hz) over best effort, so a busy machine may lose
@@ -33,7 +40,11 @@ def test_tracker_on_the_simulated_camera_matches_the_truth(launcher, graph, tmp_
         # capture stamp with its velocity (the ball's acceleration, < 1 m/s^2, adds < 0.5 mm)
         nearest = min(truths, key=lambda t: abs(t - stamp_ns(state)))
         dt = (stamp_ns(state) - nearest) * 1e-9
-        assert abs(dt) < MAX_TRUTH_GAP_NS * 1e-9, f"no truth sample within {MAX_TRUTH_GAP_NS / 1e6:.0f} ms"
+        if abs(dt) >= MAX_TRUTH_GAP_NS * 1e-9:
+            continue   # the samples around this frame were lost
         truth = truths[nearest]
         assert abs(state.x - (truth.x + truth.vx * dt)) < 0.002
         assert abs(state.y - (truth.y + truth.vy * dt)) < 0.002
+        compared += 1
+    assert compared >= COMPARED, f"only {compared} of {len(states)} frames had a truth sample within " \
+                                 f"{MAX_TRUTH_GAP_NS / 1e6:.0f} ms"
