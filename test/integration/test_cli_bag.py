@@ -93,6 +93,7 @@ def record_the_simulated_graph(launcher, graph, ros_domain, tmp_path):
     result = launcher.run([executable("ros2py"), "bag", "record", "-a", "-o", str(bag), "--duration", str(RECORD_S)],
                           timeout=RECORD_S + 90, env=environment)
     assert result.returncode == 0, result.stderr
+    print(result.stderr)   # the recorder's subscriptions and progress lines, shown if a check fails
     assert reference.wait(timeout=60) == 0, reference.output()
     received = json.loads(reference.output().strip().splitlines()[-1])
     return bag, environment, (sim, tracker), received
