@@ -24,12 +24,15 @@ import math
 import os
 import re
 import signal
+import time
 from pathlib import Path
 from typing import Callable, List, Optional, Tuple
 
 CASES = ("none", "rogue_far", "rogue_old", "rogue_ahead", "rogue_elsewhere", "kill_manager", "hand_two_markers")
 ROGUES = {"rogue_far": dict(x=5.0), "rogue_old": dict(stamp_offset_s=-10.0),
           "rogue_ahead": dict(stamp_offset_s=10.0), "rogue_elsewhere": dict(x=-0.1, y=0.1)}
+ROGUE_NODE = "fault_rogue_ball_state"
+ROGUE_NAME_WAIT_S = 30.0   # wall seconds a rogue may keep publishing after its window until it is named
 RELAY_TOPIC = "/fault_injection/image_raw"
 HIDDEN_MARKERS = (0, 1)
 
@@ -76,7 +79,7 @@ class _Rogue:
         from ball_tracker_msgs.msg import BallState
         from rclpy.qos import qos_profile_sensor_data
 
-        self.node = rclpy.create_node("fault_rogue_ball_state", context=context)
+        self.node = rclpy.create_node(ROGUE_NODE, context=context)
         self.executor = executor
         executor.add_node(self.node)
         pub = self.node.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
@@ -214,8 +217,6 @@ def run_case(graph, case: str, controller_output: Callable[[], str], sim_output:
         if pid is None:
             raise RuntimeError("ros2_control_node's pid not found in sim_arm.sh's output")
         os.kill(pid, signal.SIGKILL)
-        import time
-
         n_before, t_kill = len(cmds), time.monotonic()
         graph.spin_until(lambda: "commands stopped" in controller_output() or time.monotonic() - t_kill > 8.0, 10)
         stopped_after = time.monotonic() - t_kill
@@ -230,6 +231,14 @@ def run_case(graph, case: str, controller_output: Callable[[], str], sim_output:
         return row
     try:
         graph.spin_until(lambda: any(dropped) or sim_now() >= t_fault[0] + fault_s, 120, "the fault window")
+        if rogue is not None:
+            # the controller names a second publisher once the ROS graph tells it the node's name,
+            # which on a loaded machine can take longer than the fault window: the rogue keeps
+            # publishing until it is named or ROGUE_NAME_WAIT_S more have passed
+            named_by = time.monotonic() + ROGUE_NAME_WAIT_S
+            graph.spin_until(lambda: any(dropped) or ROGUE_NODE in controller_output()
+                             or time.monotonic() > named_by, ROGUE_NAME_WAIT_S + 5.0, "the rogue named")
+            fault_s = max(fault_s, sim_now() - t_fault[0])
     finally:
         if rogue is not None:
             rogue.close()
