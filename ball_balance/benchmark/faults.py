@@ -172,7 +172,7 @@ def run_case(graph, case: str, controller_output: Callable[[], str], sim_output:
              settle_s: float = 6.0, fault_s: float = 2.0, after_s: float = 5.0,
              engage_timeout_s: float = 180.0) -> dict:
     """Inject `case` into the running graph and watch it; `graph` has .node, .executor, .context,
-    .spin_until (test/harness.py's Graph). Returns the row of the table."""
+    .spin_until, .wait_until (test/harness.py's Graph). Returns the row of the table."""
     from ball_tracker_msgs.msg import BallState
     from geometry_msgs.msg import PointStamped, Vector3Stamped
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -235,9 +235,7 @@ def run_case(graph, case: str, controller_output: Callable[[], str], sim_output:
             # the controller names a second publisher once the ROS graph tells it the node's name,
             # which on a loaded machine can take longer than the fault window: the rogue keeps
             # publishing until it is named or ROGUE_NAME_WAIT_S more have passed
-            named_by = time.monotonic() + ROGUE_NAME_WAIT_S
-            graph.spin_until(lambda: any(dropped) or ROGUE_NODE in controller_output()
-                             or time.monotonic() > named_by, ROGUE_NAME_WAIT_S + 5.0, "the rogue named")
+            graph.wait_until(lambda: any(dropped) or ROGUE_NODE in controller_output(), ROGUE_NAME_WAIT_S)
             fault_s = max(fault_s, sim_now() - t_fault[0])
     finally:
         if rogue is not None:

@@ -6,7 +6,7 @@ publisher; killing the controller manager stops the controller's commands with a
 saying why. benchmarks/fault_injection.py runs the same cases with the camera and tracker."""
 import pytest
 
-from ball_balance.benchmark.faults import graph_commands, run_case
+from ball_balance.benchmark.faults import ROGUE_NODE, graph_commands, run_case
 from harness import ROOT
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
@@ -26,7 +26,7 @@ def test_a_rogue_ball_state_publisher_does_not_drop_the_ball(launcher, graph, co
     row = run_case(graph, case, ctrl.output, sim.output)
     log = ctrl.output()
     assert row["kept"] == "yes", f"{row}\n{log[-3000:]}"
-    assert "fault_rogue_ball_state" in log, "the second publisher was not named"
+    assert ROGUE_NODE in log, "the second publisher was not named"
     # the rogue's own effect: no tilt to the clip (it went there within 0.1 s before), judged
     # while it publishes: at load 40 the starved PID went stale, home and back well after it
     # had stopped and then reached the clip; the ball kept on the plate covers that time
