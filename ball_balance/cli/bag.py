@@ -12,7 +12,10 @@ Recording, as rosbag2 does it:
   (metadata.yaml: all profiles seen during the recording);
 - the subscriptions are raw (the publisher's CDR bytes, no decoding) with a keep-last depth of
   DEPTH, emptied by a taker thread every TAKE_PERIOD_S that only queues the bytes; a writer
-  thread appends them to the file, so writing never delays taking messages out of DDS.
+  thread owns the MCAP file and appends them, so writing never delays taking messages out of
+  DDS, and the main thread (graph polling, --duration, progress) never waits for the file;
+- what is taken but not yet written is bounded (--max-cache-size, as rosbag2's): when the
+  writer falls behind, new messages are dropped and counted instead of memory growing.
 """
 from __future__ import annotations
 
@@ -34,6 +37,7 @@ from ball_balance.cli.bag_format import (
     ros_distro_of,
 )
 from ball_balance.cli.errors import CliError
+from ball_balance.cli.mcap_write import McapWriter
 from ball_balance.cli.session import Session, absolute_name, is_hidden
 
 # Keep-last depth of the recording subscriptions: 60 Hz images are taken out of DDS as they
@@ -41,6 +45,46 @@ from ball_balance.cli.session import Session, absolute_name, is_hidden
 DEPTH = 100
 POLL_S = 0.5  # how often the graph is re-read for new topics and changed publishers
 TAKE_PERIOD_S = 0.005  # how often the subscriptions are emptied (500 Hz topics: 2-3 messages each time)
+# At most this many messages of one topic per round: a topic whose messages arrive as fast as a
+# starved taker takes them (camera frames on a loaded machine) must not keep the others waiting
+# until their keep-last queues overflow (camera_info was lost that way while frames were kept).
+TAKE_BURST = 10
+
+
+class WriteCache:
+    """Messages taken but not yet written, at most max_bytes of them (0: no limit).
+
+    One thread offers (the taker), one thread gets (the writer); each counts only its own
+    bytes, so the two need no lock. A message that would overflow the cache is refused: the
+    writer has fallen behind, and a bounded loss beats a recorder that eats the machine's memory.
+    """
+
+    def __init__(self, max_bytes: int):
+        self.max_bytes = max_bytes
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._bytes_in = 0   # taker thread only
+        self._bytes_out = 0  # writer thread only
+
+    @property
+    def queued_bytes(self) -> int:
+        return self._bytes_in - self._bytes_out
+
+    def offer(self, item: tuple, size_bytes: int) -> bool:
+        """Queue item (True), or refuse it (False) when it does not fit."""
+        if self.max_bytes and self.queued_bytes + size_bytes > self.max_bytes and self.queued_bytes > 0:
+            return False
+        self._bytes_in += size_bytes
+        self._queue.put((item, size_bytes))
+        return True
+
+    def close(self) -> None:
+        """The writer's get() returns None once everything queued before this is written."""
+        self._queue.put((None, 0))
+
+    def get(self) -> Optional[tuple]:
+        item, size_bytes = self._queue.get()
+        self._bytes_out += size_bytes
+        return item
 
 
 def offered_profiles(publishers) -> List[dict]:
@@ -67,7 +111,8 @@ class _Topic:
         self.policies: Optional[tuple] = None
         self.profiles: List[dict] = []
         self.type_hash = ""
-        self.count = 0
+        self.count = 0    # written (writer thread)
+        self.dropped = 0  # refused by a full cache (taker thread)
 
     def metadata(self) -> dict:
         return {"name": self.name, "type": self.type_name, "serialization_format": "cdr",
@@ -78,24 +123,26 @@ class Recorder:
     """Subscribes to the selected topics as their publishers appear; one MCAP file."""
 
     def __init__(self, session: Session, folder: str, topics: List[str], record_all: bool,
-                 include_unpublished: bool = False):
-        from mcap.writer import CompressionType, Writer
-
+                 include_unpublished: bool, max_cache_bytes: int):
         self.session, self.folder, self.record_all = session, folder, record_all
         self.include_unpublished = include_unpublished
         self.wanted = [absolute_name(t) for t in topics]
         self.file_name = f"{os.path.basename(os.path.normpath(folder))}_0.mcap"
         os.makedirs(folder)
         self._stream = open(os.path.join(folder, self.file_name), "wb")
-        self.writer = Writer(self._stream, compression=CompressionType.NONE)
+        # The MCAP writer (mcap_write.py: no copies of the messages' bytes), its schemas and
+        # channels belong to the writer thread; the main thread touches them only after that
+        # thread has ended. A lock shared with the per-message writes kept the main thread's
+        # graph polling, and so --duration, waiting for whole seconds under load.
+        self.writer = McapWriter(self._stream)
         self.writer.start(profile="ros2", library="ros2py bag record (ball_balance)")
-        self._lock = threading.Lock()  # the MCAP writer and the topic table (writer thread, main thread)
         self.schemas: Dict[str, int] = {}
+        self._lock = threading.Lock()  # topics' offered profiles and type hashes (main and writer thread)
         self.topics: Dict[str, _Topic] = {}
         self.events: List[str] = []  # lines for the user: subscriptions made and re-matched
         self.first_ns: Optional[int] = None
         self.last_ns: Optional[int] = None
-        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self.cache = WriteCache(max_cache_bytes)
         self._stop = threading.Event()
         self._spinner = threading.Thread(target=self._take, name="bag-take", daemon=True)
         self._writer_thread = threading.Thread(target=self._drain, name="bag-write", daemon=True)
@@ -119,8 +166,6 @@ class Recorder:
                     continue  # as rosbag2: wait for a publisher (its QoS and type hash)
                 topic = self.topics[name] = _Topic(name, types[0])
             self._learn(topic, publishers)
-            if topic.channel is None and topic.type_hash:
-                self._register(topic)
             wanted = matching_policies(publishers)
             if topic.policies != wanted and (publishers or topic.subscription is None):
                 if topic.subscription is None:
@@ -139,17 +184,15 @@ class Recorder:
                 topic.type_hash = str(publishers[0].topic_type_hash)
 
     def _register(self, topic: _Topic) -> None:
-        """The topic's schema and channel, with what its publishers offer (under the lock)."""
+        """The topic's schema and channel, with what its publishers offer (writer thread)."""
+        if topic.type_name not in self.schemas:
+            self.schemas[topic.type_name] = self.writer.register_schema(
+                name=topic.type_name, encoding="ros2msg", data=message_definition(topic.type_name).encode())
         with self._lock:
-            if topic.channel is not None:
-                return
-            if topic.type_name not in self.schemas:
-                self.schemas[topic.type_name] = self.writer.register_schema(
-                    name=topic.type_name, encoding="ros2msg", data=message_definition(topic.type_name).encode())
-            topic.channel = self.writer.register_channel(
-                topic=topic.name, message_encoding="cdr", schema_id=self.schemas[topic.type_name],
-                metadata={"offered_qos_profiles": dump_yaml(topic.profiles) if topic.profiles else "",
-                          "topic_type_hash": topic.type_hash})
+            metadata = {"offered_qos_profiles": dump_yaml(topic.profiles) if topic.profiles else "",
+                        "topic_type_hash": topic.type_hash}
+        topic.channel = self.writer.register_channel(
+            topic=topic.name, message_encoding="cdr", schema_id=self.schemas[topic.type_name], metadata=metadata)
 
     def _subscribe(self, topic: _Topic, policies: tuple) -> None:
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -169,21 +212,21 @@ class Recorder:
 
     # ---- threads ---------------------------------------------------------------------------
     def _take(self) -> None:
-        """Taker thread: every TAKE_PERIOD_S, take every waiting message of every topic.
+        """Taker thread: every TAKE_PERIOD_S, take the waiting messages of every topic in turn.
 
         rclpy's executor costs tens of microseconds per wake-up and callback; at the simulated
         graph's ~1500 messages/s that kept the recorder's DDS receive thread from the CPU on a
         loaded machine, and camera frames were lost (244 of 249 kept where a plain subscriber
         of the camera alone kept 292 of 292). Polling the subscriptions costs a C call per
         message; the keep-last DEPTH queues absorb the period."""
-        put = self._queue.put
+        offer = self.cache.offer
         while not self._stop.is_set():
             started = time.monotonic()
             for topic in list(self.topics.values()):
                 subscription = topic.subscription
                 if subscription is None:
                     continue
-                while True:
+                for _ in range(TAKE_BURST):
                     try:
                         with subscription.handle:
                             taken = subscription.handle.take_message(subscription.msg_type, True)
@@ -191,39 +234,45 @@ class Recorder:
                         break
                     if taken is None:
                         break
-                    put((topic.name, taken[0], time.time_ns(), taken[1].get("source_timestamp", 0)))
+                    data = taken[0]
+                    if not offer((topic, data, time.time_ns(), taken[1].get("source_timestamp", 0)), len(data)):
+                        topic.dropped += 1
             self._stop.wait(max(0.0, TAKE_PERIOD_S - (time.monotonic() - started)))
 
     def _drain(self) -> None:
         while True:
-            item = self._queue.get()
+            item = self.cache.get()
             if item is None:
                 return
             self._write(*item)
 
-    def _write(self, name: str, data: bytes, receive_ns: int, source_ns: int) -> None:
-        topic = self.topics[name]
-        if topic.channel is None:  # an unpublished topic's first message: its publisher is known now
-            self._learn(topic, self.session.node.get_publishers_info_by_topic(name))
+    def _write(self, topic: _Topic, data: bytes, receive_ns: int, source_ns: int) -> None:
+        if topic.channel is None:
+            if not topic.type_hash:  # an unpublished topic's first message: its publisher is known now
+                self._learn(topic, self.session.node.get_publishers_info_by_topic(topic.name))
             self._register(topic)
-        with self._lock:
-            self.writer.add_message(channel_id=topic.channel, log_time=receive_ns,
-                                    publish_time=source_ns or receive_ns, data=data, sequence=topic.count)
-            topic.count += 1
-            self.first_ns = self.first_ns or receive_ns
-            self.last_ns = receive_ns
+        self.writer.add_message(channel_id=topic.channel, log_time=receive_ns,
+                                publish_time=source_ns or receive_ns, data=data, sequence=topic.count)
+        topic.count += 1
+        self.first_ns = self.first_ns or receive_ns
+        self.last_ns = receive_ns
 
     # ---- results ---------------------------------------------------------------------------
     @property
     def recorded(self) -> List[_Topic]:
-        return [t for t in self.topics.values() if t.channel is not None]
+        """The topics subscribed (or written) so far."""
+        return [t for t in self.topics.values() if t.channel is not None or t.subscription is not None]
 
     @property
     def total(self) -> int:
         return sum(t.count for t in self.topics.values())
 
+    @property
+    def dropped(self) -> int:
+        return sum(t.dropped for t in self.topics.values())
+
     def bag_info(self) -> dict:
-        recorded = self.recorded
+        recorded = [t for t in self.topics.values() if t.channel is not None]
         start = self.first_ns or time.time_ns()
         duration = (self.last_ns - self.first_ns) if self.first_ns else 0
         return bag_metadata(self.file_name, [t.metadata() for t in recorded], [t.count for t in recorded],
@@ -239,8 +288,11 @@ class Recorder:
                     self.session.node.destroy_subscription(topic.subscription)
                 except Exception:  # noqa: BLE001 - the context may already be shut down (Ctrl-C)
                     pass
-        self._queue.put(None)
+        self.cache.close()
         self._writer_thread.join()
+        for topic in self.recorded:  # subscribed, no message written: listed with a count of 0
+            if topic.channel is None and topic.type_hash:
+                self._register(topic)
         info = self.bag_info()
         # rosbag2's MCAP reader takes the metadata version (and so how to parse the channels'
         # offered_qos_profiles) from this record; `ros2 bag` reads metadata.yaml in the folder.
@@ -255,6 +307,8 @@ def progress_line(recorder: Recorder, elapsed_s: float, rates: Dict[str, float])
     per_topic = "  ".join(f"{t.name}: {t.count} ({rates.get(t.name, 0.0):.1f}/s)" for t in recorder.recorded)
     waiting = [t for t in recorder.wanted if t not in recorder.topics]
     tail = f"  waiting for a publisher on: {', '.join(waiting)}" if waiting else ""
+    if recorder.dropped:
+        tail += f"  lost {recorder.dropped} (the writer is behind: cache of {recorder.cache.max_bytes} bytes full)"
     return (f"[{elapsed_s:6.1f} s] {recorder.total} msgs in {len(recorder.recorded)} topics  "
             f"{per_topic}{tail}")
 
@@ -272,7 +326,8 @@ def cmd_record(args) -> int:
     signal.signal(signal.SIGTERM, _stop_on_sigterm)
     tty = sys.stderr.isatty()
     with Session(args.spin_time) as session:
-        recorder = Recorder(session, folder, args.topics, args.all, args.include_unpublished_topics)
+        recorder = Recorder(session, folder, args.topics, args.all, args.include_unpublished_topics,
+                            args.max_cache_size)
         print(f"Recording to '{folder}/{recorder.file_name}' (Ctrl-C to stop)", file=sys.stderr, flush=True)
         start = last_print = time.monotonic()
         last_counts: Dict[str, int] = {}
@@ -298,8 +353,10 @@ def cmd_record(args) -> int:
             pass
         finally:
             recorder.close()
+    lost = recorder.dropped
+    lost_text = f"; {lost} lost while the writer was behind (--max-cache-size)" if lost else ""
     print(("\n" if tty else "") + f"Recorded {recorder.total} messages on {len(recorder.recorded)} topics "
-          f"to '{folder}'", file=sys.stderr, flush=True)
+          f"to '{folder}'{lost_text}", file=sys.stderr, flush=True)
     return 0
 
 

@@ -26,6 +26,7 @@ QOS_DURABILITY = ["volatile", "transient_local", "system_default"]
 # the last node was seen 3.1 s after start, so the bound is above 3.1 + 2 s
 LIST_SPIN_TIME_S = 6.0
 WAIT_FOR_NODE_S = 5.0  # discovering a node or topic can take 2-3 s on a loaded machine
+MAX_CACHE_BYTES = 100 * 1024 * 1024  # bag record: rosbag2's default --max-cache-size (about 110 VGA frames)
 
 
 def _verb(subparsers, name: str, target: str, help: str):
@@ -141,6 +142,9 @@ def _simple_parsers(sub) -> None:
     p.add_argument("--include-unpublished-topics", action="store_true",
                    help="also subscribe to selected topics that have no publisher yet")
     p.add_argument("--duration", type=float, default=None, help="ros2py extension: stop after this many seconds")
+    p.add_argument("--max-cache-size", type=int, default=MAX_CACHE_BYTES, metavar="BYTES",
+                   help="messages taken but not yet written, at most (0: no limit); when the writer falls "
+                        "behind, newer ones are dropped and counted (default: %(default)s)")
     _spin_time(p)
     p = _verb(bag, "info", "bag:cmd_info", "print a summary of an MCAP bag (folder or .mcap file)")
     p.add_argument("bag_path")

@@ -99,3 +99,27 @@ def test_recorded_qos_profiles_are_jazzy_names_and_play_back_as_publishers():
     # metadata version 8 wrote the policies as integers
     old = publisher_qos(parse_offered_qos("- history: 3\n  depth: 0\n  reliability: 1\n  durability: 1\n"))
     assert (old.reliability.name, old.durability.name, old.depth) == ("RELIABLE", "TRANSIENT_LOCAL", 10)
+
+
+def test_the_write_cache_refuses_what_would_overflow_it_and_frees_what_was_written():
+    from ball_balance.cli.bag import WriteCache
+
+    frame = 921_600  # one 640x480 bgr8 camera frame
+    cache = WriteCache(max_bytes=2 * frame)
+    assert cache.offer(("frame", 1), frame) and cache.offer(("frame", 2), frame)
+    assert not cache.offer(("frame", 3), frame)  # the writer is behind: dropped, memory bounded
+    assert cache.queued_bytes == 2 * frame
+    assert cache.get() == ("frame", 1)
+    assert cache.queued_bytes == frame and cache.offer(("frame", 4), frame)
+    cache.close()
+    assert [cache.get(), cache.get(), cache.get()] == [("frame", 2), ("frame", 4), None]
+    assert cache.queued_bytes == 0
+
+
+def test_the_write_cache_takes_a_message_larger_than_itself_when_empty_and_is_unbounded_at_zero():
+    from ball_balance.cli.bag import WriteCache
+
+    small = WriteCache(max_bytes=1000)
+    assert small.offer(("map", 1), 5000) and not small.offer(("map", 2), 1)
+    unbounded = WriteCache(max_bytes=0)
+    assert all(unbounded.offer(("frame", i), 10 ** 9) for i in range(5))
