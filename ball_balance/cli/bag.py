@@ -52,11 +52,13 @@ TAKE_BURST = 10
 
 
 class WriteCache:
-    """Messages taken but not yet written, at most max_bytes of them (0: no limit).
+    """Messages taken but not yet written, at most max_bytes of them.
 
     One thread offers (the taker), one thread gets (the writer); each counts only its own
     bytes, so the two need no lock. A message that would overflow the cache is refused: the
     writer has fallen behind, and a bounded loss beats a recorder that eats the machine's memory.
+    An empty cache takes any message, so a message larger than the cache (or any message, with
+    max_bytes 0: rosbag2's "no cache") is still recorded when the writer keeps up.
     """
 
     def __init__(self, max_bytes: int):
@@ -71,7 +73,7 @@ class WriteCache:
 
     def offer(self, item: tuple, size_bytes: int) -> bool:
         """Queue item (True), or refuse it (False) when it does not fit."""
-        if self.max_bytes and self.queued_bytes + size_bytes > self.max_bytes and self.queued_bytes > 0:
+        if self.queued_bytes > 0 and self.queued_bytes + size_bytes > self.max_bytes:
             return False
         self._bytes_in += size_bytes
         self._queue.put((item, size_bytes))

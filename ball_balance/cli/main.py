@@ -143,8 +143,8 @@ def _simple_parsers(sub) -> None:
                    help="also subscribe to selected topics that have no publisher yet")
     p.add_argument("--duration", type=float, default=None, help="ros2py extension: stop after this many seconds")
     p.add_argument("--max-cache-size", type=int, default=MAX_CACHE_BYTES, metavar="BYTES",
-                   help="messages taken but not yet written, at most (0: no limit); when the writer falls "
-                        "behind, newer ones are dropped and counted (default: %(default)s)")
+                   help="messages taken but not yet written, at most (0: one message at a time); when the "
+                        "writer falls behind, newer ones are dropped and counted (default: %(default)s)")
     _spin_time(p)
     p = _verb(bag, "info", "bag:cmd_info", "print a summary of an MCAP bag (folder or .mcap file)")
     p.add_argument("bag_path")
