@@ -70,13 +70,28 @@ def read_channels(paths: List[str], selected: Optional[List[str]]) -> Dict[int, 
     return channels
 
 
-def _messages(paths: List[str], topics: List[str]):
-    """(file index, channel id, log time ns, data) of every message, in log time order per file."""
+def bag_start_ns(paths: List[str]) -> int:
+    """The log time of the bag's first message (of any topic), as --start-offset counts from it."""
+    from mcap.reader import make_reader
+
+    starts = []
+    for path in paths:
+        with open(path, "rb") as stream:
+            summary = make_reader(stream).get_summary()
+        if summary is not None and summary.statistics is not None and summary.statistics.message_count:
+            starts.append(summary.statistics.message_start_time)
+    return min(starts, default=0)
+
+
+def _messages(paths: List[str], topics: List[str], first_ns: Optional[int] = None):
+    """(file index, channel id, log time ns, data) of every message from log time first_ns on,
+    in log time order per file."""
     from mcap.reader import make_reader
 
     for index, path in enumerate(paths):
         with open(path, "rb") as stream:
-            for _, channel, message in make_reader(stream).iter_messages(topics=topics, log_time_order=True):
+            for _, channel, message in make_reader(stream).iter_messages(topics=topics, starting_at=first_ns,
+                                                                         log_time_order=True):
                 yield index, channel.id, message.log_time, message.data
 
 
@@ -85,6 +100,8 @@ def cmd_play(args) -> int:
 
     if args.rate <= 0:
         raise CliError(f"--rate must be > 0, got {args.rate}")
+    if args.start_offset < 0:
+        raise CliError(f"--start-offset must be >= 0, got {args.start_offset}")
     paths = mcap_files(args.bag_path)
     selected = [absolute_name(t) for t in args.topics] if args.topics else None
     channels = read_channels(paths, selected)
@@ -97,6 +114,7 @@ def cmd_play(args) -> int:
         if missing:
             raise CliError(f"not in the bag: {', '.join(missing)} (it holds: "
                            f"{', '.join(sorted({c.topic for c in read_channels(paths, None).values()}))})")
+    first_ns = bag_start_ns(paths) + int(args.start_offset * 1e9) if args.start_offset else None
     with Session(args.spin_time, name="ros2py_bag_play") as session:
         node = session.node
         publishers = {}
@@ -114,7 +132,8 @@ def cmd_play(args) -> int:
         try:
             played = 0
             while True:
-                played += _play_once(session, paths, topics, channels, args.rate, clock, args.playback_duration)
+                played += _play_once(session, paths, topics, channels, args.rate, clock, args.playback_duration,
+                                     first_ns)
                 if not args.loop or not session.context.ok():
                     break
         except KeyboardInterrupt:
@@ -141,10 +160,11 @@ class _ClockPublisher:
 
 
 def _play_once(session: Session, paths, topics, channels, rate: float, clock: Optional[_ClockPublisher],
-               duration_s: Optional[float] = None) -> int:
-    """Publish the bag once (its first duration_s seconds); the bag's time runs at `rate` times the wall clock."""
+               duration_s: Optional[float] = None, first_ns: Optional[int] = None) -> int:
+    """Publish the bag once from log time first_ns (None: its first message), for duration_s
+    seconds of it (None: to its end); the bag's time runs at `rate` times the wall clock."""
     start_wall = time.monotonic_ns()
-    start_bag = None
+    start_bag = first_ns
     played = 0
     if clock is not None:
         clock.next_ns = None  # the bag's time starts again (--loop)
@@ -165,12 +185,14 @@ def _play_once(session: Session, paths, topics, channels, rate: float, clock: Op
             target = bag_ns if clock is None else min(bag_ns, clock.next_ns)
             time.sleep(max(0.0, min(0.1, (target - now) / rate / 1e9)))
 
-    for index, channel_id, log_ns, data in _messages(paths, topics):
+    for index, channel_id, log_ns, data in _messages(paths, topics, first_ns):
         channel = channels.get((index, channel_id))
         if channel is None:
             continue
         if start_bag is None:
             start_bag = log_ns
+        if log_ns < start_bag:  # before --start-offset
+            continue
         if duration_s is not None and log_ns - start_bag > duration_s * 1e9:
             break
         wait_until(log_ns)

@@ -158,7 +158,9 @@ def _simple_parsers(sub) -> None:
     p.add_argument("-d", "--delay", type=float, default=0.0,
                    help="seconds to wait before playing (lets subscribers be discovered)")
     p.add_argument("--playback-duration", type=float, default=None,
-                   help="play only the first this many seconds of the bag")
+                   help="play only the first this many seconds of the bag (from --start-offset)")
+    p.add_argument("--start-offset", type=float, default=0.0, metavar="S",
+                   help="start playing this many seconds into the bag (default: 0)")
     _spin_time(p)
 
     interface = sub.add_parser("interface", help="show interface definitions").add_subparsers(

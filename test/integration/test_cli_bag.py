@@ -71,6 +71,13 @@ def read_topics(bag: Path, topics):
     return found
 
 
+def first_log_time_ns(bag: Path, topic: str) -> int:
+    from mcap.reader import make_reader
+
+    with open(bag / f"{bag.name}_0.mcap", "rb") as stream:
+        return next(message.log_time for _, _, message in make_reader(stream).iter_messages(topics=[topic]))
+
+
 def record_the_simulated_graph(launcher, graph, ros_domain, tmp_path):
     """A RECORD_S recording (-a) of the simulated arm with its camera and the tracker."""
     from ball_tracker_msgs.msg import BallState
@@ -195,6 +202,10 @@ def check_replay_drives_a_fresh_tracker_to_the_recorded_ball_state(bag: Path, en
 
     recorded = {header_stamp_ns(d): deserialize_message(d, BallState)
                 for d in read_topics(bag, ["/ball_state"])["/ball_state"]}
+    # play from the first recorded ball state: the recorder subscribes to the topics in the order
+    # it discovers them, and on a loaded machine /ball_state came 10-20 s after the camera
+    info = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    offset_s = (first_log_time_ns(bag, "/ball_state") - info["starting_time"]["nanoseconds_since_epoch"]) / 1e9
     tracker = launcher.start([executable("ball_tracker"), "--ros-args", "--params-file",
                               str(ROOT / "config" / "ball_tracker.yaml"), "-p", "use_sim_time:=true"],
                              name="replay_tracker", env=environment)
@@ -205,7 +216,7 @@ def check_replay_drives_a_fresh_tracker_to_the_recorded_ball_state(bag: Path, en
     graph.node.create_subscription(BallState, "/ball_state", replayed.append, qos_profile_sensor_data)
     player = launcher.start([executable("ros2py"), "bag", "play", str(bag), "--topics", "/camera/image_raw",
                              "/camera/camera_info", "/clock", "--delay", "3", "--playback-duration", str(REPLAY_S),
-                             "--rate", str(REPLAY_RATE)],
+                             "--rate", str(REPLAY_RATE), "--start-offset", f"{max(0.0, offset_s):.3f}"],
                             name="bag_play", env=environment)
     graph.spin_until(lambda: not player.running, REPLAY_S / REPLAY_RATE + 60, "bag play to finish")
     assert player.wait(timeout=5) == 0, player.output()
@@ -338,6 +349,21 @@ def test_play_loops_at_a_rate_with_the_bags_time_on_clock(launcher, graph, tmp_p
     advanced_s = sum(max(0, b[1] - a[1]) for a, b in zip(clocks, clocks[1:])) / 1e9
     ratio = advanced_s / (clocks[-1][0] - clocks[0][0])
     assert 2.5 < ratio < 5.0, ratio
+
+    # --start-offset 1.5: exactly the messages recorded from 1.5 s into the bag on, in order
+    from mcap.reader import make_reader
+    from rclpy.serialization import deserialize_message
+
+    with open(bag / "count_0.mcap", "rb") as stream:
+        later = [deserialize_message(m.data, String).data for _, _, m in make_reader(stream).iter_messages()
+                 if m.log_time >= bag_start_ns + 1_500_000_000]
+    received.clear()
+    player = launcher.start([executable("ros2py"), "bag", "play", str(bag), "--rate", "4", "--topics", "/count",
+                             "--delay", "2", "--start-offset", "1.5"], name="bag_play_offset")
+    graph.spin_until(lambda: not player.running, 60, "bag play --start-offset to finish")
+    assert player.wait(timeout=5) == 0, player.output()
+    graph.spin_for(1.0)  # the last messages in flight
+    assert later and received == later, (received, later)
 
 
 def _best_effort():
