@@ -33,6 +33,10 @@ class BatchBallKalman:
         # ... and, while the model had agreed, the velocity of a constant-velocity filter run
         # alongside for maneuver_hold_s (BallKalman.fast)
         self.hold_until = np.full(batch, -np.inf)
+        # consecutive detections beyond maneuver_sigma and the last one's innovation (BallKalman._excess)
+        self.excess_count = np.zeros(batch, int)
+        self.excess_y = np.zeros((batch, 2))
+        self.excess_nis = np.ones(batch)
         self.fast = None
         if cfg.maneuver_hold_s > 0.0 and cfg.maneuver_sigma > 0.0:
             self.fast = BatchBallKalman(batch, dataclasses.replace(
@@ -84,6 +88,7 @@ class BatchBallKalman:
             self.saved_gain_var = np.where(mask & self.init, self.p[:, 4, 4], self.saved_gain_var)
         self.init &= ~mask
         self.coasted[mask] = 0
+        self.excess_count[mask] = 0
 
     def _adapt_noise(self, t, z, a, det) -> None:
         """DetectionNoiseEstimator.add + sigma_m for the balls with a detection `det`."""
@@ -164,8 +169,21 @@ class BatchBallKalman:
             y = z - self.x[:, :2]
             inv, distance = self._innovation(y)
             if self.maneuver_sigma > 0.0:
-                widen = run & (distance > self.maneuver_sigma) & (dt > 0.0)
-                self.hold_until = np.where(widen & (self.nis <= MANEUVER_MAX_NIS), t + self.cfg.maneuver_hold_s,
+                seen = run & (dt > 0.0)
+                beyond = seen & (distance > self.maneuver_sigma)
+                goes_on = seen & (self.excess_count > 0) & (np.einsum("bi,bi->b", y, self.excess_y) > 0.0) \
+                    & (distance > self.cfg.maneuver_confirm_sigma)
+                self.excess_nis = np.where(seen & ~goes_on, self.nis, self.excess_nis)
+                self.excess_count = np.where(goes_on, self.excess_count + 1,
+                                             np.where(seen, beyond.astype(int), self.excess_count))
+                self.excess_y = np.where(seen[:, None], y, self.excess_y)
+                if self.cfg.maneuver_confirm_frames <= 1:
+                    widen = beyond
+                else:
+                    widen = seen & ((self.excess_count >= self.cfg.maneuver_confirm_frames)
+                                    | (distance > self.cfg.gate_sigma))
+                nis = self.nis if self.cfg.maneuver_confirm_frames <= 1 else self.excess_nis
+                self.hold_until = np.where(widen & (nis <= MANEUVER_MAX_NIS), t + self.cfg.maneuver_hold_s,
                                            self.hold_until)
                 if widen.any() and self._widen(widen):
                     inv, widened_distance = self._innovation(y)

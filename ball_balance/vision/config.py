@@ -119,6 +119,13 @@ TRACKER_SCHEMA = (
           "after such a detection (while the model had agreed with the detections), report for this long "
           "the velocity of a constant-velocity filter with accel_noise_m_s2 run alongside, which takes up "
           "a push within a frame or two; 0 = off", "s", 0.0, 10.0),
+    Param("maneuver_confirm_frames", 1,
+          "detections that make a push: one beyond maneuver_sigma, then the rest pointing the same way beyond "
+          "maneuver_confirm_sigma (one beyond gate_sigma always does); 1 = every detection beyond maneuver_sigma, "
+          "more ignores scattered noise", "frames", 1, 10),
+    Param("maneuver_confirm_sigma", 1.5,
+          "Mahalanobis distance beyond which a detection that points the way of the one before confirms a push",
+          "", 0.0, 1000.0),
     Param("adaptive_meas_noise", True,
           "estimate the measurement noise online from the detections' scatter, within "
           "[meas_noise_m, meas_noise_max_m]"),
@@ -173,6 +180,8 @@ class TrackerConfig:
     consistency_time_s: float
     maneuver_sigma: float
     maneuver_hold_s: float
+    maneuver_confirm_frames: int
+    maneuver_confirm_sigma: float
     adaptive_meas_noise: bool
     meas_noise_max_m: float
     meas_noise_window_frames: int

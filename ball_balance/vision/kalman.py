@@ -39,7 +39,10 @@ benchmark 111 mm/s short of a 0.15 m/s push one frame after it, 36 two frames af
 later, slowed the controllers' recovery. So `fast`, a plain constant-velocity filter with
 `accel_noise_m_s2` and the same measurement noise, runs alongside, and for `maneuver_hold_s`
 after such a detection its velocity is the one reported, unless the model had disagreed with
-the detections before it (MANEUVER_MAX_NIS: a long delay or a wrong gain, not a push).
+the detections before it (MANEUVER_MAX_NIS: a long delay or a wrong gain, not a push). With
+`maneuver_confirm_frames` N > 1 a push needs a detection beyond `maneuver_sigma` followed by
+N - 1 whose innovations point the same way and lie beyond `maneuver_confirm_sigma` (or one
+beyond `gate_sigma`): a push keeps pushing the detections the same way, noise scatters them.
 
 Delay: the plate reaches a command some time after the tracker receives it (the arm's latency
 and servo lag, 0.03-0.2 s in the benchmark's latency domains); the known acceleration and the
@@ -255,7 +258,8 @@ class BallKalman:
                  meas_noise_max_m: float = 0.02, meas_noise_window: int = 60,
                  estimate_input_gain: bool = False, input_gain_bounds: Tuple[float, float] = (0.3, 2.5),
                  input_gain_std: float = 0.3, input_gain_rate_per_s: float = 0.05,
-                 consistency_time_s: float = 0.0, maneuver_sigma: float = 0.0, maneuver_hold_s: float = 0.0):
+                 consistency_time_s: float = 0.0, maneuver_sigma: float = 0.0, maneuver_hold_s: float = 0.0,
+                 maneuver_confirm_frames: int = 1, maneuver_confirm_sigma: float = 0.0):
         self.sigma_a = accel_noise_m_s2
         self.sigma_a_cmd = accel_noise_m_s2 if cmd_accel_noise_m_s2 is None else cmd_accel_noise_m_s2
         self.init_vel_std = init_vel_std_m_s
@@ -273,6 +277,11 @@ class BallKalman:
         self.nis = 1.0                # running mean of the normalised innovation squared (per axis)
         self.maneuver_sigma = maneuver_sigma
         self.maneuver_count = 0       # detections that re-predicted with accel_noise_m_s2 (total)
+        self.maneuver_confirm_frames = maneuver_confirm_frames
+        self.maneuver_confirm_sigma = maneuver_confirm_sigma
+        # detections in the current run that may be a push, the last one's innovation, and the
+        # running innovation consistency before the run began (the first one raised it)
+        self._excess = (0, np.zeros(2), 1.0)
         # after a push: the velocity of a plain constant-velocity filter run alongside
         self.maneuver_hold_s = maneuver_hold_s
         self._hold_until = -np.inf
@@ -301,7 +310,9 @@ class BallKalman:
                    meas_noise_window=cfg.meas_noise_window_frames, estimate_input_gain=cfg.estimate_input_gain,
                    input_gain_bounds=tuple(cfg.input_gain_bounds), input_gain_std=cfg.input_gain_std,
                    input_gain_rate_per_s=cfg.input_gain_rate_per_s, consistency_time_s=cfg.consistency_time_s,
-                   maneuver_sigma=cfg.maneuver_sigma, maneuver_hold_s=cfg.maneuver_hold_s)
+                   maneuver_sigma=cfg.maneuver_sigma, maneuver_hold_s=cfg.maneuver_hold_s,
+                   maneuver_confirm_frames=cfg.maneuver_confirm_frames,
+                   maneuver_confirm_sigma=cfg.maneuver_confirm_sigma)
 
     @property
     def meas_noise_m(self) -> float:
@@ -324,6 +335,7 @@ class BallKalman:
         self.initialised = False
         self.coasted = 0
         self.t_last = None
+        self._excess = (0, np.zeros(2), 1.0)
 
     def _start(self, z: Tuple[float, float], t: float) -> None:
         kf = self.kf
@@ -446,8 +458,9 @@ class BallKalman:
         gated = False
         if z is not None:
             distance = self.mahalanobis(z)
-            if 0.0 < self.maneuver_sigma < distance and dt_step > 0.0:
-                if self.nis <= MANEUVER_MAX_NIS:   # a model that agreed until now: a push
+            if self.maneuver_sigma > 0.0 and dt_step > 0.0 and self._push_seen(z, distance):
+                nis = self.nis if self.maneuver_confirm_frames <= 1 else self._excess[2]
+                if nis <= MANEUVER_MAX_NIS:   # a model that agreed until the push began
                     self._hold_until = t + self.maneuver_hold_s
                 self._widen_last_prediction()
                 distance = self.mahalanobis(z)
@@ -468,6 +481,21 @@ class BallKalman:
             self.reset()
             return estimate
         return self._estimate(fresh=False, valid=True, gated=gated)
+
+    def _push_seen(self, z: Tuple[float, float], distance: float) -> bool:
+        """Whether this detection shows a push: beyond maneuver_sigma (maneuver_confirm_frames 1);
+        else the maneuver_confirm_frames-th of a run that began beyond maneuver_sigma and went on
+        the same way beyond maneuver_confirm_sigma; or beyond the gate."""
+        innovation = np.asarray(z, dtype=np.float64) - np.ravel(self.kf.x)[:2]
+        count, previous, nis_before = self._excess
+        if count and float(innovation @ previous) > 0.0 and distance > self.maneuver_confirm_sigma:
+            count += 1
+        else:
+            count, nis_before = (1 if distance > self.maneuver_sigma else 0), self.nis
+        self._excess = (count, innovation, nis_before)
+        if self.maneuver_confirm_frames <= 1:
+            return distance > self.maneuver_sigma
+        return count >= self.maneuver_confirm_frames or distance > self.gate_sigma
 
     def _estimate(self, fresh: bool, valid: bool, gated: bool = False) -> TrackEstimate:
         """The current state; an invalid estimate keeps the last position with zero velocity

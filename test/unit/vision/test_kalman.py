@@ -301,3 +301,20 @@ def test_after_a_push_the_velocity_is_the_constant_velocity_filters_for_the_hold
     after = range(33, 36)                                            # 2-4 frames after the push
     assert np.mean([abs(v_held[k] - 0.15) for k in after]) < 0.7 * np.mean([abs(v_plain[k] - 0.15) for k in after])
     assert v_held[89] == pytest.approx(v_plain[89], abs=0.02)       # both settled after the hold
+
+
+def test_with_two_confirming_frames_scattered_noise_is_not_a_push_and_a_push_still_is():
+    def run(confirm_frames, pushed):
+        kf = BallKalman(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
+                        maneuver_sigma=3.5, maneuver_confirm_frames=confirm_frames)
+        rng = np.random.default_rng(3)
+        for k in range(90):
+            t = k / 60
+            x = 0.15 * max(0.0, t - 1.0) if pushed else 0.0
+            spike = 0.005 * (-1) ** k if k in (40, 41, 55, 70) else 0.0  # 5 sigma, one way then the other
+            kf.step(t, (x + spike + rng.normal(0.0, 0.001), 0.0), accel=(0.0, 0.0))
+        return kf.maneuver_count
+
+    assert run(1, pushed=False) >= 3       # every spike re-predicted with the large process noise
+    assert run(2, pushed=False) == 0       # scattered: never two the same way in a row
+    assert run(2, pushed=True) >= 1        # a push keeps pushing the same way
