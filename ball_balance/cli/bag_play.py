@@ -45,13 +45,13 @@ class _Channel:
         self.publisher = None
 
 
-def read_channels(paths: List[str], selected: Optional[List[str]]) -> Dict[int, _Channel]:
-    """(file index, channel id) -> _Channel for the selected topics of the bag's files."""
+def read_summaries(paths: List[str]) -> list:
+    """The summary section of each of the bag's files (one clear error for an unreadable file)."""
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
 
-    channels = {}
-    for index, path in enumerate(paths):
+    summaries = []
+    for path in paths:
         try:
             with open(path, "rb") as stream:
                 summary = make_reader(stream).get_summary()
@@ -59,6 +59,14 @@ def read_channels(paths: List[str], selected: Optional[List[str]]) -> Dict[int, 
             raise CliError(f"'{path}' is not a readable MCAP file: {error}") from None
         if summary is None:
             raise CliError(f"'{path}' has no summary section (recording interrupted?)")
+        summaries.append(summary)
+    return summaries
+
+
+def read_channels(summaries: list, selected: Optional[List[str]]) -> Dict[int, _Channel]:
+    """(file index, channel id) -> _Channel for the selected topics of the bag's files."""
+    channels = {}
+    for index, summary in enumerate(summaries):
         for channel_id, channel in summary.channels.items():
             if selected is not None and channel.topic not in selected:
                 continue
@@ -70,17 +78,10 @@ def read_channels(paths: List[str], selected: Optional[List[str]]) -> Dict[int, 
     return channels
 
 
-def bag_start_ns(paths: List[str]) -> int:
+def bag_start_ns(summaries: list) -> int:
     """The log time of the bag's first message (of any topic), as --start-offset counts from it."""
-    from mcap.reader import make_reader
-
-    starts = []
-    for path in paths:
-        with open(path, "rb") as stream:
-            summary = make_reader(stream).get_summary()
-        if summary is not None and summary.statistics is not None and summary.statistics.message_count:
-            starts.append(summary.statistics.message_start_time)
-    return min(starts, default=0)
+    return min((s.statistics.message_start_time for s in summaries
+                if s.statistics is not None and s.statistics.message_count), default=0)
 
 
 def _messages(paths: List[str], topics: List[str], first_ns: Optional[int] = None):
@@ -103,8 +104,9 @@ def cmd_play(args) -> int:
     if args.start_offset < 0:
         raise CliError(f"--start-offset must be >= 0, got {args.start_offset}")
     paths = mcap_files(args.bag_path)
+    summaries = read_summaries(paths)
     selected = [absolute_name(t) for t in args.topics] if args.topics else None
-    channels = read_channels(paths, selected)
+    channels = read_channels(summaries, selected)
     if not channels:
         wanted = f" among {', '.join(selected)}" if selected else ""
         raise CliError(f"nothing to play: no recorded topic{wanted} in '{args.bag_path}'")
@@ -113,8 +115,8 @@ def cmd_play(args) -> int:
         missing = [t for t in selected if t not in topics]
         if missing:
             raise CliError(f"not in the bag: {', '.join(missing)} (it holds: "
-                           f"{', '.join(sorted({c.topic for c in read_channels(paths, None).values()}))})")
-    first_ns = bag_start_ns(paths) + int(args.start_offset * 1e9) if args.start_offset else None
+                           f"{', '.join(sorted({c.topic for c in read_channels(summaries, None).values()}))})")
+    first_ns = bag_start_ns(summaries) + int(args.start_offset * 1e9) if args.start_offset else None
     with Session(args.spin_time, name="ros2py_bag_play") as session:
         node = session.node
         publishers = {}
@@ -191,8 +193,6 @@ def _play_once(session: Session, paths, topics, channels, rate: float, clock: Op
             continue
         if start_bag is None:
             start_bag = log_ns
-        if log_ns < start_bag:  # before --start-offset
-            continue
         if duration_s is not None and log_ns - start_bag > duration_s * 1e9:
             break
         wait_until(log_ns)

@@ -33,7 +33,8 @@ class BatchBallKalman:
         # ... and, while the model had agreed, the velocity of a constant-velocity filter run
         # alongside for maneuver_hold_s (BallKalman.fast)
         self.hold_until = np.full(batch, -np.inf)
-        # consecutive detections beyond maneuver_sigma and the last one's innovation (BallKalman._excess)
+        # with maneuver_confirm_frames > 1 (BallKalman._excess): detections in the current run that may
+        # be a push, the last one's innovation, the consistency before the run began
         self.excess_count = np.zeros(batch, int)
         self.excess_y = np.zeros((batch, 2))
         self.excess_nis = np.ones(batch)
@@ -170,19 +171,9 @@ class BatchBallKalman:
             inv, distance = self._innovation(y)
             if self.maneuver_sigma > 0.0:
                 seen = run & (dt > 0.0)
-                beyond = seen & (distance > self.maneuver_sigma)
-                goes_on = seen & (self.excess_count > 0) & (np.einsum("bi,bi->b", y, self.excess_y) > 0.0) \
-                    & (distance > self.cfg.maneuver_confirm_sigma)
-                self.excess_nis = np.where(seen & ~goes_on, self.nis, self.excess_nis)
-                self.excess_count = np.where(goes_on, self.excess_count + 1,
-                                             np.where(seen, beyond.astype(int), self.excess_count))
-                self.excess_y = np.where(seen[:, None], y, self.excess_y)
-                if self.cfg.maneuver_confirm_frames <= 1:
-                    widen = beyond
-                else:
-                    widen = seen & ((self.excess_count >= self.cfg.maneuver_confirm_frames)
-                                    | (distance > self.cfg.gate_sigma))
-                nis = self.nis if self.cfg.maneuver_confirm_frames <= 1 else self.excess_nis
+                widen, nis = seen & (distance > self.maneuver_sigma), self.nis
+                if self.cfg.maneuver_confirm_frames > 1:
+                    widen, nis = self._confirmed_pushes(seen, widen, y, distance)
                 self.hold_until = np.where(widen & (nis <= MANEUVER_MAX_NIS), t + self.cfg.maneuver_hold_s,
                                            self.hold_until)
                 if widen.any() and self._widen(widen):
@@ -212,6 +203,18 @@ class BatchBallKalman:
             valid |= run & ~lost
             self._reset(lost)
         return self.x[:, :2].copy(), self.x[:, 2:4].copy(), valid
+
+    def _confirmed_pushes(self, seen, beyond, y, distance):
+        """BallKalman._push_seen for the balls with a detection `seen` (`beyond` maneuver_sigma):
+        the balls whose detection shows a push, and the consistency to judge its hold by."""
+        goes_on = seen & (self.excess_count > 0) & (np.einsum("bi,bi->b", y, self.excess_y) > 0.0) \
+            & (distance > self.cfg.maneuver_confirm_sigma)
+        self.excess_nis = np.where(seen & ~goes_on, self.nis, self.excess_nis)
+        self.excess_count = np.where(goes_on, self.excess_count + 1,
+                                     np.where(seen, beyond.astype(int), self.excess_count))
+        self.excess_y = np.where(seen[:, None], y, self.excess_y)
+        push = seen & ((self.excess_count >= self.cfg.maneuver_confirm_frames) | (distance > self.cfg.gate_sigma))
+        return push, self.excess_nis
 
     def _innovation(self, y: np.ndarray):
         """S^-1 (b, 2, 2) of the innovation y (b, 2) under the current P and R, and its

@@ -486,6 +486,8 @@ class BallKalman:
         """Whether this detection shows a push: beyond maneuver_sigma (maneuver_confirm_frames 1);
         else the maneuver_confirm_frames-th of a run that began beyond maneuver_sigma and went on
         the same way beyond maneuver_confirm_sigma; or beyond the gate."""
+        if self.maneuver_confirm_frames <= 1:
+            return distance > self.maneuver_sigma
         innovation = np.asarray(z, dtype=np.float64) - np.ravel(self.kf.x)[:2]
         count, previous, nis_before = self._excess
         if count and float(innovation @ previous) > 0.0 and distance > self.maneuver_confirm_sigma:
@@ -493,8 +495,6 @@ class BallKalman:
         else:
             count, nis_before = (1 if distance > self.maneuver_sigma else 0), self.nis
         self._excess = (count, innovation, nis_before)
-        if self.maneuver_confirm_frames <= 1:
-            return distance > self.maneuver_sigma
         return count >= self.maneuver_confirm_frames or distance > self.gate_sigma
 
     def _estimate(self, fresh: bool, valid: bool, gated: bool = False) -> TrackEstimate:
