@@ -15,7 +15,11 @@ Recording, as rosbag2 does it:
   thread owns the MCAP file and appends them, so writing never delays taking messages out of
   DDS, and the main thread (graph polling, --duration, progress) never waits for the file;
 - what is taken but not yet written is bounded (--max-cache-size, as rosbag2's): when the
-  writer falls behind, new messages are dropped and counted instead of memory growing.
+  writer falls behind, new messages are dropped and counted instead of memory growing;
+- a topic whose type is not installed here is skipped with one line, as rosbag2 does; the
+  others are recorded;
+- a write that fails (disk full, file size limit) stops the recording at once with one line
+  naming the error; what was written before it stays in the file.
 """
 from __future__ import annotations
 
@@ -38,6 +42,7 @@ from ball_balance.cli.bag_format import (
 )
 from ball_balance.cli.errors import CliError
 from ball_balance.cli.mcap_write import McapWriter
+from ball_balance.cli.messages import get_interface
 from ball_balance.cli.session import Session, absolute_name, is_hidden
 
 # Keep-last depth of the recording subscriptions: 60 Hz images are taken out of DDS as they
@@ -113,6 +118,8 @@ class _Topic:
         self.policies: Optional[tuple] = None
         self.profiles: List[dict] = []
         self.type_hash = ""
+        self.interface = None  # the message class and
+        self.definition = ""   # its ros2msg schema text, both resolved when first seen (main thread)
         self.count = 0    # written (writer thread)
         self.dropped = 0  # refused by a full cache (taker thread)
 
@@ -141,10 +148,13 @@ class Recorder:
         self.schemas: Dict[str, int] = {}
         self._lock = threading.Lock()  # topics' offered profiles and type hashes (main and writer thread)
         self.topics: Dict[str, _Topic] = {}
-        self.events: List[str] = []  # lines for the user: subscriptions made and re-matched
+        self.skipped: Dict[str, str] = {}  # topic -> why it cannot be recorded (type not installed)
+        self.events: List[str] = []  # lines for the user: subscriptions made and re-matched, topics skipped
+        self.write_error: Optional[BaseException] = None  # the first failed write (writer thread)
         self.first_ns: Optional[int] = None
         self.last_ns: Optional[int] = None
         self.cache = WriteCache(max_cache_bytes)
+        self.finished = False  # the file's summary and index are written
         self._stop = threading.Event()
         self._spinner = threading.Thread(target=self._take, name="bag-take", daemon=True)
         self._writer_thread = threading.Thread(target=self._drain, name="bag-write", daemon=True)
@@ -159,14 +169,21 @@ class Recorder:
         """Subscribe to new topics with publishers; re-match the QoS where publishers changed."""
         node = self.session.node
         for name, types in node.get_topic_names_and_types():
-            if not types or not self.selected(name):
+            if not types or not self.selected(name) or name in self.skipped:
                 continue
             publishers = node.get_publishers_info_by_topic(name)
             topic = self.topics.get(name)
             if topic is None:
                 if not publishers and not self.include_unpublished:
                     continue  # as rosbag2: wait for a publisher (its QoS and type hash)
+                try:  # as rosbag2: a type not installed here skips its topic, not the recording
+                    interface, definition = get_interface(types[0]), message_definition(types[0])
+                except CliError as error:
+                    self.skipped[name] = str(error)
+                    self.events.append(f"skipping topic '{name}': {error}")
+                    continue
                 topic = self.topics[name] = _Topic(name, types[0])
+                topic.interface, topic.definition = interface, definition
             self._learn(topic, publishers)
             wanted = matching_policies(publishers)
             if topic.policies != wanted and (publishers or topic.subscription is None):
@@ -189,7 +206,7 @@ class Recorder:
         """The topic's schema and channel, with what its publishers offer (writer thread)."""
         if topic.type_name not in self.schemas:
             self.schemas[topic.type_name] = self.writer.register_schema(
-                name=topic.type_name, encoding="ros2msg", data=message_definition(topic.type_name).encode())
+                name=topic.type_name, encoding="ros2msg", data=topic.definition.encode())
         with self._lock:
             metadata = {"offered_qos_profiles": dump_yaml(topic.profiles) if topic.profiles else "",
                         "topic_type_hash": topic.type_hash}
@@ -199,8 +216,6 @@ class Recorder:
     def _subscribe(self, topic: _Topic, policies: tuple) -> None:
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-        from ball_balance.cli.messages import get_interface
-
         node = self.session.node
         if topic.subscription is not None:
             node.destroy_subscription(topic.subscription)
@@ -208,7 +223,7 @@ class Recorder:
                          reliability=ReliabilityPolicy[policies[0].upper()],
                          durability=DurabilityPolicy[policies[1].upper()])
         # No callback: the taker thread takes the messages (on_message is never called).
-        topic.subscription = node.create_subscription(get_interface(topic.type_name), topic.name,
+        topic.subscription = node.create_subscription(topic.interface, topic.name,
                                                       lambda data: None, qos, raw=True)
         topic.policies = policies
 
@@ -246,7 +261,12 @@ class Recorder:
             item = self.cache.get()
             if item is None:
                 return
-            self._write(*item)
+            if self.write_error is not None:  # discard: the cache must not fill while the main thread stops
+                continue
+            try:
+                self._write(*item)
+            except Exception as error:  # noqa: BLE001 - disk full, file size limit, ...: reported by the main thread
+                self.write_error = error
 
     def _write(self, topic: _Topic, data: bytes, receive_ns: int, source_ns: int) -> None:
         if topic.channel is None:
@@ -292,17 +312,39 @@ class Recorder:
                     pass
         self.cache.close()
         self._writer_thread.join()
-        for topic in self.recorded:  # subscribed, no message written: listed with a count of 0
-            if topic.channel is None and topic.type_hash:
-                self._register(topic)
-        info = self.bag_info()
-        # rosbag2's MCAP reader takes the metadata version (and so how to parse the channels'
-        # offered_qos_profiles) from this record; `ros2 bag` reads metadata.yaml in the folder.
-        self.writer.add_metadata("rosbag2", {"serialized_metadata": dump_yaml(info)})
-        self.writer.finish()
-        self._stream.close()
-        with open(os.path.join(self.folder, "metadata.yaml"), "w", encoding="utf-8") as handle:
-            handle.write(dump_yaml({"rosbag2_bagfile_information": info}))
+        try:
+            for topic in self.recorded:  # subscribed, no message written: listed with a count of 0
+                if topic.channel is None and topic.type_hash:
+                    self._register(topic)
+            info = self.bag_info()
+            # rosbag2's MCAP reader takes the metadata version (and so how to parse the channels'
+            # offered_qos_profiles) from this record; `ros2 bag` reads metadata.yaml in the folder.
+            self.writer.add_metadata("rosbag2", {"serialized_metadata": dump_yaml(info)})
+            self.writer.finish()
+            self._stream.close()
+            self.finished = True
+            with open(os.path.join(self.folder, "metadata.yaml"), "w", encoding="utf-8") as handle:
+                handle.write(dump_yaml({"rosbag2_bagfile_information": info}))
+        except OSError as error:
+            self.write_error = self.write_error or error
+            try:
+                self._stream.close()  # releases the file even when its last flush fails
+            except OSError:
+                pass
+        if self.write_error is not None:
+            raise CliError(self._write_error_text()) from None
+
+    def _write_error_text(self) -> str:
+        error = self.write_error
+        reason = (f"{error.strerror} (errno {error.errno})" if isinstance(error, OSError) and error.strerror
+                  else f"{type(error).__name__}: {error}")
+        path = os.path.join(self.folder, self.file_name)
+        if self.finished:
+            kept = f"The {self.total} messages written before it are in the bag"
+        else:
+            kept = (f"The {self.writer.messages_in_file} messages written before it are in the file, which has "
+                    f"no summary or index (the MCAP tool's `mcap recover` rebuilds them)")
+        return f"recording stopped: cannot write '{path}': {reason}. {kept}"
 
 
 def progress_line(recorder: Recorder, elapsed_s: float, rates: Dict[str, float]) -> str:
@@ -335,7 +377,7 @@ def cmd_record(args) -> int:
         last_counts: Dict[str, int] = {}
         try:
             while args.duration is None or time.monotonic() - start < args.duration:
-                if not session.context.ok():
+                if not session.context.ok() or recorder.write_error is not None:
                     break
                 recorder.poll()
                 while recorder.events:

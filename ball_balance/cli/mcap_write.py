@@ -79,6 +79,9 @@ class McapWriter:
         self._metadata_indexes: List[bytes] = []
         self._message_counts: Dict[int, int] = {}
         self._start_ns, self._end_ns = None, 0
+        # messages in the chunks handed to the file so far: what a write that fails later
+        # (disk full) leaves readable, by a reader that scans the file
+        self.messages_in_file = 0
 
     def _write(self, data: bytes) -> None:
         self._stream.write(data)
@@ -141,6 +144,7 @@ class McapWriter:
             "<QQQQ", chunk.start_ns, chunk.end_ns, chunk_offset, 1 + 8 + chunk_body_bytes)
             + struct.pack("<I", len(offsets_body)) + offsets_body + struct.pack("<Q", index_bytes)
             + _string("") + struct.pack("<QQ", chunk.records_bytes, chunk.records_bytes)))
+        self.messages_in_file += len(chunk.pieces) // 2  # a head and the data per message
         self._chunk = _Chunk()
 
     def _statistics(self) -> bytes:

@@ -3,6 +3,7 @@ import os
 import re
 import signal
 import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -26,6 +27,25 @@ BALL_STATE_PUBLISHER = textwrap.dedent("""
     node.create_timer(0.05, lambda: pub.publish(msg))
     rclpy.spin(node)
 """)
+
+
+IMAGE_PUBLISHER = textwrap.dedent("""
+    import rclpy
+    from sensor_msgs.msg import Image
+    rclpy.init()
+    node = rclpy.create_node('image_source')
+    pub = node.create_publisher(Image, '/image', 10)
+    msg = Image(height=480, width=640, encoding='rgb8', step=1920)
+    msg.data = bytes(640 * 480 * 3)
+    node.create_timer(0.1, lambda: pub.publish(msg))
+    rclpy.spin(node)
+""")
+WIDGET_PUBLISHER = Path(__file__).parent / "peers" / "cyclone_widget_publisher.py"
+# a process's file size limit (RLIMIT_FSIZE), then the command: a disk that fills up, for one
+# process; Python ignores SIGXFSZ, so a write beyond the limit fails with EFBIG. (Fast DDS's
+# shared-memory segments are files too: under the limit it logs that and talks over UDP.)
+WITH_FILE_SIZE_LIMIT = "import os, resource, sys; limit = int(sys.argv[1]); " \
+    "resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit)); os.execv(sys.argv[2], sys.argv[2:])"
 
 
 def ros2py(launcher, *args, timeout=40, input=None):
@@ -172,3 +192,47 @@ def test_bag_record_writes_mcap_that_decodes_to_the_published_messages(launcher,
     info = ros2py(launcher, "bag", "info", str(out)).stdout
     assert f"Messages:          {len(records)}\n" in info and "ROS Distro:        jazzy\n" in info
     assert f"Topic: /ball_state | Type: ball_tracker_msgs/msg/BallState | Count: {len(records)} |" in info
+
+
+def test_bag_record_stops_with_one_line_when_the_file_cannot_grow_and_keeps_what_it_wrote(launcher, graph, tmp_path):
+    from mcap.exceptions import EndOfFile
+    from mcap.records import Message
+    from mcap.stream_reader import StreamReader
+
+    launcher.start(python_cmd("-c", IMAGE_PUBLISHER), name="image_source")
+    graph.wait_for_topic("/image", timeout=30)
+    out = tmp_path / "full_bag"
+    limit_bytes = 3_000_000  # three 900 KiB frames: the fourth chunk does not fit
+    recorder = launcher.start(python_cmd("-c", WITH_FILE_SIZE_LIMIT, str(limit_bytes), executable("ros2py"),
+                                         "bag", "record", "-o", str(out), "/image"), name="bag")
+    assert recorder.wait(timeout=120) == 1, recorder.output()
+    errors = [line for line in recorder.output().splitlines() if line.startswith("ros2py: ")]
+    assert len(errors) == 1 and "recording stopped: cannot write" in errors[0] and "File too large" in errors[0], \
+        recorder.output()
+    written = int(re.search(r"The (\d+) messages written before it", errors[0]).group(1))
+    assert written >= 1, errors[0]
+    readable = 0  # as a recovering reader scans the file: record by record, up to the cut
+    with open(out / "full_bag_0.mcap", "rb") as stream:
+        try:
+            for record in StreamReader(stream).records:
+                readable += isinstance(record, Message)
+        except EndOfFile:  # the chunk cut short by the limit ends the file
+            pass
+    assert readable == written, (readable, errors[0])
+
+
+def test_bag_record_all_skips_a_topic_of_a_type_not_installed_and_records_the_rest(
+        launcher, graph, ball_state_source, tmp_path):
+    launcher.start(python_cmd(str(WIDGET_PUBLISHER)), name="cyclone_widget")
+    graph.wait_for_topic("/widget", timeout=30)
+    out = tmp_path / "all_bag"
+    recorder = launcher.start([executable("ros2py"), "bag", "record", "-a", "-o", str(out)], name="bag")
+    graph.spin_until(lambda: recorded_so_far(recorder.output()) >= 5 or not recorder.running, 60,
+                     "the recorder to count 5 messages")
+    assert recorder.running, recorder.output()
+    os.killpg(recorder.popen.pid, signal.SIGINT)
+    assert recorder.wait(timeout=20) == 0, recorder.output()
+    output = recorder.output()
+    assert "skipping topic '/widget': unknown msg type 'acme_msgs/msg/Widget'" in output, output
+    info = ros2py(launcher, "bag", "info", str(out)).stdout
+    assert "Topic: /ball_state | Type: ball_tracker_msgs/msg/BallState" in info and "/widget" not in info, info
