@@ -26,7 +26,6 @@ from __future__ import annotations
 import os
 import queue
 import signal
-import struct
 import sys
 import threading
 import time
@@ -34,11 +33,12 @@ from typing import Dict, List, Optional
 
 from ball_balance.cli.bag_format import (
     bag_metadata,
+    bag_ros_distro,
     dump_yaml,
     mcap_files,
     message_definition,
     qos_profile,
-    ros_distro_of,
+    read_summaries,
 )
 from ball_balance.cli.errors import CliError
 from ball_balance.cli.mcap_write import McapWriter
@@ -411,23 +411,13 @@ def _stamp(ns: int) -> str:
 
 def cmd_info(args) -> int:
     """Summary of an MCAP bag (folder or file), laid out like `ros2 bag info`."""
-    from mcap.exceptions import McapError
-    from mcap.reader import make_reader
-
     files = mcap_files(args.bag_path)
     topics: Dict[str, list] = {}  # topic -> [type, count, encoding]
-    start, end, total, distro = None, None, 0, ""
-    for path in files:
-        try:
-            with open(path, "rb") as stream:
-                reader = make_reader(stream)
-                summary = reader.get_summary()
-                if summary is None or summary.statistics is None:
-                    raise CliError(f"'{path}' has no summary section (recording interrupted?)")
-                stats = summary.statistics
-                distro = distro or ros_distro_of(reader.iter_metadata())
-        except (McapError, struct.error, ValueError, EOFError) as error:
-            raise CliError(f"'{path}' is not a readable MCAP file: {error}") from None
+    start, end, total = None, None, 0
+    for path, summary in zip(files, read_summaries(files)):
+        stats = summary.statistics
+        if stats is None:
+            raise CliError(f"'{path}' has no statistics in its summary (not written by a complete recording?)")
         if stats.message_count:
             start = min(start or stats.message_start_time, stats.message_start_time)
             end = max(end or stats.message_end_time, stats.message_end_time)
@@ -441,7 +431,7 @@ def cmd_info(args) -> int:
     print(f"Files:             {', '.join(os.path.basename(p) for p in files)}")
     print(f"Bag size:          {size / 2 ** 20:.1f} MiB")
     print("Storage id:        mcap")
-    print(f"ROS Distro:        {distro or 'unknown'}")
+    print(f"ROS Distro:        {bag_ros_distro(files) or 'unknown'}")
     print(f"Duration:          {duration:.9f}s")
     if start is not None:
         print(f"Start:             {_stamp(start)}")

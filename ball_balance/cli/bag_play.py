@@ -10,12 +10,18 @@ the bag's time at HZ (default 40), for nodes with use_sim_time; without it, a re
 """
 from __future__ import annotations
 
-import struct
 import sys
 import time
 from typing import Dict, List, Optional
 
-from ball_balance.cli.bag_format import DURABILITY, RELIABILITY, mcap_files, parse_offered_qos, policy_name
+from ball_balance.cli.bag_format import (
+    DURABILITY,
+    RELIABILITY,
+    mcap_files,
+    parse_offered_qos,
+    policy_name,
+    read_summaries,
+)
 from ball_balance.cli.errors import CliError
 from ball_balance.cli.session import Session, absolute_name
 
@@ -43,24 +49,6 @@ class _Channel:
     def __init__(self, topic: str, type_name: str, profiles: List[dict]):
         self.topic, self.type_name, self.profiles = topic, type_name, profiles
         self.publisher = None
-
-
-def read_summaries(paths: List[str]) -> list:
-    """The summary section of each of the bag's files (one clear error for an unreadable file)."""
-    from mcap.exceptions import McapError
-    from mcap.reader import make_reader
-
-    summaries = []
-    for path in paths:
-        try:
-            with open(path, "rb") as stream:
-                summary = make_reader(stream).get_summary()
-        except (McapError, struct.error, ValueError, EOFError) as error:
-            raise CliError(f"'{path}' is not a readable MCAP file: {error}") from None
-        if summary is None:
-            raise CliError(f"'{path}' has no summary section (recording interrupted?)")
-        summaries.append(summary)
-    return summaries
 
 
 def read_channels(summaries: list, selected: Optional[List[str]]) -> Dict[int, _Channel]:

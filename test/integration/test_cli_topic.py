@@ -233,6 +233,9 @@ def test_bag_record_stops_with_one_line_when_the_file_cannot_grow_and_keeps_what
         except EndOfFile:  # the chunk cut short by the limit ends the file
             pass
     assert readable == written, (readable, errors[0])
+    one_line_error(ros2py(launcher, "bag", "info", str(out)), "ends before its footer", "mcap recover")
+    (out / "not_a_bag.mcap").write_text("hello")
+    one_line_error(ros2py(launcher, "bag", "info", str(out / "not_a_bag.mcap")), "is not an MCAP file")
 
 
 def test_bag_record_all_skips_a_topic_of_a_type_not_installed_and_records_the_rest(
