@@ -241,7 +241,8 @@ def test_forward_command_at_50_rad_is_limited_counted_in_diagnostics(launcher, g
     def warned():
         (diag,) = graph.collect(DiagnosticArray, "/diagnostics", timeout=10)
         hardware = [s for s in diag.status if s.name.endswith("Hardware Components Activity")]
-        return hardware and hardware[0].level == b"\x01" and "mock_ur" in hardware[0].message \
+        # at least WARN: on a loaded machine the read/write periodicity may make it ERROR as well
+        return hardware and hardware[0].level in (b"\x01", b"\x02") and "mock_ur" in hardware[0].message \
             and "limited commands" in hardware[0].message
     publisher.publish(Float64MultiArray(data=command))
     graph.spin_until(warned, 20, "a WARN naming the limited commands on /diagnostics")
