@@ -357,8 +357,32 @@ def progress_line(recorder: Recorder, elapsed_s: float, rates: Dict[str, float])
             f"{per_topic}{tail}")
 
 
-def _stop_on_sigterm(signum, frame):
-    raise KeyboardInterrupt
+class StopRequest:
+    """SIGINT (Ctrl-C) and SIGTERM ask the recording to stop; the main loop looks between naps.
+
+    Raising KeyboardInterrupt from the handler would land wherever the main thread happens to
+    be, and one raised inside a __del__ run by the garbage collector is printed and dropped (the
+    recording would go on). The handler only sets a flag: no lock, so it cannot deadlock on one
+    the main thread holds. A second signal while the file is being finished does nothing."""
+
+    NAP_S = 0.05
+
+    def __init__(self):
+        self.requested = False
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._on_signal)
+
+    def _on_signal(self, signum, frame) -> None:
+        self.requested = True
+
+    def sleep_until(self, end_s: float) -> bool:
+        """Sleep until time.monotonic() reaches end_s or a stop is asked for (True)."""
+        while not self.requested:
+            left_s = end_s - time.monotonic()
+            if left_s <= 0.0:
+                break
+            time.sleep(min(left_s, self.NAP_S))
+        return self.requested
 
 
 def cmd_record(args) -> int:
@@ -367,7 +391,7 @@ def cmd_record(args) -> int:
     folder = args.output or time.strftime("rosbag2_%Y_%m_%d-%H_%M_%S")
     if os.path.exists(folder):
         raise CliError(f"output folder '{folder}' already exists: choose another name with -o")
-    signal.signal(signal.SIGTERM, _stop_on_sigterm)
+    stop = StopRequest()
     tty = sys.stderr.isatty()
     with Session(args.spin_time) as session:
         recorder = Recorder(session, folder, args.topics, args.all, args.include_unpublished_topics,
@@ -377,7 +401,7 @@ def cmd_record(args) -> int:
         last_counts: Dict[str, int] = {}
         try:
             while args.duration is None or time.monotonic() - start < args.duration:
-                if not session.context.ok() or recorder.write_error is not None:
+                if stop.requested or not session.context.ok() or recorder.write_error is not None:
                     break
                 recorder.poll()
                 while recorder.events:
@@ -385,7 +409,8 @@ def cmd_record(args) -> int:
                 end = time.monotonic() + POLL_S
                 if args.duration is not None:
                     end = min(end, start + args.duration)
-                time.sleep(max(0.0, end - time.monotonic()))
+                if stop.sleep_until(end):
+                    break
                 now = time.monotonic()
                 if now - last_print >= (1.0 if tty else 5.0):
                     counts = {t.name: t.count for t in recorder.recorded}
@@ -393,8 +418,6 @@ def cmd_record(args) -> int:
                     last_counts, last_print = counts, now
                     line = progress_line(recorder, now - start, rates)
                     print(f"\r\033[K{line}" if tty else line, end="" if tty else "\n", file=sys.stderr, flush=True)
-        except KeyboardInterrupt:
-            pass
         finally:
             recorder.close()
     lost = recorder.dropped

@@ -124,3 +124,23 @@ def test_the_write_cache_takes_a_message_larger_than_itself_when_empty_and_one_a
     none = WriteCache(max_bytes=0)  # rosbag2's --max-cache-size 0: no cache
     assert none.offer(("frame", 1), 921_600) and not none.offer(("frame", 2), 921_600)
     assert none.get() == ("frame", 1) and none.offer(("frame", 3), 921_600)
+
+
+def test_a_stop_signal_only_raises_the_recorders_flag_and_ends_its_nap():
+    import os
+    import signal
+    import time
+
+    from ball_balance.cli.bag import StopRequest
+
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            stop = StopRequest()
+            assert not stop.sleep_until(time.monotonic() + 0.1)   # nothing asked: sleeps it out
+            os.kill(os.getpid(), sig)                               # no KeyboardInterrupt
+            started = time.monotonic()
+            assert stop.sleep_until(started + 30.0) and time.monotonic() - started < 5.0
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
