@@ -29,7 +29,7 @@ import signal
 import sys
 import threading
 import time
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Set
 
 from ball_balance.cli.bag_format import (
     bag_metadata,
@@ -111,15 +111,15 @@ def matching_policies(publishers) -> tuple:
 
 
 class _Topic:
-    def __init__(self, name: str, type_name: str):
+    def __init__(self, name: str, type_name: str, interface, definition: str):
         self.name, self.type_name = name, type_name
+        # the message class and its ros2msg schema text, resolved when the topic is first seen
+        self.interface, self.definition = interface, definition
         self.channel: Optional[int] = None
         self.subscription = None
         self.policies: Optional[tuple] = None
         self.profiles: List[dict] = []
         self.type_hash = ""
-        self.interface = None  # the message class and
-        self.definition = ""   # its ros2msg schema text, both resolved when first seen (main thread)
         self.count = 0    # written (writer thread)
         self.dropped = 0  # refused by a full cache (taker thread)
 
@@ -148,7 +148,7 @@ class Recorder:
         self.schemas: Dict[str, int] = {}
         self._lock = threading.Lock()  # topics' offered profiles and type hashes (main and writer thread)
         self.topics: Dict[str, _Topic] = {}
-        self.skipped: Dict[str, str] = {}  # topic -> why it cannot be recorded (type not installed)
+        self.skipped: Set[str] = set()  # topics that cannot be recorded (type not installed)
         self.events: List[str] = []  # lines for the user: subscriptions made and re-matched, topics skipped
         self.write_error: Optional[BaseException] = None  # the first failed write (writer thread)
         self.first_ns: Optional[int] = None
@@ -179,11 +179,10 @@ class Recorder:
                 try:  # as rosbag2: a type not installed here skips its topic, not the recording
                     interface, definition = get_interface(types[0]), message_definition(types[0])
                 except CliError as error:
-                    self.skipped[name] = str(error)
+                    self.skipped.add(name)
                     self.events.append(f"skipping topic '{name}': {error}")
                     continue
-                topic = self.topics[name] = _Topic(name, types[0])
-                topic.interface, topic.definition = interface, definition
+                topic = self.topics[name] = _Topic(name, types[0], interface, definition)
             self._learn(topic, publishers)
             wanted = matching_policies(publishers)
             if topic.policies != wanted and (publishers or topic.subscription is None):
@@ -401,7 +400,7 @@ def cmd_record(args) -> int:
         last_counts: Dict[str, int] = {}
         try:
             while args.duration is None or time.monotonic() - start < args.duration:
-                if stop.requested or not session.context.ok() or recorder.write_error is not None:
+                if not session.context.ok() or recorder.write_error is not None:
                     break
                 recorder.poll()
                 while recorder.events:
