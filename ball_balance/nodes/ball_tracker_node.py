@@ -58,6 +58,7 @@ import rclpy
 from ball_tracker_msgs.msg import BallState
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseWithCovarianceStamped, Vector3Stamped
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
@@ -154,6 +155,7 @@ class BallTrackerNode(Node):
             self.create_subscription(CameraInfo, p["camera_info_topic"], self.on_camera_info,
                                      qos_profile_sensor_data)
 
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.source: Optional[CaptureSource] = None
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None
@@ -162,7 +164,10 @@ class BallTrackerNode(Node):
             self.image_reliability: Optional[ReliabilityPolicy] = None
             if p["image_qos"] == "auto":
                 self.match_image_qos()
-                self.create_timer(IMAGE_QOS_CHECK_PERIOD_S, self.match_image_qos)
+                # discovery and camera silence are wall-clock matters: with use_sim_time a
+                # timer on the node clock stops until /clock ticks, and a tracker started
+                # before a bag's or a simulator's /clock never subscribed to its camera
+                self.create_timer(IMAGE_QOS_CHECK_PERIOD_S, self.match_image_qos, clock=steady)
             else:
                 self._subscribe_images(ReliabilityPolicy.RELIABLE if p["image_qos"] == "reliable"
                                        else ReliabilityPolicy.BEST_EFFORT)
@@ -183,7 +188,7 @@ class BallTrackerNode(Node):
             self._thread = threading.Thread(target=self._capture_loop, name="capture", daemon=True)
             self._thread.start()
             where = f"{p['source']} {p['camera_device'] if p['source'] == 'camera' else p['video_file']}"
-        self.create_timer(min(0.5, p["camera_timeout_s"] / 2.0), self.watch_camera)
+        self.create_timer(min(0.5, p["camera_timeout_s"] / 2.0), self.watch_camera, clock=steady)
         # last, once every thread exists (threads started later inherit the policy)
         if p["thread_priority"] > 0 and not set_process_realtime_priority(p["thread_priority"]):
             self.get_logger().warning(f"could not give the tracker's threads SCHED_FIFO priority "

@@ -1,10 +1,12 @@
 """A camera driver on another DDS implementation (Eclipse Cyclone DDS, best effort, as most
 camera drivers publish): its 640x480 frames arrive whole, and each one is answered on
 /ball_state or, when the CPU is too busy to track them all, skipped as stale and counted
-(a newer frame was waiting). The tracker's image queue is deepened for the test so that
-every frame DDS delivers reaches the node and is counted, however busy the machine: only
-frames lost in transport go missing. This is what the project's DDS settings (config/dds)
-are for."""
+(a newer frame was waiting). A tracker on simulated time (use_sim_time) with no /clock yet,
+as before a bag's or a simulator's clock starts, still finds the camera and answers it.
+
+The tracker's image queue is deepened for the test so that every frame DDS delivers reaches
+the node and is counted, however busy the machine: only frames lost in transport go missing.
+This is what the project's DDS settings (config/dds) are for."""
 import json
 from pathlib import Path
 
@@ -23,8 +25,9 @@ PUBLISHER = Path(__file__).parent / "peers" / "cyclone_image_publisher.py"
 FRAMES = 150                # 5 s at 30 Hz
 
 
-@pytest.mark.parametrize("reliability", ["best_effort", "reliable"])
-def test_frames_from_a_cyclone_dds_camera_are_answered(launcher, graph, tmp_path, reliability):
+@pytest.mark.parametrize("reliability, use_sim_time", [("best_effort", False), ("reliable", False),
+                                                       ("best_effort", True)])
+def test_frames_from_a_cyclone_dds_camera_are_answered(launcher, graph, tmp_path, reliability, use_sim_time):
     scene = SyntheticScene()
     frame = tmp_path / "frame.npy"
     np.save(frame, scene.render((0.08, -0.04), noise_std=2.0)[0])
@@ -34,7 +37,8 @@ def test_frames_from_a_cyclone_dds_camera_are_answered(launcher, graph, tmp_path
     graph.node.create_timer(0.2, lambda: info_pub.publish(info))
     config = str(ROOT / "config" / "ball_tracker.yaml")
     launcher.start([executable("ball_tracker"), "--ros-args", "--params-file", config,
-                    "-p", "startup_frames:=3", "-p", "image_queue_depth:=20"], name="ball_tracker")
+                    "-p", "startup_frames:=3", "-p", "image_queue_depth:=20",
+                    "-p", f"use_sim_time:={str(use_sim_time).lower()}"], name="ball_tracker")
     graph.wait_for_topic("/ball_state", timeout=30)
     answered = set()
     graph.node.create_subscription(BallState, "/ball_state",
