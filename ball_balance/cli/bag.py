@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import os
 import queue
-import signal
 import sys
 import threading
 import time
@@ -43,7 +42,7 @@ from ball_balance.cli.bag_format import (
 from ball_balance.cli.errors import CliError
 from ball_balance.cli.mcap_write import McapWriter
 from ball_balance.cli.messages import get_interface
-from ball_balance.cli.session import Session, absolute_name, is_hidden
+from ball_balance.cli.session import Session, StopRequest, absolute_name, is_hidden
 
 # Keep-last depth of the recording subscriptions: 60 Hz images are taken out of DDS as they
 # arrive, so 100 covers more than a second of the writer or the interpreter falling behind.
@@ -354,34 +353,6 @@ def progress_line(recorder: Recorder, elapsed_s: float, rates: Dict[str, float])
         tail += f"  lost {recorder.dropped} (the writer is behind: cache of {recorder.cache.max_bytes} bytes full)"
     return (f"[{elapsed_s:6.1f} s] {recorder.total} msgs in {len(recorder.recorded)} topics  "
             f"{per_topic}{tail}")
-
-
-class StopRequest:
-    """SIGINT (Ctrl-C) and SIGTERM ask the recording to stop; the main loop looks between naps.
-
-    Raising KeyboardInterrupt from the handler would land wherever the main thread happens to
-    be, and one raised inside a __del__ run by the garbage collector is printed and dropped (the
-    recording would go on). The handler only sets a flag: no lock, so it cannot deadlock on one
-    the main thread holds. A second signal while the file is being finished does nothing."""
-
-    NAP_S = 0.05
-
-    def __init__(self):
-        self.requested = False
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, self._on_signal)
-
-    def _on_signal(self, signum, frame) -> None:
-        self.requested = True
-
-    def sleep_until(self, end_s: float) -> bool:
-        """Sleep until time.monotonic() reaches end_s or a stop is asked for (True)."""
-        while not self.requested:
-            left_s = end_s - time.monotonic()
-            if left_s <= 0.0:
-                break
-            time.sleep(min(left_s, self.NAP_S))
-        return self.requested
 
 
 def cmd_record(args) -> int:

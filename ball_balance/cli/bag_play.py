@@ -23,7 +23,7 @@ from ball_balance.cli.bag_format import (
     read_summaries,
 )
 from ball_balance.cli.errors import CliError
-from ball_balance.cli.session import Session, absolute_name
+from ball_balance.cli.session import Session, StopRequest, absolute_name
 
 
 def publisher_qos(profiles: List[dict]):
@@ -105,6 +105,7 @@ def cmd_play(args) -> int:
             raise CliError(f"not in the bag: {', '.join(missing)} (it holds: "
                            f"{', '.join(sorted({c.topic for c in read_channels(summaries, None).values()}))})")
     first_ns = bag_start_ns(summaries) + int(args.start_offset * 1e9) if args.start_offset else None
+    stop = StopRequest()
     with Session(args.spin_time, name="ros2py_bag_play") as session:
         node = session.node
         publishers = {}
@@ -117,17 +118,13 @@ def cmd_play(args) -> int:
         clock = _ClockPublisher(node, args.clock) if args.clock else None
         print(f"Playing {', '.join(topics)} from '{args.bag_path}' at rate {args.rate:g}"
               f"{' (looping)' if args.loop else ''}; Ctrl-C to stop", file=sys.stderr, flush=True)
-        if args.delay > 0:
-            session.spin_for(args.delay)  # let subscribers be discovered before the first message
-        try:
-            played = 0
-            while True:
-                played += _play_once(session, paths, topics, channels, args.rate, clock, args.playback_duration,
-                                     first_ns)
-                if not args.loop or not session.context.ok():
-                    break
-        except KeyboardInterrupt:
-            pass
+        if args.delay > 0:  # let subscribers be discovered before the first message
+            session.spin_until(lambda: stop.requested, args.delay)
+        played = 0
+        while not stop.requested:
+            played += _play_once(stop, paths, topics, channels, args.rate, clock, args.playback_duration, first_ns)
+            if not args.loop:
+                break
     print(f"Played {played} messages", file=sys.stderr, flush=True)
     return 0
 
@@ -149,10 +146,11 @@ class _ClockPublisher:
         self.publisher.publish(self.msg)
 
 
-def _play_once(session: Session, paths, topics, channels, rate: float, clock: Optional[_ClockPublisher],
+def _play_once(stop: StopRequest, paths, topics, channels, rate: float, clock: Optional[_ClockPublisher],
                duration_s: Optional[float] = None, first_ns: Optional[int] = None) -> int:
     """Publish the bag once from log time first_ns (None: its first message), for duration_s
-    seconds of it (None: to its end); the bag's time runs at `rate` times the wall clock."""
+    seconds of it (None: to its end), or until a stop is asked for; the bag's time runs at
+    `rate` times the wall clock."""
     start_wall = time.monotonic_ns()
     start_bag = first_ns
     played = 0
@@ -162,8 +160,9 @@ def _play_once(session: Session, paths, topics, channels, rate: float, clock: Op
     def bag_now() -> int:
         return start_bag + int((time.monotonic_ns() - start_wall) * rate)
 
-    def wait_until(bag_ns: int) -> None:
-        while True:
+    def wait_until(bag_ns: int) -> bool:
+        """Wait until the bag's time reaches bag_ns (False) or a stop is asked for (True)."""
+        while not stop.requested:
             now = bag_now()
             if clock is not None and (clock.next_ns is None or now >= clock.next_ns):
                 # never ahead of the message about to go out: a late wake-up must not move
@@ -171,9 +170,10 @@ def _play_once(session: Session, paths, topics, channels, rate: float, clock: Op
                 clock.publish(min(now, bag_ns))
                 clock.next_ns = now + int(clock.period_ns * rate)
             if now >= bag_ns:
-                return
+                return False
             target = bag_ns if clock is None else min(bag_ns, clock.next_ns)
-            time.sleep(max(0.0, min(0.1, (target - now) / rate / 1e9)))
+            stop.sleep_until(time.monotonic() + (target - now) / rate / 1e9)
+        return True
 
     for index, channel_id, log_ns, data in _messages(paths, topics, first_ns):
         channel = channels.get((index, channel_id))
@@ -183,8 +183,7 @@ def _play_once(session: Session, paths, topics, channels, rate: float, clock: Op
             start_bag = log_ns
         if duration_s is not None and log_ns - start_bag > duration_s * 1e9:
             break
-        wait_until(log_ns)
-        if not session.context.ok():
+        if wait_until(log_ns):
             break
         channel.publisher.publish(data)
         played += 1

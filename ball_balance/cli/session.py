@@ -7,6 +7,7 @@ moment; so do we. The node is hidden (`_ros2py_<pid>`), serves no parameters and
 from __future__ import annotations
 
 import os
+import signal
 import time
 from typing import Callable, Dict, List, Optional, Tuple
 
@@ -244,3 +245,32 @@ def print_name_type_pairs(pairs: List[Tuple[str, List[str]]], count_only: bool, 
     for name, types in pairs:
         print(f"{name} [{', '.join(types)}]" if show_types else name)
     return 0
+
+
+class StopRequest:
+    """SIGINT (Ctrl-C) and SIGTERM ask a long-running verb (bag record, bag play) to stop; its
+    main loop looks between naps.
+
+    Raising KeyboardInterrupt from the handler would land wherever the main thread happens to
+    be, and one raised inside a __del__ run by the garbage collector is printed and dropped (a
+    recording would go on). The handler only sets a flag: no lock, so it cannot deadlock on one
+    the main thread holds. A second signal while a file is being finished does nothing."""
+
+    NAP_S = 0.05
+
+    def __init__(self):
+        self.requested = False
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._on_signal)
+
+    def _on_signal(self, signum, frame) -> None:
+        self.requested = True
+
+    def sleep_until(self, end_s: float) -> bool:
+        """Sleep until time.monotonic() reaches end_s or a stop is asked for (True)."""
+        while not self.requested:
+            left_s = end_s - time.monotonic()
+            if left_s <= 0.0:
+                break
+            time.sleep(min(left_s, self.NAP_S))
+        return self.requested

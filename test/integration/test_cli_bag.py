@@ -354,8 +354,9 @@ def test_play_loops_at_a_rate_with_the_bags_time_on_clock(launcher, graph, tmp_p
     player = launcher.start([executable("ros2py"), "bag", "play", str(bag), "--rate", "4", "--loop", "--clock", "20",
                              "--topics", "/count", "--delay", "2"], name="bag_play")
     graph.spin_until(lambda: len(received) >= 4 * len(recorded), 120, "four passes of the bag")
-    stop(player)
+    stop(player)  # Ctrl-C: it says what it played, no traceback
     assert player.wait(timeout=5) == 0, player.output()
+    assert "Played" in player.output() and "Traceback" not in player.output(), player.output()
     first = received.index(received[0], 1)  # the first message again: the second pass begins
     assert received[:first] == received[first:2 * first]  # every pass plays the same messages in order
     outside = [(v - bag_start_ns) / 1e6 for _, v in clocks if not bag_start_ns <= v <= bag_end_ns]

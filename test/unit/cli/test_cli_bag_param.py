@@ -126,12 +126,12 @@ def test_the_write_cache_takes_a_message_larger_than_itself_when_empty_and_one_a
     assert none.get() == ("frame", 1) and none.offer(("frame", 3), 921_600)
 
 
-def test_a_stop_signal_only_raises_the_recorders_flag_and_ends_its_nap():
+def test_a_stop_signal_only_raises_the_flag_and_ends_the_nap():
     import os
     import signal
     import time
 
-    from ball_balance.cli.bag import StopRequest
+    from ball_balance.cli.session import StopRequest
 
     saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
