@@ -206,7 +206,16 @@ class BatchBallKalman:
 
     def _confirmed_pushes(self, seen, beyond, y, distance):
         """BallKalman._push_seen for the balls with a detection `seen` (`beyond` maneuver_sigma):
-        the balls whose detection shows a push, and the consistency to judge its hold by."""
+        the balls whose detection shows a push, and the consistency to judge its hold by. Balls
+        whose measurement noise is below maneuver_confirm_noise_m take one detection for a push."""
+        single = self.r < self.cfg.maneuver_confirm_noise_m ** 2
+        push_now, nis_now = self._confirmed_runs(seen & ~single, y, distance, beyond)
+        self.excess_count = np.where(seen & single, 0, self.excess_count)
+        self.excess_nis = np.where(seen & single, self.nis, self.excess_nis)
+        return np.where(single, beyond, push_now), np.where(single, self.nis, nis_now)
+
+    def _confirmed_runs(self, seen, y, distance, beyond):
+        """The runs of detections that make a push (maneuver_confirm_frames), for the balls `seen`."""
         goes_on = seen & (self.excess_count > 0) & (np.einsum("bi,bi->b", y, self.excess_y) > 0.0) \
             & (distance > self.cfg.maneuver_confirm_sigma)
         self.excess_nis = np.where(seen & ~goes_on, self.nis, self.excess_nis)

@@ -126,6 +126,9 @@ TRACKER_SCHEMA = (
     Param("maneuver_confirm_sigma", 1.5,
           "Mahalanobis distance beyond which a detection that points the way of the one before confirms a push",
           "", 0.0, 1000.0),
+    Param("maneuver_confirm_noise_m", 0.0,
+          "maneuver_confirm_frames applies only while the measurement noise (1 sigma, estimated) is at least "
+          "this; below it one detection beyond maneuver_sigma makes a push", "m", 0.0, 1.0),
     Param("adaptive_meas_noise", True,
           "estimate the measurement noise online from the detections' scatter, within "
           "[meas_noise_m, meas_noise_max_m]"),
@@ -182,6 +185,7 @@ class TrackerConfig:
     maneuver_hold_s: float
     maneuver_confirm_frames: int
     maneuver_confirm_sigma: float
+    maneuver_confirm_noise_m: float
     adaptive_meas_noise: bool
     meas_noise_max_m: float
     meas_noise_window_frames: int

@@ -43,6 +43,9 @@ the detections before it (MANEUVER_MAX_NIS: a long delay or a wrong gain, not a 
 `maneuver_confirm_frames` N > 1 a push needs a detection beyond `maneuver_sigma` followed by
 N - 1 whose innovations point the same way and lie beyond `maneuver_confirm_sigma` (or one
 beyond `gate_sigma`): a push keeps pushing the detections the same way, noise scatters them.
+Only while the measurement noise is at least `maneuver_confirm_noise_m`: with less, a push
+moves the ball beyond the noise within a frame and one detection tells, so waiting for a
+second only brakes it a frame later.
 
 Delay: the plate reaches a command some time after the tracker receives it (the arm's latency
 and servo lag, 0.03-0.2 s in the benchmark's latency domains); the known acceleration and the
@@ -259,7 +262,8 @@ class BallKalman:
                  estimate_input_gain: bool = False, input_gain_bounds: Tuple[float, float] = (0.3, 2.5),
                  input_gain_std: float = 0.3, input_gain_rate_per_s: float = 0.05,
                  consistency_time_s: float = 0.0, maneuver_sigma: float = 0.0, maneuver_hold_s: float = 0.0,
-                 maneuver_confirm_frames: int = 1, maneuver_confirm_sigma: float = 0.0):
+                 maneuver_confirm_frames: int = 1, maneuver_confirm_sigma: float = 0.0,
+                 maneuver_confirm_noise_m: float = 0.0):
         self.sigma_a = accel_noise_m_s2
         self.sigma_a_cmd = accel_noise_m_s2 if cmd_accel_noise_m_s2 is None else cmd_accel_noise_m_s2
         self.init_vel_std = init_vel_std_m_s
@@ -279,6 +283,7 @@ class BallKalman:
         self.maneuver_count = 0       # detections that re-predicted with accel_noise_m_s2 (total)
         self.maneuver_confirm_frames = maneuver_confirm_frames
         self.maneuver_confirm_sigma = maneuver_confirm_sigma
+        self.maneuver_confirm_noise_m = maneuver_confirm_noise_m
         # detections in the current run that may be a push, the last one's innovation, and the
         # running innovation consistency before the run began (the first one raised it)
         self._excess = (0, np.zeros(2), 1.0)
@@ -312,7 +317,8 @@ class BallKalman:
                    input_gain_rate_per_s=cfg.input_gain_rate_per_s, consistency_time_s=cfg.consistency_time_s,
                    maneuver_sigma=cfg.maneuver_sigma, maneuver_hold_s=cfg.maneuver_hold_s,
                    maneuver_confirm_frames=cfg.maneuver_confirm_frames,
-                   maneuver_confirm_sigma=cfg.maneuver_confirm_sigma)
+                   maneuver_confirm_sigma=cfg.maneuver_confirm_sigma,
+                   maneuver_confirm_noise_m=cfg.maneuver_confirm_noise_m)
 
     @property
     def meas_noise_m(self) -> float:
@@ -459,7 +465,7 @@ class BallKalman:
         if z is not None:
             distance = self.mahalanobis(z)
             if self.maneuver_sigma > 0.0 and dt_step > 0.0 and self._push_seen(z, distance):
-                nis = self.nis if self.maneuver_confirm_frames <= 1 else self._excess[2]
+                nis = self._excess[2] if self._confirming() else self.nis
                 if nis <= MANEUVER_MAX_NIS:   # a model that agreed until the push began
                     self._hold_until = t + self.maneuver_hold_s
                 self._widen_last_prediction()
@@ -486,7 +492,8 @@ class BallKalman:
         """Whether this detection shows a push: beyond maneuver_sigma (maneuver_confirm_frames 1);
         else the maneuver_confirm_frames-th of a run that began beyond maneuver_sigma and went on
         the same way beyond maneuver_confirm_sigma; or beyond the gate."""
-        if self.maneuver_confirm_frames <= 1:
+        if not self._confirming():
+            self._excess = (0, self._excess[1], self.nis)
             return distance > self.maneuver_sigma
         innovation = np.asarray(z, dtype=np.float64) - np.ravel(self.kf.x)[:2]
         count, previous, nis_before = self._excess
@@ -496,6 +503,12 @@ class BallKalman:
             count, nis_before = (1 if distance > self.maneuver_sigma else 0), self.nis
         self._excess = (count, innovation, nis_before)
         return count >= self.maneuver_confirm_frames or distance > self.gate_sigma
+
+    def _confirming(self) -> bool:
+        """Whether a push needs maneuver_confirm_frames detections: only while the measurement
+        noise is at least maneuver_confirm_noise_m. Below it a push shows in one detection; above
+        it a frame's step of a push is within the noise, so one detection cannot tell them apart."""
+        return self.maneuver_confirm_frames > 1 and self.meas_noise_m >= self.maneuver_confirm_noise_m
 
     def _estimate(self, fresh: bool, valid: bool, gated: bool = False) -> TrackEstimate:
         """The current state; an invalid estimate keeps the last position with zero velocity

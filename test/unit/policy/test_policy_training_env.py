@@ -199,7 +199,9 @@ def test_training_domains_cover_the_benchmark_extremes(knob):
 
 @pytest.mark.parametrize("overrides", [{}, {"estimate_input_gain": False, "adaptive_meas_noise": False},
                                        {"consistency_time_s": 0.0, "use_plate_cmd": False},
-                                       {"maneuver_sigma": 2.5}, {"maneuver_sigma": 2.5, "maneuver_confirm_frames": 2}])
+                                       {"maneuver_sigma": 2.5}, {"maneuver_sigma": 2.5, "maneuver_confirm_frames": 2},
+                                       {"maneuver_sigma": 2.5, "maneuver_confirm_frames": 2,
+                                        "maneuver_confirm_noise_m": 0.0025}])
 def test_batch_kalman_is_the_trackers_filter(overrides):
     """The plant's batched filter follows vision/kalman.py BallKalman frame by frame on the same
     detections and known accelerations: dropped frames, outliers (gate, coasting, a lost

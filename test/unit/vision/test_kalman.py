@@ -304,9 +304,10 @@ def test_after_a_push_the_velocity_is_the_constant_velocity_filters_for_the_hold
 
 
 def test_with_two_confirming_frames_scattered_noise_is_not_a_push_and_a_push_still_is():
-    def run(confirm_frames, pushed):
+    def run(confirm_frames, pushed, confirm_noise_m=0.0):
         kf = BallKalman(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
-                        maneuver_sigma=3.5, maneuver_confirm_frames=confirm_frames)
+                        maneuver_sigma=3.5, maneuver_confirm_frames=confirm_frames,
+                        maneuver_confirm_noise_m=confirm_noise_m)
         rng = np.random.default_rng(3)
         for k in range(90):
             t = k / 60
@@ -318,3 +319,6 @@ def test_with_two_confirming_frames_scattered_noise_is_not_a_push_and_a_push_sti
     assert run(1, pushed=False) >= 3       # every spike re-predicted with the large process noise
     assert run(2, pushed=False) == 0       # scattered: never two the same way in a row
     assert run(2, pushed=True) >= 1        # a push keeps pushing the same way
+    # confirming only from a measurement noise of 2 mm: at 1 mm one detection is a push again
+    assert run(2, pushed=False, confirm_noise_m=0.002) == run(1, pushed=False)
+    assert run(2, pushed=False, confirm_noise_m=0.0009) == 0
