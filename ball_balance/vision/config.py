@@ -119,14 +119,14 @@ TRACKER_SCHEMA = (
           "after such a detection (while the model had agreed with the detections), report for this long "
           "the velocity of a constant-velocity filter with accel_noise_m_s2 run alongside, which takes up "
           "a push within a frame or two; 0 = off", "s", 0.0, 10.0),
-    Param("maneuver_confirm_frames", 1,
+    Param("maneuver_confirm_frames", 2,
           "detections that make a push: one beyond maneuver_sigma, then the rest pointing the same way beyond "
           "maneuver_confirm_sigma (one beyond gate_sigma always does); 1 = every detection beyond maneuver_sigma, "
           "more ignores scattered noise", "frames", 1, 10),
     Param("maneuver_confirm_sigma", 1.5,
           "Mahalanobis distance beyond which a detection that points the way of the one before confirms a push",
           "", 0.0, 1000.0),
-    Param("maneuver_confirm_noise_m", 0.0,
+    Param("maneuver_confirm_noise_m", 0.002,
           "maneuver_confirm_frames applies only while the measurement noise (1 sigma, estimated) is at least "
           "this; below it one detection beyond maneuver_sigma makes a push", "m", 0.0, 1.0),
     Param("adaptive_meas_noise", True,
