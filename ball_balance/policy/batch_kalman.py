@@ -210,8 +210,7 @@ class BatchBallKalman:
         whose measurement noise is below maneuver_confirm_noise_m take one detection for a push."""
         single = self.r < self.cfg.maneuver_confirm_noise_m ** 2
         push_now, nis_now = self._confirmed_runs(seen & ~single, y, distance, beyond)
-        self.excess_count = np.where(seen & single, 0, self.excess_count)
-        self.excess_nis = np.where(seen & single, self.nis, self.excess_nis)
+        self.excess_count = np.where(seen & single, 0, self.excess_count)   # a run in progress ends
         return np.where(single, beyond, push_now), np.where(single, self.nis, nis_now)
 
     def _confirmed_runs(self, seen, y, distance, beyond):

@@ -489,11 +489,13 @@ class BallKalman:
         return self._estimate(fresh=False, valid=True, gated=gated)
 
     def _push_seen(self, z: Tuple[float, float], distance: float) -> bool:
-        """Whether this detection shows a push: beyond maneuver_sigma (maneuver_confirm_frames 1);
-        else the maneuver_confirm_frames-th of a run that began beyond maneuver_sigma and went on
-        the same way beyond maneuver_confirm_sigma; or beyond the gate."""
+        """Whether this detection shows a push: beyond maneuver_sigma (maneuver_confirm_frames 1,
+        or a measurement noise below maneuver_confirm_noise_m); else the maneuver_confirm_frames-th
+        of a run that began beyond maneuver_sigma and went on the same way beyond
+        maneuver_confirm_sigma; or beyond the gate."""
         if not self._confirming():
-            self._excess = (0, self._excess[1], self.nis)
+            if self._excess[0]:   # a run in progress ends (the next one records its own start)
+                self._excess = (0, self._excess[1], self._excess[2])
             return distance > self.maneuver_sigma
         innovation = np.asarray(z, dtype=np.float64) - np.ravel(self.kf.x)[:2]
         count, previous, nis_before = self._excess
