@@ -19,6 +19,12 @@ is loadable by name; those in `activate_controllers` are loaded, configured and 
 at start, those in `inactive_controllers` loaded and configured. Per-controller
 parameters come from the same --params-file (the `<name>:` section) or from a file in
 `<name>.params_file`. `<name>.fallback_controllers` lists fallbacks.
+
+Time: the cycle's time is the manager's clock (a simulated hardware's, else the system's);
+the node's ROS clock stamps messages. The node's own timers (start-up, statistics,
+/diagnostics) run on the steady clock: with use_sim_time:=true and the simulated arm in
+this very process, /clock only ticks once the loop is started, so start-up on the ROS clock
+would wait for itself.
 """
 from __future__ import annotations
 
@@ -32,6 +38,7 @@ from pathlib import Path
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from std_msgs.msg import String
@@ -133,8 +140,9 @@ class ControllerManagerNode(Node):
         # registries still to publish this round, and each one's last publishing time (s)
         self._pending_publish = []
         self._publish_cost = {}
-        self.create_timer(0.05, self.on_registry_timer)
-        self.create_timer(self.params["diagnostics.period"], self.on_diagnostics_timer)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(0.05, self.on_registry_timer, clock=steady)
+        self.create_timer(self.params["diagnostics.period"], self.on_diagnostics_timer, clock=steady)
         self._description_sub = None
         urdf = self._description_from_parameters()
         if urdf:
@@ -143,7 +151,7 @@ class ControllerManagerNode(Node):
             topic = self.params["robot_description_topic"]
             self.get_logger().info(f"waiting for the robot description on {topic}")
             self._description_sub = self.create_subscription(String, topic, self.on_robot_description, latched)
-        self._start_timer = self.create_timer(0.01, self.on_start)
+        self._start_timer = self.create_timer(0.01, self.on_start, clock=steady)
 
     # ---- configuration -------------------------------------------------------------------
     def _controller_config(self):

@@ -27,7 +27,7 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability
 START_TIMEOUT = 120.0
 
 
-def start_sim(launcher, tmp_path, trajectory=False, **params):
+def start_sim(launcher, tmp_path, trajectory=False, ros_args=(), **params):
     urdf = tmp_path / "sim.urdf"
     params.setdefault("robot_description_file", str(urdf))
     urdf.write_text(robot.robot_description("mujoco", params))
@@ -36,7 +36,7 @@ def start_sim(launcher, tmp_path, trajectory=False, **params):
     return launcher.start([executable("ros2_control_node"), "--ros-args", "--params-file", CONTROLLERS,
                            "--params-file", SIM_MANAGER, "-p", f"robot_description_file:={urdf}",
                            "-p", f"activate_controllers:=[joint_state_broadcaster, {active}]",
-                           "-p", f"inactive_controllers:=[{inactive}]"])
+                           "-p", f"inactive_controllers:=[{inactive}]", *ros_args])
 
 
 def camera_pose_from_tf(graph) -> np.ndarray:
@@ -99,6 +99,20 @@ def test_forward_position_commands_move_the_arm_and_the_camera_sees_the_plate(la
         return np.allclose(joint_positions(msg), target, atol=1e-3)
 
     graph.collect(JointState, "/joint_states", predicate=reached, timeout=30)
+
+
+def test_the_manager_on_simulated_time_starts_and_stamps_with_its_own_clock(launcher, graph, tmp_path):
+    # use_sim_time:=true on the node that itself publishes /clock: its start-up must not wait
+    # for a clock that only ticks once it has started
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    start_sim(launcher, tmp_path, camera_enabled=False, ros_args=["-p", "use_sim_time:=true"])
+    graph.collect(JointState, "/joint_states", timeout=START_TIMEOUT)
+    (clock,) = graph.collect(Clock, "/clock", timeout=30)
+    (diagnostics,) = graph.collect(DiagnosticArray, "/diagnostics", timeout=30,
+                                   predicate=lambda m: any(s.name.startswith("controller_manager") for s in m.status))
+    # stamped on the simulated clock (seconds since the simulation began), not the wall clock
+    assert diagnostics.header.stamp.sec < 3600 and clock.clock.sec < 3600
 
 
 def test_50_rad_forward_command_keeps_the_simulated_joints_within_their_limits(launcher, graph, tmp_path):
