@@ -15,7 +15,11 @@ error (a saturation caused by P and D on a big error would otherwise drive the i
 its opposite clamp within ~0.1 s, leaving the ball 10-15 mm off target for seconds). A
 deadband around zero error stops the integral from hunting on tracker noise, and the
 integral only changes inside an error zone (|e| < i_zone_m): outside it, large moves are
-left to P and D and the integral is held, by integration and back-calculation alike.
+left to P and D and the integral is held, by integration and back-calculation alike. Nor
+does it grow while the ball moves off the reference's speed (|v - v_ref| >= i_max_vel_error_m_s,
+the D term's filtered velocity error): the integral is for a constant offset, which shows
+as an error at the reference's speed; a ball returning from a push crosses the zone at
+0.1 m/s and, integrated, the return charged it enough to carry the ball 5 mm past the target.
 The D term's velocity error passes a first-order low-pass (`derivative_filter_s`): the
 tracker's Kalman velocity is noisy enough that, unfiltered, it shook the plate (tilt-rate
 RMS 3x the MPC's), pulled the online plant estimate off through the loop and cost
@@ -38,6 +42,7 @@ class PidGains:
     i_zone_m: float = 0.02          # integrate only while |e| < i_zone (no wind-up on big moves)
     antiwindup_time_s: float = 0.2  # back-calculation time constant t_aw
     derivative_filter_s: float = 0.06  # first-order low-pass on v - v_ref for the D term (0: off)
+    i_max_vel_error_m_s: float = 0.03  # integrate only while |v - v_ref| is below this (0: off)
 
 
 class AxisPid:
@@ -72,8 +77,10 @@ class AxisPid:
             vel_error_m_s = self.vel_error_filtered + alpha * (vel_error_m_s - self.vel_error_filtered)
         self.vel_error_filtered = vel_error_m_s
         u_pd = gain_scale * (g.kp * e + g.kd * vel_error_m_s) + u_ff + u_bias_rad
-        # Integrate unless the output is saturated and the error would push it further.
-        candidate = self.integral + (e * dt_s if abs(e) < g.i_zone_m else 0.0)
+        # Integrate near the reference's speed, unless the output is saturated and the error
+        # would push it further.
+        settled = g.i_max_vel_error_m_s <= 0.0 or abs(vel_error_m_s) < g.i_max_vel_error_m_s
+        candidate = self.integral + (e * dt_s if abs(e) < g.i_zone_m and settled else 0.0)
         u_raw = u_pd + gain_scale * g.ki * candidate
         pushing_out = (u_raw > g.u_max_rad and e > 0) or (u_raw < -g.u_max_rad and e < 0)
         if not pushing_out:

@@ -45,9 +45,9 @@ REFERENCES = ("stationary", "circle", "figure_eight")
 TEACHERS = ("pid", "pd")
 # the PID parameters the residual is trained on top of (recorded in the model, checked at run time)
 BASE_PID_KEYS = ("kp", "ki", "kd", "i_limit_rad", "i_zone_m", "deadband_m", "antiwindup_time_s", "max_tilt_cmd_rad",
-                 "rolling_factor", "gravity_m_s2", "derivative_filter_s", "adapt_pid_feedback", "adapt_plant_gain",
-                 "adapt_disturbance", "adapt_time_constant_s", "adapt_window_s", "actuation_delay_s",
-                 "estimate_actuation_delay")
+                 "rolling_factor", "gravity_m_s2", "derivative_filter_s", "i_max_vel_error_m_s", "adapt_pid_feedback",
+                 "adapt_plant_gain", "adapt_disturbance", "adapt_time_constant_s", "adapt_window_s",
+                 "actuation_delay_s", "estimate_actuation_delay")
 
 # the tracker's filter parameters the plant models (recorded in the model's training metadata)
 TRACKER_FILTER_KEYS = ("meas_noise_m", "accel_noise_m_s2", "init_vel_std_m_s", "gate_sigma", "max_coast_frames",
@@ -133,14 +133,15 @@ def reference_table(kind: str, n_ticks: int) -> np.ndarray:
 
 
 class BatchPid:
-    """ball_balance.control.pid.AxisPid over a batch (same rule: deadband, zone, anti-windup,
-    derivative filter)."""
+    """ball_balance.control.pid.AxisPid over a batch (same rule: deadband, zone, speed gate,
+    anti-windup, derivative filter)."""
 
     def __init__(self, shape, values: dict, k_g: float, u_max: float):
         self.kp, self.ki, self.kd = values["kp"], values["ki"], values["kd"]
         self.i_limit, self.deadband, self.i_zone = values["i_limit_rad"], values["deadband_m"], values["i_zone_m"]
         self.t_aw, self.k_g, self.u_max = values["antiwindup_time_s"], k_g, u_max
         self.d_filter_s = values.get("derivative_filter_s", 0.0)
+        self.i_max_ve = values.get("i_max_vel_error_m_s", 0.0)
         self.integral = np.zeros(shape)
         self.ve_filtered = None
 
@@ -151,7 +152,8 @@ class BatchPid:
             ve = self.ve_filtered + dt / (self.d_filter_s + dt) * (ve - self.ve_filtered)
         self.ve_filtered = np.array(ve, dtype=float)
         u_pd = gain_scale * (self.kp * e + self.kd * ve) - a_ref / self.k_g + u_bias
-        candidate = self.integral + np.where(np.abs(e) < self.i_zone, e * dt, 0.0)
+        settled = np.abs(ve) < self.i_max_ve if self.i_max_ve > 0.0 else True
+        candidate = self.integral + np.where((np.abs(e) < self.i_zone) & settled, e * dt, 0.0)
         u_raw = u_pd + gain_scale * self.ki * candidate
         pushing = ((u_raw > self.u_max) & (e > 0)) | ((u_raw < -self.u_max) & (e < 0))
         self.integral = np.where(pushing, self.integral, candidate)

@@ -8,6 +8,7 @@ command: the law holds its last tilt and counts it (`held_count`).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Mapping, Optional
 
@@ -103,8 +104,12 @@ def load_tilt_law(values: Mapping) -> PolicyTiltLaw:
         raise PolicyModelError(f"policy model {runner.where}: trained on a different PID ({mismatch})")
     # a model trained on a PID that took the plant estimate records the estimate's parameters
     # (ball_balance/policy/env.py BASE_PID_KEYS); one trained before that runs on the PID without it
-    use_estimate = "adapt_plant_gain" in (runner.metadata.training.get("base_pid") or {})
-    return PolicyTiltLaw(runner, control_config.pid_gains(values), control_config.k_g(values),
+    base_pid = runner.metadata.training.get("base_pid") or {}
+    use_estimate = "adapt_plant_gain" in base_pid
+    gains = control_config.pid_gains(values)
+    if "i_max_vel_error_m_s" not in base_pid:   # trained before the integral's speed gate: without it
+        gains = dataclasses.replace(gains, i_max_vel_error_m_s=0.0)
+    return PolicyTiltLaw(runner, gains, control_config.k_g(values),
                          values["policy_blend_s"], bool(values.get("adapt_pid_feedback", False)), use_estimate)
 
 

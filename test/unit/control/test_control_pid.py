@@ -97,6 +97,21 @@ def test_saturation_by_a_big_error_never_charges_the_integral_against_it():
     assert pid.integral == -0.05             # conditional integration: e > 0 pushes out, no growth
 
 
+def test_the_integral_grows_only_near_the_references_speed():
+    """A ball crossing the integration zone fast (returning from a push) must not charge the
+    integral; the same error at the reference's speed (a constant offset) does."""
+    gains = PidGains(derivative_filter_s=0.0, i_max_vel_error_m_s=0.03)
+    returning, offset = AxisPid(gains, K_G), AxisPid(gains, K_G)
+    for _ in range(25):                      # 0.5 s at 10 mm, the one at 0.1 m/s, the other at rest
+        returning.step(0.01, -0.1, 0.0, 0.02)
+        offset.step(0.01, 0.0, 0.0, 0.02)
+    assert returning.integral == 0.0
+    assert offset.integral == pytest.approx(0.01 * 0.5)
+    ungated = AxisPid(PidGains(derivative_filter_s=0.0, i_max_vel_error_m_s=0.0), K_G)
+    ungated.step(0.01, -0.1, 0.0, 0.02)
+    assert ungated.integral > 0.0            # 0: integrates whatever the speed
+
+
 def test_after_a_saturating_release_the_ball_settles_close_to_the_target():
     pid = PlatePid(PidGains(kp=2.0, ki=0.4, kd=0.75), K_G)
     plant = DelayedPlant(x0=(0.12, -0.1), v0=(0.2, -0.2), delay_s=0.04)
