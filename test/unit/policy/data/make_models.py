@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ball_balance.control import config as control_config
+from ball_balance.policy.env import BASE_PID_KEYS
 from ball_balance.policy.export import write_mlp_onnx
 from ball_balance.policy.observation import flat_names
 from controller_manager_py.controllers import policy_model as meta
@@ -20,11 +22,21 @@ def mlp(rng, n_in, hidden, n_out=1):
             (rng.normal(0, 0.3, (n_out, hidden)), rng.normal(0, 0.1, n_out))]
 
 
-def metadata(names, actions, kind="residual_tilt", rate_hz=50.0, scale=0.1, low=-0.15, high=0.15):
+def metadata(names, actions, kind="residual_tilt", rate_hz=50.0, scale=0.1, low=-0.15, high=0.15, training=TRAINING):
     return meta.make_metadata(meta.ObservationSpec(names=names, mean=[0.0] * len(names), std=[1.0] * len(names)),
                               meta.ActionSpec(names=actions, kind=kind, unit="rad", scale=[scale] * len(actions),
                                               low=[low] * len(actions), high=[high] * len(actions)),
-                              rate_hz, TRAINING)
+                              rate_hz, training)
+
+
+def configured_policy_values():
+    import yaml
+
+    from controller_manager_py.parameters import validate
+
+    config = HERE.parents[3] / "config" / "policy.yaml"
+    values = yaml.safe_load(config.read_text())["ball_balance_policy"]["ros__parameters"]
+    return dict(validate(control_config.POLICY_SCHEMA, values))
 
 
 def main():
@@ -51,6 +63,12 @@ def main():
     write_mlp_onnx(HERE / "absolute_joint.onnx", mlp(rng, 3, 4), 3, 1,
                    metadata([joint, "target", "target[1]"], [joint], kind="absolute", rate_hz=100.0, scale=1.0,
                             low=-1.0, high=1.0))
+    # the ball's layout at the configured rate, trained on the configured PID as it was before the
+    # integral's speed gate (its base_pid has no i_max_vel_error_m_s): the runtime runs it without the gate
+    values = configured_policy_values()
+    before_gate = {**TRAINING, "base_pid": {k: values[k] for k in BASE_PID_KEYS if k != "i_max_vel_error_m_s"}}
+    write_mlp_onnx(HERE / "before_speed_gate.onnx", mlp(rng, half, 4), half, 2,
+                   metadata(names, tilt, rate_hz=values["control_rate_hz"], training=before_gate))
 
 
 if __name__ == "__main__":
