@@ -32,7 +32,7 @@ from ball_balance.control import config as control_config
 from ball_balance.control.estimation import EstimatorConfig
 from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
 from ball_balance.policy.batch_kalman import BatchBallKalman
-from ball_balance.policy.observation import ObservationBuilder
+from ball_balance.policy.observation import ObservationBuilder, correction_weight
 
 # the control tick: the PID node's rate (config/pid.yaml, 60 Hz); config/policy.yaml's
 # control_rate_hz must equal it (checked here) and the model records it (rate_hz, checked at run time)
@@ -357,7 +357,7 @@ class PlateBatch:
     def __init__(self, batch: int, seed: int, ranges: DomainRanges = DomainRanges(),
                  nominal: Optional[Nominal] = None, duration_s: float = 20.0, action_scale_rad: float = 0.1,
                  teacher_wn: float = 4.0, teacher_zeta: float = 0.85, tracker_cfg=None, teacher: str = "pid",
-                 pid_overrides=()):
+                 pid_overrides=(), correction_fade_m: float = 0.0):
         if teacher not in TEACHERS:
             raise ValueError(f"teacher = {teacher!r} must be one of {TEACHERS}")
         self.b, self.ranges, self.teacher = batch, ranges, teacher
@@ -365,6 +365,7 @@ class PlateBatch:
         self.rng = np.random.default_rng(seed)
         self.n_ticks = int(round(duration_s / CONTROL_DT_S))
         self.action_scale = action_scale_rad
+        self.correction_fade_m = correction_fade_m   # observation.correction_weight, as the runtime applies it
         self.wn, self.zeta = teacher_wn, teacher_zeta
         from ball_balance.benchmark.episode import controller_values
 
@@ -647,9 +648,11 @@ class PlateBatch:
         return x, v, th
 
     def step(self, action: Optional[np.ndarray] = None, tilt: Optional[np.ndarray] = None) -> np.ndarray:
-        """Apply the law: PID + action * scale (or an explicit `tilt`), shape, advance one tick."""
+        """Apply the law: PID + action * scale * correction_weight (or an explicit `tilt`), shape,
+        advance one tick."""
         if tilt is None:
             a = np.zeros((self.b, 2)) if action is None else np.clip(action, -1.0, 1.0)
+            a = a * correction_weight(self.e, self.correction_fade_m)[:, None]
             tilt = self.u_pid + self.action_scale * a
         u = np.clip(tilt, -self.nom.u_max_rad, self.nom.u_max_rad)
         u = np.where(self.engaged[:, None], u, 0.0)

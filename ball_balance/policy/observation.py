@@ -15,7 +15,8 @@ Per axis, newest first, everything in the plate frame and in SI units:
 
 The history lets the network see how the ball answered earlier tilts (the plant's gain and
 the command-to-plate delay it lives with), which the PID cannot. The action per axis is a
-correction in [-1, 1]; times `action_scale_rad` it is added to the PID tilt.
+correction in [-1, 1]; times `action_scale_rad` and `correction_weight` it is added to the PID
+tilt.
 """
 from __future__ import annotations
 
@@ -82,3 +83,17 @@ class ObservationBuilder:
         """The tilt pair commanded this tick (batch, 2): the newest entry of the next observation."""
         self.tilts[:, :, 1:] = self.tilts[:, :, :-1]
         self.tilts[:, :, 0] = tilt_rad
+
+
+def correction_weight(error_m, fade_error_m: float) -> np.ndarray:
+    """The share of the policy's correction that applies, from the ball's error (..., 2) [m]
+    (error_m[0] of both axes): all of it within fade_error_m of the reference, none beyond
+    twice that, linear between; fade_error_m 0: all of it everywhere. Far from the reference
+    the ball is coming back from a push, where the imitation's labels explain least (the
+    teacher, on the truth, answers a push before the controller can see it) and where the
+    correction cost the PID's recovery in every held-out pushes episode set."""
+    error_m = np.asarray(error_m, dtype=float)
+    if fade_error_m <= 0.0:
+        return np.ones(error_m.shape[:-1])
+    distance_m = np.hypot(error_m[..., 0], error_m[..., 1])
+    return np.clip(2.0 - distance_m / fade_error_m, 0.0, 1.0)

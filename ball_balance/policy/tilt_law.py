@@ -1,10 +1,12 @@
 """The learned tilt law: the PID plus the policy's bounded correction, one control tick at a time.
 
-    u = clamp(u_pid + blend(t) * scale * policy(observation), low, high)
+    u = clamp(u_pid + blend(t) * weight(error) * scale * policy(observation), low, high)
 
 `blend` ramps from 0 to 1 over `blend_s` after every (re-)engagement, so switching the policy
-in never jumps the plate. A non-finite observation or model output never reaches the
-command: the law holds its last tilt and counts it (`held_count`).
+in never jumps the plate. `weight` fades the correction out far from the reference, as the
+model was trained (its metadata's `correction_fade_error_m`; observation.correction_weight).
+A non-finite observation or model output never reaches the command: the law holds its last
+tilt and counts it (`held_count`).
 """
 from __future__ import annotations
 
@@ -16,7 +18,7 @@ import numpy as np
 
 from ball_balance.control.pid import PidGains, PlatePid
 from ball_balance.control.pipeline import adapted_pid_step
-from ball_balance.policy.observation import ObservationBuilder, flat_names
+from ball_balance.policy.observation import ObservationBuilder, correction_weight, flat_names
 from ball_balance.policy.params import model_path
 from controller_manager_py.controllers.policy_model import PolicyModelError, PolicyRunner
 
@@ -27,8 +29,9 @@ class PolicyTiltLaw:
     """A pipeline tilt law (ball_balance.control.pipeline.TiltLaw): `reset()`, `tilt(ctx)`."""
 
     def __init__(self, runner: PolicyRunner, gains: PidGains, k_g: float, blend_s: float = 1.0,
-                 scale_feedback: bool = False, use_estimate: bool = True):
+                 scale_feedback: bool = False, use_estimate: bool = True, correction_fade_m: float = 0.0):
         self.runner, self.k_g, self.blend_s = runner, k_g, blend_s
+        self.correction_fade_m = correction_fade_m
         self.scale_feedback = scale_feedback   # adapt_pid_feedback, as the PID law
         self.use_estimate = use_estimate       # the PID takes the plant estimate (as the model was trained)
         self.pid = PlatePid(gains, k_g)
@@ -76,8 +79,9 @@ class PolicyTiltLaw:
             self.builder.record_tilt(self.u)
             return float(self.u[0]), float(self.u[1])
         self.inferences += 1
-        self.last_correction = self.blend * action * self.runner.scale
-        self.u = self.runner.command(self.blend * action, base=u_pid)
+        action = self.blend * correction_weight((pos - ref.p)[None], self.correction_fade_m)[0] * action
+        self.last_correction = action * self.runner.scale
+        self.u = self.runner.command(action, base=u_pid)
         self.builder.record_tilt(self.u)
         self.t_active_s += dt_s
         return float(self.u[0]), float(self.u[1])
@@ -110,7 +114,8 @@ def load_tilt_law(values: Mapping) -> PolicyTiltLaw:
     if "i_max_vel_error_m_s" not in base_pid:   # trained before the integral's speed gate: without it
         gains = dataclasses.replace(gains, i_max_vel_error_m_s=0.0)
     return PolicyTiltLaw(runner, gains, control_config.k_g(values),
-                         values["policy_blend_s"], bool(values.get("adapt_pid_feedback", False)), use_estimate)
+                         values["policy_blend_s"], bool(values.get("adapt_pid_feedback", False)), use_estimate,
+                         float(runner.metadata.training.get("correction_fade_error_m", 0.0)))
 
 
 def make_tilt_law(cfg) -> PolicyTiltLaw:

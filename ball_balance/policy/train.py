@@ -200,6 +200,11 @@ def main(argv=None) -> int:
                         help="comma-separated gains on the chosen iteration's correction, each evaluated on the "
                         "buckets beside the PID; the best is exported (as the action scale times it): the "
                         "network's imitation error costs most where the PID is already good")
+    parser.add_argument("--correction-fade-mm", type=float, default=5.0,
+                        help="the correction applies in full within this distance of the reference and fades out "
+                        "to none at twice it (observation.correction_weight; recorded in the model, the runtime "
+                        "applies the same; 0: everywhere). Far off, the ball is coming back from a push, where "
+                        "the held-out pushes episodes showed the correction costing at every output gain")
     parser.add_argument("--save-iterations", default="", help="also write every iteration's model into this folder")
     parser.add_argument("--base-pid", nargs="*", default=[], metavar="NAME=VALUE",
                         help="PID parameters over config/policy.yaml's for the training (recorded in the model; "
@@ -224,7 +229,8 @@ def main(argv=None) -> int:
 
     pid_overrides = tuple((name, yaml.safe_load(value)) for name, value in
                           (item.split("=", 1) for item in args.base_pid))
-    env_args = dict(action_scale_rad=args.action_scale, teacher=args.teacher, pid_overrides=pid_overrides)
+    env_args = dict(action_scale_rad=args.action_scale, teacher=args.teacher, pid_overrides=pid_overrides,
+                    correction_fade_m=args.correction_fade_mm * 1e-3)
     bucket_ranges = buckets(ranges) if args.bucket_batch > 0 else {}
 
     def evaluate_all(act):
@@ -287,6 +293,7 @@ def main(argv=None) -> int:
         training = {"method": method, "output_gain": gain, "output_gains_evaluated": list(gains_evaluated),
                     "teacher": args.teacher, "residual_penalty": args.residual_penalty,
                     "first_rollout": args.first_rollout, "push_label_frames": args.push_label_frames,
+                    "correction_fade_error_m": args.correction_fade_mm * 1e-3,
                     "weight_power": args.weight_power,
                     "weight_floor_rad": args.weight_floor_rad,
                     "seed": args.seed, "commit": commit_id(), "iterations": args.iterations, "batch": args.batch,

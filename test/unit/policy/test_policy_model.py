@@ -7,7 +7,7 @@ import pytest
 
 from ball_balance.control import config as control_config
 from ball_balance.control.references import RefSample
-from ball_balance.policy.observation import HISTORY, ObservationBuilder, axis_size, flat_names
+from ball_balance.policy.observation import HISTORY, ObservationBuilder, axis_size, correction_weight, flat_names
 from ball_balance.policy.tilt_law import ACTION_KIND, base_pid_mismatch, load_tilt_law
 from controller_manager_py.controllers.policy_model import PolicyModelError, PolicyRunner, read_model
 from controller_manager_py.parameters import validate
@@ -131,6 +131,27 @@ def test_correction_blends_in_after_engagement():
     assert first <= 0.02 * 0.1 + 1e-12
     law.reset()
     assert law.blend == 0.0
+
+
+def test_correction_weight_is_whole_near_the_reference_and_none_beyond_twice_the_fade_distance():
+    errors = np.array([[0.003, 0.004], [0.0, 0.0075], [-0.006, 0.008], [0.05, 0.0]])   # 5, 7.5, 10, 50 mm
+    np.testing.assert_allclose(correction_weight(errors, 0.005), [1.0, 0.5, 0.0, 0.0])
+    np.testing.assert_allclose(correction_weight(errors, 0.0), [1.0] * 4)
+
+
+def test_the_law_applies_the_models_correction_fade():
+    _, md = read_model(SHIPPED)
+    law = load_tilt_law(policy_values(policy_blend_s=0.0))
+    assert law.correction_fade_m == md.training.get("correction_fade_error_m", 0.0)
+    corrections = {}
+    for fade_m in (0.0, 0.005):
+        law.reset()
+        law.correction_fade_m = fade_m
+        for _ in range(30):   # 30 mm off, as after a push
+            law.step((0.03, -0.01), (0.2, 0.0), _ref(), 1.0 / 60.0, 0.03)
+        corrections[fade_m] = law.last_correction.copy()
+    assert np.abs(corrections[0.0]).max() > 0.0
+    np.testing.assert_array_equal(corrections[0.005], [0.0, 0.0])
 
 
 def test_observation_layout_puts_the_newest_sample_first():

@@ -297,3 +297,16 @@ def test_the_plants_filter_looks_the_commands_up_with_the_episodes_delay_when_th
         for i in range(6):
             j = min(int(np.floor((t - want[i]) / CONTROL_DT_S + 1e-9)), env.tick - 1)
             np.testing.assert_array_equal(got[i], env.law_hist[i, :, j % env.hist_len])
+
+
+def test_the_correction_fades_out_far_from_the_reference():
+    """A correction faded out beyond twice a tiny distance never moves the plate: the plant runs
+    as the PID alone, as the runtime's law does with the same weight."""
+    runs = []
+    for action, fade_m in ((None, 0.0), (np.ones((3, 2)), 1e-9)):
+        env = PlateBatch(3, seed=5, duration_s=2.0, correction_fade_m=fade_m)
+        obs = env.reset()
+        while not env.finished:
+            obs = env.step(action=action)
+        runs.append(obs)
+    np.testing.assert_array_equal(runs[0], runs[1])
