@@ -62,7 +62,8 @@ def main(argv=None) -> int:
     cases = [
         ("onnxruntime session.run", lambda f: runner.session.run(None, f), feeds),
         ("PolicyRunner.infer (normalise + run + checks)", runner.infer, list(recorded)),
-        ("tilt law tick (PID + history + infer + scale)", lambda s: law.step(s[0], s[1], ref, 0.02, 0.03), states),
+        ("tilt law tick (PID, history, infer, fade, scale)",
+         lambda s: law.step(s[0], s[1], ref, 0.02, 0.03), states),
     ]
     for _, fn, inputs in cases:   # warm-up
         timed(fn, inputs, 500)

@@ -29,9 +29,10 @@ class PolicyTiltLaw:
     """A pipeline tilt law (ball_balance.control.pipeline.TiltLaw): `reset()`, `tilt(ctx)`."""
 
     def __init__(self, runner: PolicyRunner, gains: PidGains, k_g: float, blend_s: float = 1.0,
-                 scale_feedback: bool = False, use_estimate: bool = True, correction_fade_m: float = 0.0):
+                 scale_feedback: bool = False, use_estimate: bool = True):
         self.runner, self.k_g, self.blend_s = runner, k_g, blend_s
-        self.correction_fade_m = correction_fade_m
+        # as the model was trained (a model from before the fade has none)
+        self.correction_fade_m = float(runner.metadata.training.get("correction_fade_error_m", 0.0))
         self.scale_feedback = scale_feedback   # adapt_pid_feedback, as the PID law
         self.use_estimate = use_estimate       # the PID takes the plant estimate (as the model was trained)
         self.pid = PlatePid(gains, k_g)
@@ -114,8 +115,7 @@ def load_tilt_law(values: Mapping) -> PolicyTiltLaw:
     if "i_max_vel_error_m_s" not in base_pid:   # trained before the integral's speed gate: without it
         gains = dataclasses.replace(gains, i_max_vel_error_m_s=0.0)
     return PolicyTiltLaw(runner, gains, control_config.k_g(values),
-                         values["policy_blend_s"], bool(values.get("adapt_pid_feedback", False)), use_estimate,
-                         float(runner.metadata.training.get("correction_fade_error_m", 0.0)))
+                         values["policy_blend_s"], bool(values.get("adapt_pid_feedback", False)), use_estimate)
 
 
 def make_tilt_law(cfg) -> PolicyTiltLaw:
