@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ball_balance.control import config as control_config
+from ball_balance.benchmark.episode import controller_values
 from ball_balance.policy.env import BASE_PID_KEYS
 from ball_balance.policy.export import write_mlp_onnx
 from ball_balance.policy.observation import flat_names
@@ -27,16 +27,6 @@ def metadata(names, actions, kind="residual_tilt", rate_hz=50.0, scale=0.1, low=
                               meta.ActionSpec(names=actions, kind=kind, unit="rad", scale=[scale] * len(actions),
                                               low=[low] * len(actions), high=[high] * len(actions)),
                               rate_hz, training)
-
-
-def configured_policy_values():
-    import yaml
-
-    from controller_manager_py.parameters import validate
-
-    config = HERE.parents[3] / "config" / "policy.yaml"
-    values = yaml.safe_load(config.read_text())["ball_balance_policy"]["ros__parameters"]
-    return dict(validate(control_config.POLICY_SCHEMA, values))
 
 
 def main():
@@ -65,7 +55,7 @@ def main():
                             low=-1.0, high=1.0))
     # the ball's layout at the configured rate, trained on the configured PID as it was before the
     # integral's speed gate (its base_pid has no i_max_vel_error_m_s): the runtime runs it without the gate
-    values = configured_policy_values()
+    values = controller_values("policy", "stationary")   # config/policy.yaml over the schema
     before_gate = {**TRAINING, "base_pid": {k: values[k] for k in BASE_PID_KEYS if k != "i_max_vel_error_m_s"}}
     write_mlp_onnx(HERE / "before_speed_gate.onnx", mlp(rng, half, 4), half, 2,
                    metadata(names, tilt, rate_hz=values["control_rate_hz"], training=before_gate))
