@@ -80,7 +80,9 @@ class PolicyTiltLaw:
             self.builder.record_tilt(self.u)
             return float(self.u[0]), float(self.u[1])
         self.inferences += 1
-        action = self.blend * correction_weight((pos - ref.p)[None], self.correction_fade_m)[0] * action
+        action = self.blend * action
+        if self.correction_fade_m > 0.0:   # no weight to compute on the tick of a model without a fade
+            action = correction_weight((pos - ref.p)[None], self.correction_fade_m)[0] * action
         self.last_correction = action * self.runner.scale
         self.u = self.runner.command(action, base=u_pid)
         self.builder.record_tilt(self.u)
