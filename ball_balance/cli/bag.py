@@ -53,6 +53,11 @@ TAKE_PERIOD_S = 0.005  # how often the subscriptions are emptied (500 Hz topics:
 # starved taker takes them (camera frames on a loaded machine) must not keep the others waiting
 # until their keep-last queues overflow (camera_info was lost that way while frames were kept).
 TAKE_BURST = 10
+# The taker, the writer and the main thread share the interpreter lock. With the default 5 ms
+# switch interval the taker waited whole seconds for it on a loaded machine: messages were
+# taken 1.9-3 s after publication (99th percentile), past the 100-deep queues at 60 Hz. At
+# 0.5 ms: 10-40 ms median, 0.2-1.7 s 99th percentile (docs/transport.md).
+SWITCH_INTERVAL_S = 0.0005
 
 
 class WriteCache:
@@ -363,6 +368,7 @@ def cmd_record(args) -> int:
         raise CliError(f"output folder '{folder}' already exists: choose another name with -o")
     stop = StopRequest()
     tty = sys.stderr.isatty()
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     with Session(args.spin_time) as session:
         recorder = Recorder(session, folder, args.topics, args.all, args.include_unpublished_topics,
                             args.max_cache_size)
