@@ -266,10 +266,14 @@ def kernel_baseline(rate: int, seconds: float) -> dict:
 
 
 class Busy:
-    """`n` processes that each keep a core busy (the issue's load), stopped on exit."""
+    """`n` processes that each keep a core busy (the issue's load), stopped on exit.
+    `own_sessions`: each in a session of its own, as a job started from another terminal; with
+    the kernel's autogroup scheduling (the default on desktop and server distributions) every
+    session then gets an equal share of the CPUs, however many threads it runs."""
 
-    def __init__(self, n: int):
-        self.processes = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    def __init__(self, n: int, own_sessions: bool = False):
+        self.processes = [subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=own_sessions)
+                          for _ in range(n)]
 
     def __enter__(self):
         return self
