@@ -57,7 +57,7 @@ TAKE_BURST = 10
 # The taker, the writer and the main thread share the interpreter lock. With the default 5 ms
 # switch interval the taker waited whole seconds for it on a loaded machine: messages were
 # taken 1.9-3 s after publication (99th percentile), past the 100-deep queues at 60 Hz. At
-# 0.5 ms: 10-40 ms median, 0.2-1.7 s 99th percentile (docs/transport.md).
+# 0.5 ms: 9-40 ms median, 0.1-2.4 s 99th percentile (docs/transport.md).
 SWITCH_INTERVAL_S = 0.0005
 
 
