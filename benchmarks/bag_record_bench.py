@@ -3,7 +3,9 @@
 A publisher process sends the simulated graph's mix: 640x480 bgr8 frames at 60 Hz on sensor-data
 QoS (best effort) and --small-topics reliable JointState topics at the same rate (the graph's
 ~1500 small messages a second). The recorder records every topic into an MCAP bag beside --busy
-processes each keeping a core busy; after --seconds it gets Ctrl-C (SIGINT) as from a user. From
+processes each keeping a core busy; each process runs in a session of its own, as jobs started
+from separate terminals (with autogroup scheduling every session gets an equal share of the
+CPUs). After --seconds the recorder gets Ctrl-C (SIGINT) as from a user. From
 the bag: frames kept of those published between the first and the last one recorded (each
 frame's stamp is its index), and how late each message was taken (its log time, when the
 recorder took it out of DDS, minus its publish time). The recorder's CPU time is its rusage.
