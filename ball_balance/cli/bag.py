@@ -45,9 +45,12 @@ from ball_balance.cli.messages import get_interface
 from ball_balance.cli.session import Session, StopRequest, absolute_name, is_hidden
 from controller_manager_py.realtime import reuse_freed_memory
 
-# Keep-last depth of the recording subscriptions: 60 Hz images are taken out of DDS as they
-# arrive, so 100 covers more than a second of the writer or the interpreter falling behind.
-DEPTH = 100
+# Keep-last depth of the recording subscriptions: how long the taker may stall before a
+# topic loses messages (300: 5 s of a 60 Hz camera). Beside one busy process on 2 cores the
+# taker still stalled for seconds now and then: at 100 (1.7 s), frames it took 1.8-3.3 s
+# after publication had waited in these queues, and 12-47 of about 1500 were lost in 3 of 4
+# runs. Memory is used only while the taker is behind (up to 300 frames: 276 MB at 640x480).
+DEPTH = 300
 POLL_S = 0.5  # how often the graph is re-read for new topics and changed publishers
 TAKE_PERIOD_S = 0.005  # how often the subscriptions are emptied (500 Hz topics: 2-3 messages each time)
 # At most this many messages of one topic per round: a topic whose messages arrive as fast as a
@@ -56,7 +59,7 @@ TAKE_PERIOD_S = 0.005  # how often the subscriptions are emptied (500 Hz topics:
 TAKE_BURST = 10
 # The taker, the writer and the main thread share the interpreter lock. With the default 5 ms
 # switch interval the taker waited whole seconds for it on a loaded machine: messages were
-# taken 1.9-3 s after publication (99th percentile), past the 100-deep queues at 60 Hz. At
+# taken 1.9-3 s after publication (99th percentile), past the queues' 100 then, at 60 Hz. At
 # 0.5 ms: 9-40 ms median, 0.1-2.4 s 99th percentile (docs/transport.md).
 SWITCH_INTERVAL_S = 0.0005
 
