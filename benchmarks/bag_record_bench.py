@@ -12,7 +12,7 @@ recorder took it out of DDS, minus its publish time). The recorder's CPU time is
 
 Variants, in turns in one run: the recorder's interpreter switch interval (`--switch-ms`, the
 default compares Python's 5 ms with the recorder's own). A message taken later than its topic's
-keep-last depth (100) of publish periods is lost.
+keep-last depth (ball_balance/cli/bag.py's DEPTH) of publish periods is lost.
 
 usage: python benchmarks/bag_record_bench.py [--seconds 20] [--rounds 2] [--busy 1]
            [--switch-ms 5,0.5] [--small-topics 24]
@@ -23,6 +23,7 @@ import argparse
 import os
 import signal
 import statistics
+import struct
 import subprocess
 import sys
 import tempfile
@@ -34,21 +35,22 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "test"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from controller_manager_bench import Busy  # noqa: E402
+from transport_bench import quantile  # noqa: E402
 
 from harness import DomainLease, ros_env  # noqa: E402
 
 RATE_HZ = 60.0
+SMALL_TOPIC_PREFIX = "/bench/joints_"  # the publisher's small topics: this and their number
 
 PUBLISHER = textwrap.dedent("""
     import sys, numpy as np, rclpy
     from rclpy.qos import QoSProfile, qos_profile_sensor_data
     from sensor_msgs.msg import Image, JointState
-    rate_hz, small_topics = float(sys.argv[1]), int(sys.argv[2])
+    rate_hz, small_topics, prefix = float(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
     rclpy.init()
     node = rclpy.create_node('bag_record_bench_source')
     frames = node.create_publisher(Image, '/camera/image_raw', qos_profile_sensor_data)
-    smalls = [node.create_publisher(JointState, f'/bench/joints_{i}', QoSProfile(depth=10))
-              for i in range(small_topics)]
+    smalls = [node.create_publisher(JointState, f'{prefix}{i}', QoSProfile(depth=10)) for i in range(small_topics)]
     image = Image(height=480, width=640, encoding='bgr8', step=640 * 3)
     image.data = np.random.default_rng(0).integers(0, 255, 640 * 480 * 3, dtype=np.uint8).tobytes()
     joints = JointState(name=[f'joint_{j}' for j in range(6)], position=[0.0] * 6, velocity=[0.0] * 6)
@@ -75,11 +77,6 @@ RECORDER = textwrap.dedent("""
 """)
 
 
-def percentile(values: list, q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
-
-
 def read_bag(bag: Path) -> dict:
     """Frame indices kept and take delays (ms) per topic kind, from the bag."""
     from mcap.reader import make_reader
@@ -87,12 +84,13 @@ def read_bag(bag: Path) -> dict:
     frames, delays_ms = [], {"frames": [], "small": []}
     with open(bag / f"{bag.name}_0.mcap", "rb") as stream:
         for _, channel, message in make_reader(stream).iter_messages():
-            kind = "frames" if channel.topic == "/camera/image_raw" else "small"
-            if kind == "frames":
-                sec, nanosec = int.from_bytes(message.data[4:8], "little"), int.from_bytes(message.data[8:12], "little")
+            delay_ms = (message.log_time - message.publish_time) / 1e6
+            if channel.topic == "/camera/image_raw":
+                sec, nanosec = struct.unpack_from("<iI", message.data, 4)  # header.stamp, after the CDR preamble
                 frames.append(sec * 1_000_000_000 + nanosec)
-            if channel.topic.startswith("/bench/") or kind == "frames":
-                delays_ms[kind].append((message.log_time - message.publish_time) / 1e6)
+                delays_ms["frames"].append(delay_ms)
+            elif channel.topic.startswith(SMALL_TOPIC_PREFIX):
+                delays_ms["small"].append(delay_ms)
     return {"frames": frames, "delays_ms": delays_ms}
 
 
@@ -122,9 +120,9 @@ def row(switch_ms: float, result: dict) -> str:
     published = frames[-1] - frames[0] + 1
     delays = result["delays_ms"]
     return (f"{switch_ms:>9g} {len(frames):>5d} / {published:<5d} {published - len(frames):>5d}"
-            f" {statistics.median(delays['frames']):>8.1f} {percentile(delays['frames'], 0.99):>8.1f}"
+            f" {statistics.median(delays['frames']):>8.1f} {quantile(sorted(delays['frames']), 0.99):>8.1f}"
             f" {max(delays['frames']):>8.1f} {statistics.median(delays['small']):>8.1f}"
-            f" {percentile(delays['small'], 0.99):>8.1f} {result['cpu_s']:>7.1f}")
+            f" {quantile(sorted(delays['small']), 0.99):>8.1f} {result['cpu_s']:>7.1f}")
 
 
 def main() -> None:
@@ -138,7 +136,8 @@ def main() -> None:
     switches = [float(v) for v in args.switch_ms.split(",")]
     lease = DomainLease()
     env = ros_env(lease.domain_id)
-    source = subprocess.Popen([sys.executable, "-c", PUBLISHER, str(RATE_HZ), str(args.small_topics)], env=env,
+    source = subprocess.Popen([sys.executable, "-c", PUBLISHER, str(RATE_HZ), str(args.small_topics),
+                               SMALL_TOPIC_PREFIX], env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     results = []
     try:

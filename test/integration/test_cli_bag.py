@@ -14,6 +14,7 @@ import sys
 import textwrap
 import time
 from pathlib import Path
+from typing import Optional
 
 import pytest
 import yaml
@@ -64,7 +65,7 @@ def header_stamp_ns(cdr: bytes) -> int:
     return sec * 1_000_000_000 + nanosec
 
 
-def read_topics(bag: Path, topics, take_delays_ms: dict = None):
+def read_topics(bag: Path, topics, take_delays_ms: Optional[dict] = None):
     """{topic: [message bytes]}; with take_delays_ms, also {topic: [how late the recorder took
     each message after its publication, ms]} (log time - publish time)."""
     from mcap.reader import make_reader
