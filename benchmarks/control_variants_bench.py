@@ -12,7 +12,7 @@ A variant is NAME:param=value,param=value (values parsed as YAML: true, 0.5, [0,
 list runs the defaults (config/<controller>.yaml over the schema). A parameter named
 tracker.NAME is the tracker's (over config/ball_tracker.yaml), e.g.
 `--variant fixed:tracker.use_plate_cmd=false,tracker.adaptive_meas_noise=false`. Per cell: drops, RMSE after
-5 s (mean and worst episode), settling time (worst), push recovery (mean and worst) and tick p50.
+5 s (mean and worst episode), settling time (worst), push recovery (mean, worst, pushes over 1 s) and tick p50.
 """
 from __future__ import annotations
 
@@ -29,7 +29,11 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from closed_loop_bench import DOMAIN_GROUPS, names  # noqa: E402
+
 from ball_balance.benchmark.episode import EpisodeSpec, Occlusion, run_episode  # noqa: E402
+from ball_balance.benchmark.report import late_pushes  # noqa: E402
+from ball_balance.sim.config import DOMAIN_ALIASES, DOMAINS  # noqa: E402
 
 
 def parse_variant(text: str):
@@ -56,7 +60,8 @@ def _finite(values):
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--controllers", default="pid,mpc")
-    parser.add_argument("--domains", default="standard,low_gravity,full_dr")
+    parser.add_argument("--domains", default="standard,low_gravity,full_dr",
+                        help=f"comma-separated domains or groups {sorted(DOMAIN_GROUPS)}")
     parser.add_argument("--references", default="stationary,circle")
     parser.add_argument("--episodes", type=int, default=3)
     parser.add_argument("--duration", type=float, default=15.0)
@@ -71,13 +76,14 @@ def main(argv=None) -> int:
     variants = [parse_variant(v) for v in (args.variant or ["default:"])]
     events = (Occlusion(args.lose[0], args.lose[1], (0, 1, 2, 3)),) if args.lose else ()
     split = lambda text: [x for x in text.replace(" ", ",").split(",") if x]  # noqa: E731
-    cells = [(c, r, d) for r in split(args.references) for d in split(args.domains) for c in split(args.controllers)]
+    domains = names(args.domains, set(DOMAINS) | set(DOMAIN_ALIASES), "domain", DOMAIN_GROUPS)
+    cells = [(c, r, d) for r in split(args.references) for d in domains for c in split(args.controllers)]
     print(f"control variants: {len(cells)} cells x {len(variants)} variants x {args.episodes} episodes of "
           f"{args.duration:.0f} s, mode {args.mode}", flush=True)
     header = (f"{'variant':<12} {'ctrl':<5} {'reference':<11} {'domain':<14} {'n':>2} {'drops':>5} "
-              f"{'RMSE>5s':>7} {'worst':>6} {'settle':>6} {'push':>5} {'push':>5} {'tick':>6}")
+              f"{'RMSE>5s':>7} {'worst':>6} {'settle':>6} {'push':>5} {'push':>5} {'push':>7} {'tick':>6}")
     units = f"{'':<12} {'':<5} {'':<11} {'':<14} {'':>2} {'':>5} {'mm':>7} {'mm':>6} {'s':>6} " \
-            f"{'rec s':>5} {'max s':>5} {'p50 us':>6}"
+            f"{'rec s':>5} {'max s':>5} {'>1 s':>7} {'p50 us':>6}"
     lines = []
     t_start = time.monotonic()
     for controller, reference, domain in cells:
@@ -94,12 +100,15 @@ def main(argv=None) -> int:
             settle = [m["settle_s"] for m in kept]
             push = [m["push_recover_s"] for m in kept if "push_recover_s" in m]
             push_max = [m["push_recover_max_s"] for m in kept if "push_recover_max_s" in m]
+            late = late_pushes({"pushes": sum(m.get("pushes", 0.0) for m in ms),
+                                "pushes_late": sum(m.get("pushes_late", 0.0) for m in ms)})
             fmt = lambda v: f"{v:.2f}" if math.isfinite(v) else "inf"  # noqa: E731
             line = (f"{name:<12} {controller:<5} {reference:<11} {domain:<14} {len(ms):>2} "
                     f"{sum(m['drop'] for m in ms):>5.0f} "
                     f"{np.mean(steady) if steady else math.nan:>7.1f} {max(steady) if steady else math.nan:>6.1f} "
                     f"{fmt(max(settle)) if settle else '-':>6} "
                     f"{(fmt(float(np.mean(push))) if push else '-'):>5} {(fmt(max(push_max)) if push_max else '-'):>5} "
+                    f"{late:>7} "
                     f"{np.median([m['tick_p50_us'] for m in ms]):>6.0f}")
             lines.append(line)
             print(f"  {line}   ({time.monotonic() - t_start:.0f} s)", flush=True)

@@ -13,6 +13,8 @@
 - push_recover_s / push_recover_max_s: per push (or force), time until the error is back
   within 5 mm and stays there for RECOVER_HOLD_S (or until the next push); mean and worst.
   inf when it never does; absent without pushes.
+- pushes / pushes_late: how many pushes (or forces) there were, and how many of them took longer
+  than PUSH_GOAL_S to recover (issue 11's goal: back within 5 mm in at most 1 s).
 - rmse_release_m (`release_rmse`): the reference system's figure, RMS error sampled at 30 Hz
   from the release (not the engagement) over the steps before a drop.
 """
@@ -26,6 +28,7 @@ import numpy as np
 SETTLE_TOL_M = 0.005
 STEADY_AFTER_S = 5.0
 RECOVER_HOLD_S = 0.5
+PUSH_GOAL_S = 1.0
 
 
 def release_rmse(s: Dict[str, np.ndarray], rate_hz: float = 30.0) -> float:
@@ -94,4 +97,6 @@ def episode_metrics(s: Dict[str, np.ndarray], dropped: bool, duration_s: float,
         finite = [r for r in recoveries if math.isfinite(r)]
         metrics["push_recover_s"] = float(np.mean(finite)) if len(finite) == len(recoveries) else math.inf
         metrics["push_recover_max_s"] = float(max(recoveries))
+        metrics["pushes"] = float(len(recoveries))
+        metrics["pushes_late"] = float(sum(r > PUSH_GOAL_S for r in recoveries))
     return metrics

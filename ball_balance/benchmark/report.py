@@ -15,9 +15,9 @@ REFERENCE_FIGURES = {"standard": "34 mm", "high_gravity": "117 mm, 70 % drops", 
                      "sticky": "33 % drops"}
 
 COLUMNS = ("controller", "protocol", "reference", "domain", "episodes", "drop_rate", "rmse_steady_mm", "settle_s",
-           "push_recover_s", "push_recover_max_s", "engaged_pct", "rmse_mm", "rmse_release_mm", "peak_tilt_deg",
-           "smoothness_rad_s", "latency_ms", "tick_p99_us", "qp_p50_us", "qp_p99_us", "qp_p99_worst_us",
-           "qp_fallbacks")
+           "push_recover_s", "push_recover_max_s", "pushes", "pushes_late", "engaged_pct", "rmse_mm",
+           "rmse_release_mm", "peak_tilt_deg", "smoothness_rad_s", "latency_ms", "tick_p99_us", "qp_p50_us",
+           "qp_p99_us", "qp_p99_worst_us", "qp_fallbacks")
 
 
 def aggregate(results) -> List[Dict[str, float]]:
@@ -53,6 +53,9 @@ def aggregate(results) -> List[Dict[str, float]]:
             "push_recover_s": mean("push_recover_s", survivors) if all(
                 math.isfinite(m.get("push_recover_s", 0.0)) for m in survivors) else math.inf,
             "push_recover_max_s": pooled("push_recover_max_s", survivors),
+            # every push of every episode (a dropped episode's last push never recovered: late)
+            "pushes": float(sum(m.get("pushes", 0.0) for m in ms)),
+            "pushes_late": float(sum(m.get("pushes_late", 0.0) for m in ms)),
             "engaged_pct": 100.0 * mean("engaged_frac"),
             "rmse_mm": 1e3 * mean("rmse_m"),
             "rmse_release_mm": 1e3 * mean("rmse_release_m"),
@@ -79,15 +82,16 @@ def format_table(rows) -> str:
     if ours:
         lines += [
             f"{'controller':10} {'reference':12} {'domain':13} {'n':>3} {'drop':>5} {'RMSE>5s':>8} {'settle':>7} "
-            f"{'push':>6} {'push':>6} {'engaged':>7} {'RMSE':>7} {'peak':>6} {'du/dt':>6} {'lat':>6} {'QP p50':>7} "
-            f"{'QP p99':>7}",
-            f"{'':10} {'':12} {'':13} {'':>3} {'%':>5} {'mm':>8} {'s':>7} {'rec s':>6} {'max s':>6} {'%':>7} "
-            f"{'all mm':>7} {'deg':>6} {'rad/s':>6} {'ms':>6} {'us':>7} {'us':>7}"]
+            f"{'push':>6} {'push':>6} {'push':>7} {'engaged':>7} {'RMSE':>7} {'peak':>6} {'du/dt':>6} {'lat':>6} "
+            f"{'QP p50':>7} {'QP p99':>7}",
+            f"{'':10} {'':12} {'':13} {'':>3} {'%':>5} {'mm':>8} {'s':>7} {'rec s':>6} {'max s':>6} {'>1 s':>7} "
+            f"{'%':>7} {'all mm':>7} {'deg':>6} {'rad/s':>6} {'ms':>6} {'us':>7} {'us':>7}"]
         for r in ours:
             lines.append(
                 f"{r['controller']:10} {r['reference']:12} {r['domain']:13} {r['episodes']:>3} "
                 f"{100 * r['drop_rate']:>5.0f} {r['rmse_steady_mm']:>8.1f} {r['settle_s']:>7.2f} "
-                f"{_fix(r['push_recover_s'], 2):>6} {_fix(r['push_recover_max_s'], 2):>6} {r['engaged_pct']:>7.1f} "
+                f"{_fix(r['push_recover_s'], 2):>6} {_fix(r['push_recover_max_s'], 2):>6} {late_pushes(r):>7} "
+                f"{r['engaged_pct']:>7.1f} "
                 f"{r['rmse_mm']:>7.1f} {r['peak_tilt_deg']:>6.1f} {r['smoothness_rad_s']:>6.2f} "
                 f"{r['latency_ms']:>6.0f} {_num(r['qp_p50_us']):>7} {_num(r['qp_p99_us']):>7}")
     if theirs:
@@ -103,6 +107,14 @@ def format_table(rows) -> str:
                          f"{100 * r['drop_rate']:>5.0f} {r['rmse_release_mm']:>7.1f}  "
                          f"{REFERENCE_FIGURES.get(r['domain'], '')}")
     return "\n".join(lines)
+
+
+def late_pushes(row) -> str:
+    """'late/all' pushes of a row ('-' without pushes, or from a CSV written before the count)."""
+    pushes = row.get("pushes", math.nan)
+    if not pushes or not math.isfinite(pushes):
+        return "-"
+    return f"{row['pushes_late']:.0f}/{pushes:.0f}"
 
 
 def _fix(v, digits: int) -> str:

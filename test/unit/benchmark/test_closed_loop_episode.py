@@ -2,6 +2,7 @@
 expresses pushes, forces, occlusions, the ball type, knob overrides and the reference protocol."""
 import dataclasses
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -17,8 +18,8 @@ from ball_balance.benchmark.episode import (
     reference_protocol,
     run_episode,
 )
-from ball_balance.benchmark.metrics import recovery_times
-from ball_balance.benchmark.report import aggregate, format_table
+from ball_balance.benchmark.metrics import episode_metrics, recovery_times
+from ball_balance.benchmark.report import aggregate, format_table, late_pushes
 from ball_balance.sim.config import SimConfigError
 
 
@@ -94,6 +95,24 @@ def test_recovery_time_counts_until_the_error_stays_inside():
     err[(t > 1.6) & (t < 1.7)] = 0.01    # a brief excursion: not yet recovered
     assert recovery_times(t, err, [1.0], dropped=False) == [pytest.approx(0.7, abs=0.03)]
     assert recovery_times(t, np.full_like(t, 0.02), [1.0], dropped=False) == [math.inf]
+
+
+def test_pushes_that_take_longer_than_the_goal_are_counted_and_summed_over_episodes():
+    t = np.arange(0.0, 6.0, 0.01)
+    err = np.full_like(t, 0.001)
+    err[(t >= 1.0) & (t < 1.8)] = 0.02    # back after 0.8 s
+    err[(t >= 3.0) & (t < 4.3)] = 0.02    # back after 1.3 s: late
+    zeros = np.zeros_like(t)
+    series = {"t": t, "x": err, "y": zeros, "rx": zeros, "ry": zeros, "ux": zeros, "uy": zeros,
+              "age": zeros, "mode": np.ones_like(t)}
+    m = episode_metrics(series, dropped=False, duration_s=6.0, push_times_s=[1.0, 3.0])
+    assert (m["pushes"], m["pushes_late"]) == (2.0, 1.0)
+    assert m["push_recover_max_s"] == pytest.approx(1.3, abs=0.02)
+    results = [SimpleNamespace(spec=EpisodeSpec(domain="pushes", seed=k), metrics=dict(m, drop=0.0, tick_p99_us=1.0))
+               for k in range(3)]
+    row = aggregate(results)[0]
+    assert (row["pushes"], row["pushes_late"]) == (6.0, 3.0) and late_pushes(row) == "3/6"
+    assert late_pushes({"pushes": math.nan}) == "-"   # a CSV written before the count
 
 
 def test_vision_mode_sees_the_hand_and_the_camera_impairments():
