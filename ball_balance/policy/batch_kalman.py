@@ -150,7 +150,7 @@ class BatchBallKalman:
         self._reset(det & self.init & (dt > self.cfg.max_dt_s))
         pred = det & self.init & (dt > 0.0)
         if pred.any():
-            self._predict(pred, np.where(pred, dt, 0.0), accel)
+            self._predict(pred, np.where(pred, dt, 0.0), accel, holding=t <= self.hold_until)
             self.t_last = np.where(pred, t, self.t_last)
         start = det & ~self.init
         if start.any():
@@ -250,8 +250,9 @@ class BatchBallKalman:
             self.p[i, axis + 2, axis + 2] += extra * h ** 2
         return True
 
-    def _predict(self, mask, dt, accel) -> None:
-        """BallKalman._predict for the balls in mask, dt (b,) their time steps."""
+    def _predict(self, mask, dt, accel, holding) -> None:
+        """BallKalman._predict for the balls in mask, dt (b,) their time steps; holding (b,) the
+        balls in a maneuver hold."""
         i = np.flatnonzero(mask)
         h = dt[i]
         known = accel is not None
@@ -262,6 +263,7 @@ class BatchBallKalman:
                 * self.sigma_a_cmd ** 2
         else:
             q = np.full(len(i), self.sigma_a_cmd ** 2)
+        q = np.where(holding[i], np.maximum(q, self.cfg.maneuver_accel_noise_m_s2 ** 2), q)
         self.last_dt[i], self.last_q[i] = h, q
         f = np.broadcast_to(np.eye(DIM), (len(i), DIM, DIM)).copy()
         f[:, 0, 2] = f[:, 1, 3] = h

@@ -39,7 +39,12 @@ benchmark 111 mm/s short of a 0.15 m/s push one frame after it, 36 two frames af
 later, slowed the controllers' recovery. So `fast`, a plain constant-velocity filter with
 `accel_noise_m_s2` and the same measurement noise, runs alongside, and for `maneuver_hold_s`
 after such a detection its velocity is the one reported, unless the model had disagreed with
-the detections before it (MANEUVER_MAX_NIS: a long delay or a wrong gain, not a push). With
+the detections before it (MANEUVER_MAX_NIS: a long delay or a wrong gain, not a push). The
+position stays the model's; during the hold it predicts with at least
+`maneuver_accel_noise_m_s2` of process noise, so that position follows the pushed ball within
+frames (with only the small noise it lagged the returning ball by 3-5 mm for most of the hold).
+Its velocity is not reported then: its error after a push is a slow bias that the controllers
+follow, where the constant-velocity filter's is noise that they average. With
 `maneuver_confirm_frames` N > 1 a push needs a detection beyond `maneuver_sigma` followed by
 N - 1 whose innovations point the same way and lie beyond `maneuver_confirm_sigma` (or one
 beyond `gate_sigma`): a push keeps pushing the detections the same way, noise scatters them.
@@ -262,8 +267,8 @@ class BallKalman:
                  estimate_input_gain: bool = False, input_gain_bounds: Tuple[float, float] = (0.3, 2.5),
                  input_gain_std: float = 0.3, input_gain_rate_per_s: float = 0.05,
                  consistency_time_s: float = 0.0, maneuver_sigma: float = 0.0, maneuver_hold_s: float = 0.0,
-                 maneuver_confirm_frames: int = 1, maneuver_confirm_sigma: float = 0.0,
-                 maneuver_confirm_noise_m: float = 0.0):
+                 maneuver_accel_noise_m_s2: float = 0.0, maneuver_confirm_frames: int = 1,
+                 maneuver_confirm_sigma: float = 0.0, maneuver_confirm_noise_m: float = 0.0):
         self.sigma_a = accel_noise_m_s2
         self.sigma_a_cmd = accel_noise_m_s2 if cmd_accel_noise_m_s2 is None else cmd_accel_noise_m_s2
         self.init_vel_std = init_vel_std_m_s
@@ -290,6 +295,8 @@ class BallKalman:
         # after a push: the velocity of a plain constant-velocity filter run alongside
         self.maneuver_hold_s = maneuver_hold_s
         self._hold_until = -np.inf
+        # ... during which the model's process noise is at least this
+        self.sigma_a_maneuver = maneuver_accel_noise_m_s2
         self.fast: Optional[BallKalman] = None
         if maneuver_hold_s > 0.0 and maneuver_sigma > 0.0:
             self.fast = BallKalman(meas_noise_m, accel_noise_m_s2, init_vel_std_m_s, gate_sigma, max_coast_frames,
@@ -316,6 +323,7 @@ class BallKalman:
                    input_gain_bounds=tuple(cfg.input_gain_bounds), input_gain_std=cfg.input_gain_std,
                    input_gain_rate_per_s=cfg.input_gain_rate_per_s, consistency_time_s=cfg.consistency_time_s,
                    maneuver_sigma=cfg.maneuver_sigma, maneuver_hold_s=cfg.maneuver_hold_s,
+                   maneuver_accel_noise_m_s2=cfg.maneuver_accel_noise_m_s2,
                    maneuver_confirm_frames=cfg.maneuver_confirm_frames,
                    maneuver_confirm_sigma=cfg.maneuver_confirm_sigma,
                    maneuver_confirm_noise_m=cfg.maneuver_confirm_noise_m)
@@ -354,10 +362,10 @@ class BallKalman:
         kf.P = np.diag(P)
         self.initialised, self.coasted, self.t_last = True, 0, t
 
-    def _predict(self, dt: float, accel: Optional[Tuple[float, float]]) -> None:
+    def _predict(self, dt: float, accel: Optional[Tuple[float, float]], holding: bool = False) -> None:
         kf = self.kf
         I2 = np.eye(2)
-        q = self.process_noise(accel is not None)
+        q = self.process_noise(accel is not None, holding)
         self._last_prediction = (dt, q)
         F = np.eye(self.dim)
         F[0:2, 2:4] = dt * I2
@@ -391,16 +399,19 @@ class BallKalman:
         self.kf.P[:4, :4] += extra * np.block([[dt ** 4 / 4 * I2, dt ** 3 / 2 * I2], [dt ** 3 / 2 * I2, dt ** 2 * I2]])
         self.maneuver_count += 1
 
-    def process_noise(self, known_accel: bool) -> float:
+    def process_noise(self, known_accel: bool, holding: bool = False) -> float:
         """q (m^2/s^4) for the next prediction: sigma_a^2 without a known acceleration; with one
         sigma_a_cmd^2, raised by the running innovation consistency (up to sigma_a^2) while the
-        detections disagree with the model more than its covariance says (a wrong delay or gain)."""
+        detections disagree with the model more than its covariance says (a wrong delay or gain).
+        During a maneuver hold (`holding`) at least sigma_a_maneuver^2."""
         if not known_accel:
-            return self.sigma_a ** 2
-        scale = 1.0
-        if self.consistency_time_s > 0.0:
-            scale = min(max(self.nis, 1.0), max(1.0, (self.sigma_a / self.sigma_a_cmd) ** 2))
-        return scale * self.sigma_a_cmd ** 2
+            q = self.sigma_a ** 2
+        else:
+            scale = 1.0
+            if self.consistency_time_s > 0.0:
+                scale = min(max(self.nis, 1.0), max(1.0, (self.sigma_a / self.sigma_a_cmd) ** 2))
+            q = scale * self.sigma_a_cmd ** 2
+        return max(q, self.sigma_a_maneuver ** 2) if holding else q
 
     @property
     def _gain_var_max(self) -> float:
@@ -454,7 +465,7 @@ class BallKalman:
             if dt > self.max_dt_s:
                 self.reset()
             elif dt > 0.0:            # a repeated or out-of-order stamp only updates
-                self._predict(dt, accel)
+                self._predict(dt, accel, holding=t <= self._hold_until)
                 self.t_last = t
         if not self.initialised:
             if z is None:
