@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 from closed_loop_bench import DOMAIN_GROUPS, names  # noqa: E402
 
 from ball_balance.benchmark.episode import EpisodeSpec, Occlusion, run_episode  # noqa: E402
-from ball_balance.benchmark.report import late_pushes  # noqa: E402
+from ball_balance.benchmark.report import late_pushes, push_counts  # noqa: E402
 from ball_balance.sim.config import DOMAIN_ALIASES, DOMAINS  # noqa: E402
 
 
@@ -100,8 +100,7 @@ def main(argv=None) -> int:
             settle = [m["settle_s"] for m in kept]
             push = [m["push_recover_s"] for m in kept if "push_recover_s" in m]
             push_max = [m["push_recover_max_s"] for m in kept if "push_recover_max_s" in m]
-            late = late_pushes({"pushes": sum(m.get("pushes", 0.0) for m in ms),
-                                "pushes_late": sum(m.get("pushes_late", 0.0) for m in ms)})
+            late = late_pushes(push_counts(ms))
             fmt = lambda v: f"{v:.2f}" if math.isfinite(v) else "inf"  # noqa: E731
             line = (f"{name:<12} {controller:<5} {reference:<11} {domain:<14} {len(ms):>2} "
                     f"{sum(m['drop'] for m in ms):>5.0f} "

@@ -53,9 +53,7 @@ def aggregate(results) -> List[Dict[str, float]]:
             "push_recover_s": mean("push_recover_s", survivors) if all(
                 math.isfinite(m.get("push_recover_s", 0.0)) for m in survivors) else math.inf,
             "push_recover_max_s": pooled("push_recover_max_s", survivors),
-            # every push of every episode (a dropped episode's last push never recovered: late)
-            "pushes": float(sum(m.get("pushes", 0.0) for m in ms)),
-            "pushes_late": float(sum(m.get("pushes_late", 0.0) for m in ms)),
+            **push_counts(ms),
             "engaged_pct": 100.0 * mean("engaged_frac"),
             "rmse_mm": 1e3 * mean("rmse_m"),
             "rmse_release_mm": 1e3 * mean("rmse_release_m"),
@@ -107,6 +105,12 @@ def format_table(rows) -> str:
                          f"{100 * r['drop_rate']:>5.0f} {r['rmse_release_mm']:>7.1f}  "
                          f"{REFERENCE_FIGURES.get(r['domain'], '')}")
     return "\n".join(lines)
+
+
+def push_counts(metrics) -> Dict[str, float]:
+    """Pushes and late pushes summed over episodes' metrics: every push of every episode (a
+    dropped episode's last push never recovered, so it counts as late)."""
+    return {key: float(sum(m.get(key, 0.0) for m in metrics)) for key in ("pushes", "pushes_late")}
 
 
 def late_pushes(row) -> str:

@@ -329,6 +329,7 @@ def test_during_the_hold_the_models_position_follows_the_push_with_the_maneuver_
     assert inflated.process_noise(True, holding=True) == pytest.approx(1.0)
     assert inflated.process_noise(True) == pytest.approx(0.05 ** 2 * max(1.0, min(inflated.nis, 400.0)))
 
+
 def test_with_two_confirming_frames_scattered_noise_is_not_a_push_and_a_push_still_is():
     def run(confirm_frames, pushed, confirm_noise_m=0.0):
         kf = BallKalman(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
