@@ -222,3 +222,42 @@ class PlateKinematics:
     def command(self, u_x: float, u_y: float, q_prev: np.ndarray) -> np.ndarray:
         """The shaped 6-joint command for the tilt pair, starting from the last command."""
         return self.shape(self.ik(q_prev, self.desired_rotation(u_x, u_y)), q_prev)
+
+
+class CommandRamp:
+    """The joint command between two control steps: a straight line from the last command to
+    the new target, reached one control period later, written at the manager's update rate.
+
+    A target that jumps once per control step (a staircase at 50-60 Hz) is taken by the joint
+    servo within a few milliseconds: at every step the plate's angular acceleration spikes,
+    and the plate's surface under the ball (its distance from the axis times that
+    acceleration) drops faster than gravity. After a push, when the steps are large, the ball
+    then leaves the plate for about half the time, and while it is in the air the tilt does
+    not act on it as the tracker's model assumes. Spread over the period, the same motion
+    keeps the ball down (docs/control.md, "The staircase and the hop"), at the price of half a
+    period of delay on average, which the measured actuation delay takes in.
+
+        q(t) = q_from + (q_to - q_from) min(1, (t - t_from) / T)
+
+    `at` writes into one array it owns (the real-time path allocates nothing).
+    """
+
+    def __init__(self, n_joints: int):
+        self._from = np.zeros(n_joints)
+        self._delta = np.zeros(n_joints)
+        self._out = np.zeros(n_joints)
+        self._t_from_s = 0.0
+        self._duration_s = 1.0
+
+    def start(self, q_from: Sequence[float], q_to: Sequence[float], t_from_s: float, duration_s: float) -> None:
+        """Ramp from q_from (the command at t_from_s) to q_to over duration_s (> 0)."""
+        self._from[:] = q_from
+        np.subtract(q_to, self._from, out=self._delta)
+        self._t_from_s, self._duration_s = t_from_s, duration_s
+
+    def at(self, t_s: float) -> np.ndarray:
+        """The command at t_s: q_from before t_from_s, q_to from t_from_s + duration_s on."""
+        fraction = min(1.0, max(0.0, (t_s - self._t_from_s) / self._duration_s))
+        np.multiply(self._delta, fraction, out=self._out)
+        self._out += self._from
+        return self._out

@@ -19,7 +19,10 @@ own triggering (control_trigger, peer_timeout_s: joint states never go missing h
     average rate is control_rate_hz.
   - `update_rate` (0: the manager's, 500 Hz): every update writes the newest step's joint
     target to the six command interfaces, moved towards it within the URDF joint velocity
-    limits for that update's period (manager/joint_limits.JointLimiter). Why every update: the
+    limits for that update's period (manager/joint_limits.JointLimiter). With `command_ramp`
+    (default) the written command runs from the last one to the target in a straight line
+    over one control period (control/kinematics.CommandRamp): a target jumping once per step
+    shook the plate at the control rate and threw the ball off it after a push. Why every update: the
     manager's limits stage writes the saturated value back into the command interface (as
     ros2_control's does), so a target written only once per step was cut to one manager
     cycle's worth of joint motion (3.14 rad/s x 2 ms = 6.3 mrad of a step of up to 20 mrad)
@@ -72,7 +75,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from ball_balance.control import config as control_config
-from ball_balance.control.kinematics import Chain, KinematicsError
+from ball_balance.control.kinematics import Chain, CommandRamp, KinematicsError
 from ball_balance.control.pipeline import CONTROLLERS, ControlPipeline
 from ball_balance.control.plausibility import BallStateGate, gate_config
 from ball_balance.control.references import ReferenceError
@@ -108,6 +111,9 @@ def _schema() -> tuple:
     """The balance nodes' parameters (PID, MPC and policy schemas: one source), once each."""
     seen, params = set(), [Param("tilt_law", "policy", "the tilt law: the learned policy (PID + ONNX "
                                  "correction), the PID or the MPC", choices=CONTROLLERS),
+                           Param("command_ramp", True, "write the joint command as a ramp from the last "
+                                 "command to the step's target over one control period (false: the target "
+                                 "at once, a staircase at control_rate_hz that makes the ball hop)"),
                            Param("async_step", True, "run each control step in a worker thread (update() "
                                  "never waits for it; a step due while the last one runs is missed)"),
                            Param("step_thread_priority", STEP_THREAD_PRIORITY, "SCHED_FIFO priority of the "
@@ -181,6 +187,8 @@ class BallBalanceController(ControllerInterface):
         self._next_step_s = -math.inf                # manager time the next pipeline step is due
         self._step_in = None                         # (q measured, ball observation): update() -> step
         self._target: Optional[np.ndarray] = None    # the newest step's joint target: step -> update()
+        self._ramp = CommandRamp(len(JOINT_NAMES)) if values["command_ramp"] else None
+        self._ramp_target: Optional[np.ndarray] = None   # the target the ramp leads to
         self._worker: Optional[AsyncHandler] = None
         self.missed_steps = 0
         self.mode: Optional[Mode] = None
@@ -368,6 +376,13 @@ class BallBalanceController(ControllerInterface):
                 else:
                     self._step(time, period)
         target = self._target
+        if target is not None and self._ramp is not None:
+            if target is not self._ramp_target:   # a new step: ramp on from the command last written,
+                self._ramp_target = target         # to reach the target in the last update before the next step
+                last = self.limiter.previous_positions
+                self._ramp.start(last if all(map(math.isfinite, last)) else target, target,
+                                 time - period, max(self._next_step_s - time, period))
+            target = self._ramp.at(time)
         if target is not None:
             for handle, value in zip(self.command_interfaces, self.limiter.limit_positions(target, period)):
                 handle.value = value

@@ -140,6 +140,11 @@ class JointLimiter:
     def clamped_by_joint(self) -> Dict[str, int]:
         return {j.name: j.clamped for j in self._joints}
 
+    @property
+    def previous_positions(self) -> List[float]:
+        """The last position each joint was limited to (or reset to; NaN: none yet)."""
+        return [j.previous for j in self._joints]
+
     def reset(self, positions: Optional[Sequence[float]] = None,
               velocities: Optional[Sequence[float]] = None) -> None:
         """Start over from measured `positions` (None: the next command is only clamped

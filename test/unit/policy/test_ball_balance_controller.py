@@ -195,3 +195,25 @@ def test_an_update_rate_below_the_control_rate_is_refused_at_configure(caplog):
     with pytest.raises(ControllerError, match="on_configure failed"):
         cm.configure_controller("ball")
     assert any("must be at least control_rate_hz" in r.getMessage() for r in caplog.records)
+
+
+@pytest.mark.parametrize("ramp", [True, False])
+def test_the_command_ramps_across_each_control_period_instead_of_jumping_at_each_step(ramp):
+    """command_ramp: between two steps the written joint command moves in equal parts at every
+    update (8-9 per 60 Hz step at 500 Hz); without it the whole change comes at the step's
+    update and the command then stands still until the next step (a staircase)."""
+    cm, ctrl = spawn(command_ramp=ramp)
+    run = Run(cm, ctrl)
+    run.run(1.0)
+    run.run(1.0, ball=(0.06, -0.04, 0.0, 0.0, True, 4))
+    commands = []
+    for _ in range(int(0.5 * MANAGER_HZ)):
+        run.run(1.0 / MANAGER_HZ, ball=(0.06, -0.04, 0.0, 0.0, True, 4))
+        commands.append(run.commands())
+    per_update = np.max(np.abs(np.diff(commands, axis=0)), axis=1)
+    moving = per_update > 1e-9
+    assert ctrl.mode == Mode.ENGAGED and per_update.max() > 1e-5
+    if ramp:
+        assert moving.mean() > 0.9                 # the command moves at (nearly) every update
+    else:
+        assert moving.mean() < 0.2                 # once per step: about 60 of 500 updates
