@@ -11,12 +11,15 @@ table. For judging a control change (adaptation, braking, gains) before it becom
 A variant is NAME:param=value,param=value (values parsed as YAML: true, 0.5, [0, 0]); an empty
 list runs the defaults (config/<controller>.yaml over the schema). A parameter named
 tracker.NAME is the tracker's (over config/ball_tracker.yaml), e.g.
-`--variant fixed:tracker.use_plate_cmd=false,tracker.adaptive_meas_noise=false`. Per cell: drops, RMSE after
+`--variant fixed:tracker.use_plate_cmd=false,tracker.adaptive_meas_noise=false`, and one named
+episode.NAME a field of the episode's spec (ball_balance.benchmark.EpisodeSpec), e.g.
+`--variant nodes:episode.command_write_hz=0` (joint targets as the balance nodes send them). Per cell: drops, RMSE after
 5 s (mean and worst episode), settling time (worst), push recovery (mean, worst, pushes over 1 s) and tick p50.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import re
 import sys
@@ -37,9 +40,9 @@ from ball_balance.sim.config import DOMAIN_ALIASES, DOMAINS  # noqa: E402
 
 
 def parse_variant(text: str):
-    """NAME:param=value,... -> (name, controller overrides, tracker overrides)."""
+    """NAME:param=value,... -> (name, controller overrides, tracker overrides, episode spec fields)."""
     name, _, body = text.partition(":")
-    overrides, tracker = [], []
+    overrides, tracker, episode = [], [], {}
     # commas inside [...] belong to a list value (input_gain_bounds=[0.3,2.5])
     for item in filter(None, (part.strip() for part in re.split(r",(?![^\[]*\])", body))):
         key, sep, value = item.partition("=")
@@ -48,9 +51,14 @@ def parse_variant(text: str):
         key = key.strip()
         if key.startswith("tracker."):
             tracker.append((key[len("tracker."):], yaml.safe_load(value)))
+        elif key.startswith("episode."):
+            field = key[len("episode."):]
+            if field not in {f.name for f in dataclasses.fields(EpisodeSpec)}:
+                raise SystemExit(f"variant '{text}': EpisodeSpec has no field '{field}'")
+            episode[field] = yaml.safe_load(value)
         else:
             overrides.append((key, yaml.safe_load(value)))
-    return name or "default", tuple(overrides), tuple(tracker)
+    return name or "default", tuple(overrides), tuple(tracker), episode
 
 
 def _finite(values):
@@ -87,13 +95,13 @@ def main(argv=None) -> int:
     lines = []
     t_start = time.monotonic()
     for controller, reference, domain in cells:
-        for name, overrides, tracker_overrides in variants:
+        for name, overrides, tracker_overrides, episode_fields in variants:
             ms = []
             for k in range(args.episodes):
                 spec = EpisodeSpec(controller=controller, domain=domain, reference=reference, seed=args.seed + k,
                                    duration_s=args.duration, mode=args.mode, overrides=overrides,
                                    tracker_overrides=tracker_overrides,
-                                   release_speed_m_s=(0.0, args.release_speed), events=events)
+                                   release_speed_m_s=(0.0, args.release_speed), events=events, **episode_fields)
                 ms.append(run_episode(spec).metrics)
             kept = [m for m in ms if not m["drop"]]
             steady = _finite([1e3 * m["rmse_steady_m"] for m in kept])

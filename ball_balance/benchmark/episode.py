@@ -36,7 +36,7 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from ball_balance.control import config as control_config
-from ball_balance.control.kinematics import Chain, PlateKinematics
+from ball_balance.control.kinematics import Chain, CommandRamp, PlateKinematics
 from ball_balance.control.pipeline import ControlPipeline
 from ball_balance.control.safety import BallObservation, Mode
 from ball_balance.robot import HOME_POSITIONS_RAD, JOINT_NAMES, robot_description
@@ -116,6 +116,11 @@ class EpisodeSpec:
     protocol: str = "ours"                  # label of the protocol the spec follows (table rows)
     overrides: tuple = ()                   # extra controller parameters ((name, value), ...)
     tracker_overrides: tuple = ()           # tracker parameters over config/ball_tracker.yaml ((name, value), ...)
+    # How the joint targets reach the arm: > 0, ramped over each control period and written at
+    # this rate, as BallBalanceController does in the manager (command_ramp, at the update
+    # rate of config/ur_controllers.yaml); 0, one step per control tick, as the balance nodes
+    # through forward_position_controller.
+    command_write_hz: float = 500.0
     record: bool = False                    # keep time series (for plots)
 
 
@@ -332,6 +337,11 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
     control_dt = 1.0 / values["control_rate_hz"]
     frame_dt = 1.0 / spec.camera_rate_hz
     steps_per_tick = int(round(control_dt / world.physics_dt_s))
+    ramp = None
+    if spec.command_write_hz > 0.0:
+        steps_per_write = max(1, int(round(1.0 / (spec.command_write_hz * world.physics_dt_s))))
+        write_dt = steps_per_write * world.physics_dt_s
+        ramp, written = CommandRamp(len(JOINT_NAMES)), None
     pending = []            # (visible_at_s, observation fields, stamp_s)
     latest = None           # (obs fields tuple, stamp_s)
     next_frame_s = 0.0
@@ -415,8 +425,15 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
             tracker.set_plate_cmd(u_cmd[0], u_cmd[1], t)
         elif kalman is not None:
             plate_cmds.add(u_cmd[0], u_cmd[1], t)
-        world.set_joint_targets(result.q_cmd)
-        world.step(steps_per_tick)
+        if ramp is None:
+            world.set_joint_targets(result.q_cmd)
+            world.step(steps_per_tick)
+        else:  # as the controller's updates write it (the first write of a step already moves)
+            ramp.start(result.q_cmd if written is None else written, result.q_cmd, t - write_dt, control_dt)
+            for first in range(0, steps_per_tick, steps_per_write):
+                written = ramp.at(t + first * world.physics_dt_s)
+                world.set_joint_targets(written)
+                world.step(min(steps_per_write, steps_per_tick - first))
         truth = world.ball_truth()
         # the reference the user asked for at the truth's instant, on the clock of the last
         # engagement (no latency look-ahead; it keeps running while the controller is not engaged)
