@@ -226,7 +226,7 @@ class PlateKinematics:
 
 class CommandRamp:
     """The joint command between two control steps: a straight line from the last command to
-    the new target, reached one control period later, written at the manager's update rate.
+    the new target, reached by the next step, written at the manager's update rate.
 
     A target that jumps once per control step (a staircase at 50-60 Hz) is taken by the joint
     servo within a few milliseconds: at every step the plate's angular acceleration spikes,

@@ -381,7 +381,7 @@ class BallBalanceController(ControllerInterface):
                 self._ramp_target = target         # to reach the target in the last update before the next step
                 last = self.limiter.previous_positions
                 self._ramp.start(last if all(map(math.isfinite, last)) else target, target,
-                                 time - period, max(self._next_step_s - time, period))
+                                 time - period, max(self._next_step_s - time, period, 1e-6))
             target = self._ramp.at(time)
         if target is not None:
             for handle, value in zip(self.command_interfaces, self.limiter.limit_positions(target, period)):
