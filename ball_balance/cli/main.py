@@ -1,6 +1,6 @@
 """`ros2py`: the ros2 command-line verbs we need, for machines without ROS 2's `ros2`.
 
-    ros2py topic list|echo|hz|info|pub     ros2py node list     ros2py service list
+    ros2py topic list|echo|hz|info|pub     ros2py node list     ros2py service list|call
     ros2py param get|set|dump|list|load    ros2py bag record|play|info    ros2py run PKG EXE
     ros2py tf echo TARGET SOURCE           ros2py interface show TYPE
     ros2py action list|info|send_goal
@@ -107,9 +107,16 @@ def _simple_parsers(sub) -> None:
     p.add_argument("-c", "--count-nodes", action="store_true", help="only show the number of nodes")
     _spin_time(p, LIST_SPIN_TIME_S)
 
-    service = sub.add_parser("service", help="list services").add_subparsers(dest="verb", required=True)
+    service = sub.add_parser("service", help="list and call services").add_subparsers(dest="verb", required=True)
     _list_options(_verb(service, "list", "graph:cmd_service_list", "output a list of available services"),
                   "service")
+    p = _verb(service, "call", "service:cmd_call", "call a service")
+    p.add_argument("service_name", help="name of the service to call (e.g. /sim/set_pause)")
+    p.add_argument("service_type", help="type of the service (e.g. std_srvs/srv/SetBool)")
+    p.add_argument("values", nargs="?", default="{}", help="the request's values in YAML (default: {})")
+    p.add_argument("-r", "--rate", type=float, default=None, help="repeat the call at this rate in Hz")
+    p.add_argument("--timeout", type=float, default=None,
+                   help="give up after this many seconds waiting for the service or a response (default: wait)")
 
     param = sub.add_parser("param", help="node parameters").add_subparsers(dest="verb", required=True)
     p = _verb(param, "get", "param:cmd_get", "get a parameter")

@@ -46,3 +46,21 @@ def test_param_set_of_an_undeclared_name_names_it(launcher, graph):
     assert result.stderr.strip() == (
         "ros2py: Setting parameter failed: 'rate_hzz' is not declared by /ball_balance_visualizer "
         "(did you mean rate_hz? `ros2py param list /ball_balance_visualizer` shows its parameters)")
+
+
+def test_service_call_asks_a_node_in_another_process_and_prints_as_ros2cli(launcher):
+    launcher.start([executable("ball_balance_visualizer"), "--ros-args", "-p", "rate_hz:=12.5"])
+    result = launcher.run([executable("ros2py"), "service", "call", "/ball_balance_visualizer/get_parameters",
+                           "rcl_interfaces/srv/GetParameters", "{names: [rate_hz]}", "--timeout", "60"], timeout=90)
+    assert result.returncode == 0, result.stderr
+    assert "requester: making request: rcl_interfaces.srv.GetParameters_Request(names=['rate_hz'])\n" in result.stdout
+    assert "response:\nrcl_interfaces.srv.GetParameters_Response(values=[rcl_interfaces.msg.ParameterValue(type=3, " \
+        in result.stdout
+    assert "double_value=12.5" in result.stdout
+
+
+def test_service_call_refuses_bad_values_with_one_line_before_calling(launcher):
+    result = launcher.run([executable("ros2py"), "service", "call", "/sim/set_pause", "std_srvs/srv/SetBool",
+                           "{dat: true}"], timeout=30)
+    assert result.returncode == 1 and result.stdout == ""
+    assert result.stderr.strip() == "ros2py: std_srvs/srv/SetBool_Request has no field 'dat' (fields: data)"
