@@ -3,6 +3,7 @@
 # (scripts/sim_arm.sh), ball_tracker on the simulated camera, the balance controller (PID, MPC or policy)
 # and the visualizer, each with its parameter file; a monitor prints progress once a second.
 # Ctrl-C stops every process. Usually started through scripts/sim_pid.sh or scripts/sim_mpc.sh.
+# The simulation waits, paused, until the nodes are up: the run starts with the ball at rest.
 #
 #   scripts/sim_balance.sh --controller pid                    # balance at the centre
 #   scripts/sim_balance.sh --controller mpc --reference circle --radius 0.1 --period 10
@@ -91,7 +92,7 @@ trap stop_all INT TERM EXIT
 
 echo "sim_balance.sh: $CONTROLLER controller, domain $DOMAIN seed $SEED, ball released at ($BALL_X, $BALL_Y) m; logs in $LOGS" >&2
 start sim "$ROOT/scripts/sim_arm.sh" --sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" \
-  --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y" ${ARM_FLAGS[@]+"${ARM_FLAGS[@]}"} \
+  --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y" --param start_paused=true ${ARM_FLAGS[@]+"${ARM_FLAGS[@]}"} \
   ${SIM_PARAMS[@]+"${SIM_PARAMS[@]}"}
 if ((! TRUTH_FED)); then
   start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
@@ -104,6 +105,9 @@ fi
 start controller "$EXE" --ros-args --params-file "$YAML" -p use_sim_time:=true -p peer_timeout_s:=5.0 \
   ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"}
 start visualizer ball_balance_visualizer --ros-args -p use_sim_time:=true ${VIS_PARAMS[@]+"${VIS_PARAMS[@]}"}
+# the simulation starts paused: it runs once the tracker (or the truth feed), the controller and
+# the monitor are up
+start resume resume_when /ball_state=Publisher /plate_cmd=Publisher /sim/ball_truth=Subscription
 
 MONITOR=(python -m ball_balance.benchmark.live --sim-time --duration "$DURATION" --title "$CONTROLLER, $DOMAIN")
 [[ -n "$OUT" ]] && MONITOR+=(--out "$OUT")

@@ -87,7 +87,7 @@ trap stop_all INT TERM EXIT
 echo "sim_policy_in_manager.sh: ${TILT_LAW:-policy} tilt law in the controller manager, domain $DOMAIN seed $SEED," \
   "ball released at ($BALL_X, $BALL_Y) m; logs in $LOGS" >&2
 start sim "$ROOT/scripts/sim_arm.sh" --sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" \
-  --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y"
+  --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y" --param start_paused=true
 if ((! TRUTH_FED)); then
   start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true
 fi
@@ -100,20 +100,15 @@ if ! spawner "$CONTROLLER" -t ball_balance_controllers/BallBalanceController -p 
   exit 3
 fi
 # then take over the joints from forward_position_controller in one switch, once the monitor
-# listens: it counts from the engagement and must see the release. The hand-over stays a process
-# of the graph (a failed switch ends the graph with its log lines, exit code 3).
-exec 3>&2
+# listens (it counts from the engagement), and resume the simulation (paused until then) once
+# /ball_state has its publisher. The hand-over stays a process of the graph (a failed switch
+# ends the graph with its log lines, exit code 3).
 handover() {
-  local _ info
-  for _ in $(seq 120); do
-    info="$(ros2py topic info /ball_reference 2>/dev/null || true)"
-    [[ "$info" == *"Subscription count: "[1-9]* ]] && break
-    sleep 0.5
-  done
+  wait_for_endpoint /ball_reference Subscription || return 3
   ros2py control switch_controllers --spin-time 30 --activate "$CONTROLLER" \
     --deactivate forward_position_controller --strict || return 3
   echo "sim_policy_in_manager.sh: $CONTROLLER active (forward_position_controller inactive)" >&3
-  exec sleep infinity
+  resume_when /ball_state=Publisher
 }
 start handover handover
 

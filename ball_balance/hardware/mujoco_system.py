@@ -94,6 +94,8 @@ SCHEMA = (
     Param("ball_y", 0.0, "initial ball position, plate frame", "m", -0.2, 0.2),
     Param("sim_config", "", "YAML file with any of these parameters (URDF params win)"),
     Param("robot_description_file", "", "URDF the world is built from; empty = config/ur5e_ball_balance.urdf"),
+    Param("start_paused", False, "come up paused (physics and clock stopped) until /sim/set_pause data=false: "
+          "the graph scripts resume once every node is up, so nothing moves the ball before a controller acts"),
     Param("step_simulation_steps", 1, "physics steps per /sim/step_simulation call (while paused)", "", 1, 100000),
     Param("wrench_duration", 0.1, "how long one /sim/ball_wrench message acts", "s", 0.0, 10.0),
 )
@@ -223,7 +225,7 @@ class MujocoSystem(SystemInterface):
             self.world.speed_scaling = factor
         self._target = np.array(robot.HOME_POSITIONS_RAD)
         self._requests = collections.deque()   # callables from other threads, run in read()
-        self.paused = False
+        self.paused = self.params["start_paused"]
         self._steps_requested = 0
         self._copy_states()
         return CallbackReturn.SUCCESS

@@ -87,7 +87,7 @@ class SimRosIo:
             node.create_subscription(WrenchStamped, "/sim/ball_wrench", self._on_wrench, 10),
             node.create_subscription(Vector3Stamped, "/sim/push_ball", self._on_push, 10),
         ]
-        self.paused = False
+        self.paused = params["start_paused"]
         self._dropped = None
         self._camera_info = camera_info_msg(self.world.config.camera, self.params["camera_frame_id"])
         self.static_tf = StaticTransformBroadcaster(node)

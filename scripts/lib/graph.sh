@@ -11,6 +11,32 @@ start() {  # start NAME CMD...: in the background, output to $LOGS/NAME.log
   echo "$(basename "$0"): started $name (pid $!)" >&2
 }
 
+# fd 3: the script's own stderr, for lines from helper processes (`start` sends their output
+# to their log)
+exec 3>&2
+
+# The graph scripts start the simulation paused (start_paused=true): while the nodes come up,
+# a domain's push or a plate out of level would move the ball before any controller acts.
+# `start resume resume_when TOPIC=Publisher|Subscription ...` waits until each topic has one,
+# resumes the simulation, then idles as a process of the graph (a timeout ends the graph).
+wait_for_endpoint() {  # wait_for_endpoint TOPIC Publisher|Subscription: up to 120 s
+  local info _
+  for _ in $(seq 240); do
+    info="$(ros2py topic info "$1" 2>/dev/null || true)"
+    [[ "$info" == *"$2 count: "[1-9]* ]] && return 0
+    sleep 0.5
+  done
+  echo "$(basename "$0"): no ${2,,} on $1 after 120 s" >&3
+  return 1
+}
+resume_when() {
+  local spec
+  for spec in "$@"; do wait_for_endpoint "${spec%=*}" "${spec#*=}" || return 3; done
+  ros2py service call /sim/set_pause std_srvs/srv/SetBool "{data: false}" || return 3
+  echo "$(basename "$0"): simulation resumed (the graph is up)" >&3
+  exec sleep infinity
+}
+
 # The monitor ends the run (after its --duration, or never); any other process ending first
 # is a dead core node: the script exits there with code 3 and that process's last log lines.
 # Ctrl-C exits with 130 (stop_all has already stopped everything).

@@ -219,6 +219,23 @@ def test_pause_stops_the_clock_and_steps_advance_it_exactly(system):
     assert system.now() == pytest.approx(paused_at + 7 * system.world.physics_dt_s + 10 * PERIOD_S)
 
 
+def test_start_paused_waits_for_resume_with_the_ball_where_it_was_placed():
+    system, result = make_system({"start_paused": True, "domain": "pushes", "ball_x": 0.05})
+    assert result == CallbackReturn.SUCCESS
+    try:
+        assert system.on_configure(State.UNCONFIGURED) == CallbackReturn.SUCCESS
+        assert system.on_activate(State.INACTIVE) == CallbackReturn.SUCCESS
+        start = system.now()
+        run_cycles(system, 3000)   # 6 s of the manager's cycles: past the domain's first push (4 s)
+        assert system.now() == start
+        assert (system.get_state("ball/x"), system.get_state("ball/vx")) == pytest.approx((0.05, 0.0), abs=1e-6)
+        system.request_pause(False)
+        run_cycles(system, 10)
+        assert system.now() == pytest.approx(start + 10 * PERIOD_S)
+    finally:
+        system.on_shutdown(State.ACTIVE)
+
+
 def test_reset_world_puts_arm_and_ball_back_at_rest(system):
     system.set_command("wrist_2_joint/position", robot.HOME_POSITIONS_RAD[4] + 0.1)
     system.request_push((0.1, 0.0, 0.0))
