@@ -1,6 +1,6 @@
 """`ros2py`: the ros2 command-line verbs we need, for machines without ROS 2's `ros2`.
 
-    ros2py topic list|echo|hz|info|pub     ros2py node list     ros2py service list|call
+    ros2py topic list|echo|hz|info|pub     ros2py node list|info     ros2py service list|call
     ros2py param get|set|dump|list|load    ros2py bag record|play|info    ros2py run PKG EXE
     ros2py tf echo TARGET SOURCE           ros2py interface show TYPE
     ros2py action list|info|send_goal
@@ -101,10 +101,14 @@ def _topic_parsers(sub) -> None:
 
 
 def _simple_parsers(sub) -> None:
-    node = sub.add_parser("node", help="list nodes").add_subparsers(dest="verb", required=True)
+    node = sub.add_parser("node", help="list nodes, show one").add_subparsers(dest="verb", required=True)
     p = _verb(node, "list", "graph:cmd_node_list", "output a list of available nodes")
     p.add_argument("-a", "--all", action="store_true", help="also show hidden nodes")
     p.add_argument("-c", "--count-nodes", action="store_true", help="only show the number of nodes")
+    _spin_time(p, LIST_SPIN_TIME_S)
+    p = _verb(node, "info", "graph:cmd_node_info", "output information about a node")
+    p.add_argument("node_name", help="node name to request information (e.g. /ball_tracker)")
+    p.add_argument("--include-hidden", action="store_true", help="display hidden topics, services, and actions")
     _spin_time(p, LIST_SPIN_TIME_S)
 
     service = sub.add_parser("service", help="list and call services").add_subparsers(dest="verb", required=True)

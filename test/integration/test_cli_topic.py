@@ -98,6 +98,12 @@ def test_topic_list_info_hz_and_node_list_see_the_publisher(launcher, ball_state
     listed_in(launcher, ("node", "list"), "/ball_state_source")
     listed_in(launcher, ("service", "list", "-t"),
               "/ball_state_source/get_parameters [rcl_interfaces/srv/GetParameters]")
+    listed_in(launcher, ("node", "info", "/ball_state_source"), "    /ball_state: ball_tracker_msgs/msg/BallState")
+    info = ros2py(launcher, "node", "info", "/ball_state_source").stdout
+    assert info.startswith("/ball_state_source\n  Subscribers:\n\n  Publishers:\n"), info
+    assert "  Service Servers:\n    /ball_state_source/describe_parameters: rcl_interfaces/srv/DescribeParameters\n" \
+        in info
+    assert info.endswith("  Action Servers:\n\n  Action Clients:\n\n"), info
 
 
 def listed_in(launcher, verb, line: str, deadline_s: float = 60.0) -> None:
