@@ -144,3 +144,13 @@ def test_tracker_filter_takes_the_delay_the_plate_shows(mode):
     fixed = dataclasses.replace(spec, mode="fast", tracker_overrides=(("estimate_plate_cmd_delay", False),
                                                                       ("plate_cmd_delay_s", 0.05)))
     assert run_episode(fixed).metrics["tracker_delay_s"] == 0.05
+
+
+def test_the_ramped_commands_are_written_at_the_managers_update_rate():
+    """EpisodeSpec.command_write_hz models BallBalanceController's writes: one per manager cycle."""
+    import yaml
+
+    from harness import ROOT
+
+    manager = yaml.safe_load((ROOT / "config" / "ur_controllers.yaml").read_text())["controller_manager"]
+    assert EpisodeSpec().command_write_hz == manager["ros__parameters"]["update_rate"]
