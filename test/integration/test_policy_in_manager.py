@@ -31,6 +31,9 @@ def test_the_policy_controller_in_the_manager_brings_the_ball_to_the_centre(laun
     wait_for(lambda: "ball_balance_controller active" in script.output() or not script.running, 240,
              "the controller to be active in the manager")
     assert script.running, script.output()
+    # the simulation, paused until the graph is up, runs once the controller has taken over
+    wait_for(lambda: "simulation resumed" in script.output() or not script.running, 120, "the simulation to resume")
+    assert script.running, script.output()
     # the controller commands the joints: the plate leaves its level home pose
     home = np.array(HOME_POSITIONS_RAD)
 
