@@ -1,6 +1,6 @@
 """`ros2py`: the ros2 command-line verbs we need, for machines without ROS 2's `ros2`.
 
-    ros2py topic list|echo|hz|info|pub     ros2py node list|info     ros2py service list|call
+    ros2py topic list|echo|hz|bw|info|pub     ros2py node list|info     ros2py service list|call
     ros2py param get|set|dump|list|load    ros2py bag record|play|info    ros2py run PKG EXE
     ros2py tf echo TARGET SOURCE           ros2py interface show TYPE
     ros2py action list|info|send_goal
@@ -55,6 +55,16 @@ def _list_options(p, noun: str) -> None:
     _spin_time(p, LIST_SPIN_TIME_S)
 
 
+def _watch_options(p, window_default: int) -> None:
+    """What `topic hz` and `topic bw` take: a topic, a window, a duration, the QoS."""
+    p.add_argument("topic_name")
+    p.add_argument("--window", "-w", type=int, default=window_default,
+                   help="window size in messages (default: %(default)s)")
+    p.add_argument("--duration", type=float, default=None, help="ros2py extension: stop after this many seconds")
+    _qos(p)
+    _spin_time(p, WAIT_FOR_NODE_S)
+
+
 def _topic_parsers(sub) -> None:
     topic = sub.add_parser("topic", help="inspect and publish topics").add_subparsers(dest="verb", required=True)
     _list_options(_verb(topic, "list", "topic:cmd_list", "output a list of available topics"), "topic")
@@ -73,12 +83,8 @@ def _topic_parsers(sub) -> None:
     _qos(p)
     _spin_time(p, WAIT_FOR_NODE_S)
 
-    p = _verb(topic, "hz", "topic:cmd_hz", "print the average receiving rate of a topic")
-    p.add_argument("topic_name")
-    p.add_argument("--window", "-w", type=int, default=10000, help="window size in messages (default: 10000)")
-    p.add_argument("--duration", type=float, default=None, help="ros2py extension: stop after this many seconds")
-    _qos(p)
-    _spin_time(p, WAIT_FOR_NODE_S)
+    _watch_options(_verb(topic, "hz", "topic:cmd_hz", "print the average receiving rate of a topic"), 10000)
+    _watch_options(_verb(topic, "bw", "topic:cmd_bw", "display the bandwidth used by a topic"), 100)
 
     p = _verb(topic, "info", "topic:cmd_info", "print information about a topic")
     p.add_argument("topic_name")

@@ -81,44 +81,86 @@ def hz_statistics(intervals_s):
     return 1.0 / mean if mean > 0 else 0.0, min(intervals_s), max(intervals_s), std_dev
 
 
-def cmd_hz(args) -> int:
-    from collections import deque
-
+def _watch_raw(args, topic: str, on_message, report) -> None:
+    """Subscribe `topic` without decoding (QoS matched to its publishers), call on_message(raw)
+    for each message and report() once a second, until --duration (or Ctrl-C)."""
     from ball_balance.cli.messages import get_interface
 
-    topic = absolute_name(args.topic_name)
     with Session() as session:
         msg_cls = get_interface(resolve_type(session, topic, None, args.spin_time))
         qos = session.adapted_qos(topic, _policy(args.qos_reliability), _policy(args.qos_durability),
                                   args.qos_depth)
-        stamps = deque(maxlen=args.window + 1)
-        total = [0]
-
-        def on_message(_raw) -> None:
-            stamps.append(time.monotonic())
-            total[0] += 1
-
-        session.node.create_subscription(msg_cls, topic, on_message, qos, raw=True)  # raw: no decoding
+        session.node.create_subscription(msg_cls, topic, on_message, qos, raw=True)
         start = time.monotonic()
-        state = {"next": start + 1.0, "printed_at": 0}
+        next_report = [start + 1.0]
 
         def tick() -> bool:
             now = time.monotonic()
-            if now >= state["next"]:
-                state["next"] += 1.0
-                if total[0] == state["printed_at"]:
-                    if total[0]:
-                        print("no new messages", flush=True)
-                elif len(stamps) >= 2:
-                    state["printed_at"] = total[0]
-                    samples = list(stamps)
-                    intervals = [b - a for a, b in zip(samples, samples[1:], strict=False)]
-                    rate, lo, hi, std = hz_statistics(intervals)
-                    print(f"average rate: {rate:.3f}\n\tmin: {lo:.3f}s max: {hi:.3f}s "
-                          f"std dev: {std:.5f}s window: {len(samples)}", flush=True)
+            if now >= next_report[0]:
+                next_report[0] += 1.0
+                report()
             return args.duration is not None and now - start >= args.duration
 
         session.spin_until(tick, None, step_s=0.05)
+
+
+def cmd_hz(args) -> int:
+    from collections import deque
+
+    stamps = deque(maxlen=args.window + 1)
+    count = {"total": 0, "printed_at": 0}
+
+    def on_message(_raw) -> None:
+        stamps.append(time.monotonic())
+        count["total"] += 1
+
+    def report() -> None:
+        if count["total"] == count["printed_at"]:
+            if count["total"]:
+                print("no new messages", flush=True)
+        elif len(stamps) >= 2:
+            count["printed_at"] = count["total"]
+            samples = list(stamps)
+            intervals = [b - a for a, b in zip(samples, samples[1:], strict=False)]
+            rate, lo, hi, std = hz_statistics(intervals)
+            print(f"average rate: {rate:.3f}\n\tmin: {lo:.3f}s max: {hi:.3f}s "
+                  f"std dev: {std:.5f}s window: {len(samples)}", flush=True)
+
+    _watch_raw(args, absolute_name(args.topic_name), on_message, report)
+    return 0
+
+
+def bandwidth_text(bytes_per_s: float, count: int, mean: float, smallest: float, largest: float) -> str:
+    """ros2 topic bw's two lines: every figure in the unit (B, KB, MB; 1000-based) of the rate."""
+    unit, divisor, digits = (("B", 1.0, 0) if bytes_per_s < 1e3 else ("KB", 1e3, 2) if bytes_per_s < 1e6
+                             else ("MB", 1e6, 2))
+
+    def text(value: float) -> str:
+        return f"{value / divisor:.{digits}f} {unit}"
+
+    return (f"{text(bytes_per_s)}/s from {count} messages\n"
+            f"\tMessage size mean: {text(mean)} min: {text(smallest)} max: {text(largest)}")
+
+
+def cmd_bw(args) -> int:
+    from collections import deque
+
+    received = deque(maxlen=args.window)   # (arrival time, size in bytes)
+
+    def on_message(raw: bytes) -> None:
+        received.append((time.monotonic(), len(raw)))
+
+    def report() -> None:
+        samples = list(received)
+        span_s = time.monotonic() - samples[0][0] if len(samples) >= 2 else 0.0
+        if span_s > 0.0:
+            sizes = [size for _, size in samples]
+            print(bandwidth_text(sum(sizes) / span_s, len(sizes), sum(sizes) / len(sizes), min(sizes), max(sizes)),
+                  flush=True)
+
+    topic = absolute_name(args.topic_name)
+    print(f"Subscribed to [{topic}]", flush=True)
+    _watch_raw(args, topic, on_message, report)
     return 0
 
 

@@ -95,6 +95,10 @@ def test_topic_list_info_hz_and_node_list_see_the_publisher(launcher, ball_state
     # (4 Hz and 40 Hz over its first 5 and 19 messages at load 15)
     assert rates and 10.0 < rates[-1] < 30.0, hz
     assert "\tmin: " in hz and " std dev: " in hz and " window: " in hz
+    bw = ros2py(launcher, "topic", "bw", "/ball_state", "--duration", "8").stdout
+    assert bw.startswith("Subscribed to [/ball_state]\n"), bw
+    # a BallState is under 100 bytes: at 20 Hz, B/s or KB/s
+    assert " messages\n\tMessage size mean: " in bw and ("B/s from " in bw), bw
     listed_in(launcher, ("node", "list"), "/ball_state_source")
     listed_in(launcher, ("service", "list", "-t"),
               "/ball_state_source/get_parameters [rcl_interfaces/srv/GetParameters]")

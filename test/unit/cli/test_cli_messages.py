@@ -10,7 +10,7 @@ from ball_balance.cli.messages import (
     set_message_fields,
     type_name_of,
 )
-from ball_balance.cli.topic import hz_statistics
+from ball_balance.cli.topic import bandwidth_text, hz_statistics
 
 
 def test_ball_state_prints_as_ros2_topic_echo_does():
@@ -72,6 +72,15 @@ def test_bad_yaml_and_unknown_types_are_one_line_errors():
         get_interface("std_msgs/msg/Strin")
     with pytest.raises(CliError, match="not a valid interface type name"):
         get_interface("String")
+
+
+def test_bandwidth_lines_use_the_rates_unit_for_every_figure_as_ros2_topic_bw():
+    assert bandwidth_text(500.0, 10, 50.0, 48, 52) == (
+        "500 B/s from 10 messages\n\tMessage size mean: 50 B min: 48 B max: 52 B")
+    assert bandwidth_text(1600.5, 32, 50.0, 50, 50) == (
+        "1.60 KB/s from 32 messages\n\tMessage size mean: 0.05 KB min: 0.05 KB max: 0.05 KB")
+    assert bandwidth_text(27.65e6, 30, 921654, 921654, 921654).startswith(
+        "27.65 MB/s from 30 messages\n\tMessage size mean: 0.92 MB")
 
 
 def test_hz_statistics_match_the_definition():
