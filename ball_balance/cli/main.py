@@ -1,7 +1,7 @@
 """`ros2py`: the ros2 command-line verbs we need, for machines without ROS 2's `ros2`.
 
     ros2py topic list|echo|hz|bw|info|pub     ros2py node list|info     ros2py service list|call
-    ros2py param get|set|dump|list|load    ros2py bag record|play|info    ros2py run PKG EXE
+    ros2py param get|set|dump|list|load|describe    ros2py bag record|play|info    ros2py run PKG EXE
     ros2py tf echo TARGET SOURCE           ros2py interface show TYPE
     ros2py action list|info|send_goal
     ros2py control list_controllers|list_hardware_components|list_hardware_interfaces|
@@ -144,6 +144,10 @@ def _simple_parsers(sub) -> None:
     _spin_time(p, WAIT_FOR_NODE_S)
     p = _verb(param, "list", "param:cmd_list", "list the parameter names of a node")
     p.add_argument("node_name")
+    _spin_time(p, WAIT_FOR_NODE_S)
+    p = _verb(param, "describe", "param:cmd_describe", "show the type, description and constraints of parameters")
+    p.add_argument("node_name")
+    p.add_argument("parameter_names", nargs="+")
     _spin_time(p, WAIT_FOR_NODE_S)
     p = _verb(param, "load", "param:cmd_load", "set parameters of a node from a parameter file")
     p.add_argument("node_name")

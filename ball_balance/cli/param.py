@@ -90,6 +90,16 @@ def set_values(session: Session, node: str, values: Dict[str, Any]) -> List[Any]
     return list(_service(session, node, "set_parameters", SetParameters, request).results)
 
 
+def undeclared(session: Session, node: str, name: str, prefix: str) -> CliError:
+    """The one line for a name the node has not declared, with the closest declared one."""
+    from controller_manager_py.parameters import closest_name
+
+    close = closest_name(name, list_names(session, node))
+    hint = f"did you mean {close}? " if close else ""
+    return CliError(f"{prefix}'{name}' is not declared by {node} "
+                    f"({hint}`ros2py param list {node}` shows its parameters)")
+
+
 def cmd_get(args) -> int:
     node = full_node_name(args.node_name)
     with _open(args) as session:
@@ -111,12 +121,7 @@ def cmd_set(args) -> int:
         (result,) = set_values(session, node, {args.parameter_name: data})
         if not result.successful and "undeclared" in result.reason:
             # rclpy's reason lists no name ("undeclared parameter(s): []"): say which, and what is close
-            from controller_manager_py.parameters import closest_name
-
-            close = closest_name(args.parameter_name, list_names(session, node))
-            hint = f"did you mean {close}? " if close else ""
-            raise CliError(f"Setting parameter failed: '{args.parameter_name}' is not declared by {node} "
-                           f"({hint}`ros2py param list {node}` shows its parameters)")
+            raise undeclared(session, node, args.parameter_name, "Setting parameter failed: ")
     if not result.successful:
         raise CliError(f"Setting parameter failed: {result.reason or 'refused by the node'}")
     print("Set parameter successful")
@@ -157,6 +162,47 @@ def cmd_dump(args) -> int:
     params = {name: value_to_python(v) for name, v in zip(names, values, strict=True)}
     print(yaml.safe_dump({node: {"ros__parameters": nest(params)}}, default_flow_style=False,
                          sort_keys=False), end="")
+    return 0
+
+
+# rcl_interfaces/msg/ParameterType -> the name ros2cli prints
+_TYPE_NAMES = ("not set", "boolean", "integer", "double", "string", "byte array", "boolean array",
+               "integer array", "double array", "string array")
+
+
+def describe_text(descriptor) -> str:
+    """One parameter's rcl_interfaces/ParameterDescriptor as `ros2 param describe` prints it."""
+    kind = _TYPE_NAMES[descriptor.type] if 0 <= descriptor.type < len(_TYPE_NAMES) else "unknown type"
+    lines = [f"Parameter name: {descriptor.name}", f"  Type: {kind}"]
+    if descriptor.description:
+        lines.append(f"  Description: {descriptor.description}")
+    lines.append("  Constraints:")
+    if descriptor.read_only:
+        lines.append("    Read only: true")
+    ranges = list(descriptor.floating_point_range) + list(descriptor.integer_range)
+    if ranges:
+        lines += [f"    Min value: {ranges[0].from_value}", f"    Max value: {ranges[0].to_value}"]
+        if ranges[0].step:
+            lines.append(f"    Step: {ranges[0].step}")
+    if descriptor.additional_constraints:
+        lines.append(f"    Additional constraints: {descriptor.additional_constraints}")
+    return "\n".join(lines)
+
+
+def cmd_describe(args) -> int:
+    from rcl_interfaces.srv import DescribeParameters
+
+    node = full_node_name(args.node_name)
+    with _open(args) as session:
+        response = _service(session, node, "describe_parameters", DescribeParameters,
+                            DescribeParameters.Request(names=args.parameter_names))
+        descriptors = list(response.descriptors)
+        # rclpy answers an undeclared name with no descriptors at all; others with type "not set"
+        described = {d.name for d in descriptors if d.type != 0}
+        unknown = [name for name in args.parameter_names if name not in described]
+        if unknown:
+            raise undeclared(session, node, unknown[0], "parameter ")
+    print("\n".join(describe_text(d) for d in descriptors))
     return 0
 
 

@@ -64,3 +64,18 @@ def test_service_call_refuses_bad_values_with_one_line_before_calling(launcher):
                            "{dat: true}"], timeout=30)
     assert result.returncode == 1 and result.stdout == ""
     assert result.stderr.strip() == "ros2py: std_srvs/srv/SetBool_Request has no field 'dat' (fields: data)"
+
+
+def test_param_describe_shows_the_schema_description_and_range_as_ros2cli(launcher, graph):
+    launcher.start([executable("ball_balance_visualizer")])
+    graph.wait_for_service("/ball_balance_visualizer/describe_parameters", timeout=30)
+    result = launcher.run([executable("ros2py"), "param", "describe", "/ball_balance_visualizer", "rate_hz"],
+                          timeout=40)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("Parameter name: rate_hz\n  Type: double\n  Description: "), result.stdout
+    assert "  Constraints:\n    Read only: true\n    Min value: 1.0\n    Max value: 100.0\n" in result.stdout
+    typo = launcher.run([executable("ros2py"), "param", "describe", "/ball_balance_visualizer", "rate_hzz"],
+                        timeout=40)
+    assert typo.returncode == 1 and typo.stdout == ""
+    assert "ros2py: parameter 'rate_hzz' is not declared by /ball_balance_visualizer (did you mean rate_hz?" \
+        in typo.stderr
