@@ -112,7 +112,7 @@ def main(argv=None) -> int:
             fmt = lambda v: f"{v:.2f}" if math.isfinite(v) else "inf"  # noqa: E731
             line = (f"{name:<12} {controller:<5} {reference:<11} {domain:<14} {len(ms):>2} "
                     f"{sum(m['drop'] for m in ms):>5.0f} "
-                    f"{np.mean(steady) if steady else math.nan:>7.1f} {max(steady) if steady else math.nan:>6.1f} "
+                    f"{np.mean(steady) if steady else math.nan:>7.2f} {max(steady) if steady else math.nan:>6.2f} "
                     f"{fmt(max(settle)) if settle else '-':>6} "
                     f"{(fmt(float(np.mean(push))) if push else '-'):>5} {(fmt(max(push_max)) if push_max else '-'):>5} "
                     f"{late:>7} "
