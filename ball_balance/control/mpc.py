@@ -46,7 +46,7 @@ class MpcConfig:
     dt_s: float = 0.02                 # model step = control period
     horizon: int = 25                  # N
     q_pos: float = 150.0               # weight on position error [1/m^2]
-    q_vel: float = 7.0                 # weight on velocity error [1/(m/s)^2] (7 with 60 Hz: the push tail)
+    q_vel: float = 6.0                 # weight on velocity error [1/(m/s)^2] (6 with 60 Hz: the push tail)
     r_u: float = 1.0                   # weight on (u - u_ff) [1/rad^2]
     r_du: float = 600.0                # weight on (u_k - u_{k-1}) [1/rad^2]
     u_max_rad: float = 0.15            # tilt limit
