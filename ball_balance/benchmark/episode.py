@@ -36,10 +36,11 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from ball_balance.control import config as control_config
-from ball_balance.control.kinematics import Chain, CommandRamp, PlateKinematics
+from ball_balance.control.kinematics import Chain, PlateKinematics
 from ball_balance.control.pipeline import ControlPipeline
 from ball_balance.control.safety import BallObservation, Mode
 from ball_balance.robot import HOME_POSITIONS_RAD, JOINT_NAMES, robot_description
+from controller_manager_py.controllers.command_ramp import CommandRamp
 from controller_manager_py.parameters import validate
 
 REFERENCES = {
@@ -117,9 +118,10 @@ class EpisodeSpec:
     overrides: tuple = ()                   # extra controller parameters ((name, value), ...)
     tracker_overrides: tuple = ()           # tracker parameters over config/ball_tracker.yaml ((name, value), ...)
     # How the joint targets reach the arm: > 0, ramped over each control period and written at
-    # this rate, as BallBalanceController does in the manager (command_ramp, at the update
-    # rate of config/ur_controllers.yaml); 0, one step per control tick, as the balance nodes
-    # through forward_position_controller.
+    # this rate, as BallBalanceController does in the manager and the simulated arm's
+    # forward_position_controller does with the balance nodes' targets (command_ramp, at the
+    # update rate of config/ur_controllers.yaml); 0, one step per control tick, as a forward
+    # controller without the ramp writes them.
     command_write_hz: float = 500.0
     record: bool = False                    # keep time series (for plots)
 

@@ -4,8 +4,18 @@ Subscribes `~/commands` (std_msgs/Float64MultiArray, one value per joint in `joi
 order) and writes them to `<joint>/<interface_name>`. Wrong-length or non-finite commands
 are refused (counted, throttled warning); update() keeps the last good command and never
 blocks. Activation and deactivation clear the command, so a stale one never applies.
+
+`command_ramp: true` (ours; ros2_controllers writes commands as they come, the default)
+writes each new command as a straight line from the value last written, reached in the update
+before the next command is expected: commands sent at a balance controller's 60 Hz then reach
+a stiff simulated servo as a ramp instead of a staircase (command_ramp.py says why that
+matters). How far apart commands come is measured, at most `command_ramp_max_s`.
 """
 from __future__ import annotations
+
+import math
+
+import numpy as np
 
 from ..controller_interface.base import (
     ControllerInterface,
@@ -14,6 +24,7 @@ from ..controller_interface.base import (
 )
 from ..hardware_interface.types import CallbackReturn, State, return_type
 from ..parameters import Param
+from .command_ramp import CommandIntervalEstimate, CommandRamp
 from .command_slot import CommandSlot
 
 
@@ -21,10 +32,19 @@ def _non_empty(value):
     return None if value else "must list at least one joint"
 
 
+_RAMP_PARAMS = (
+    Param("command_ramp", False, "write each new command as a ramp from the value last written, reached when "
+          "the next command is expected (false: as it comes, as ros2_controllers does)", read_only=True),
+    Param("command_ramp_max_s", 0.05, "longest ramp: commands further apart than this are reached after it",
+          "s", 0.001, 1.0, read_only=True),
+)
+
+
 class ForwardCommandController(ControllerInterface):
     PARAMS = (
         Param("joints", [""], "joints commanded, in the order of the command array", check=_non_empty),
         Param("interface_name", "position", "command interface written for every joint"),
+        *_RAMP_PARAMS,
     )
 
     def interface_name(self) -> str:
@@ -37,6 +57,11 @@ class ForwardCommandController(ControllerInterface):
             return CallbackReturn.ERROR
         self.joints = joints
         self.slot = CommandSlot(self.name, len(joints), self.get_logger())
+        ramped = self.params["command_ramp"]
+        self._ramp = CommandRamp(len(joints)) if ramped else None
+        self._intervals = CommandIntervalEstimate(self.params["command_ramp_max_s"]) if ramped else None
+        self._ramped_command = None
+        self._written = np.zeros(len(joints))
         self.introspection.clear()  # (re)configure: the getters read the live attributes
         self.register_introspection("refused_commands", lambda: float(self.slot.refused))
         node = self.get_node()
@@ -54,12 +79,18 @@ class ForwardCommandController(ControllerInterface):
                                       [f"{j}/{self.interface_name()}" for j in self.joints])
 
     def on_activate(self, previous_state: State) -> CallbackReturn:
-        self.slot.reset()
+        self._reset()
         return CallbackReturn.SUCCESS
 
     def on_deactivate(self, previous_state: State) -> CallbackReturn:
-        self.slot.reset()
+        self._reset()
         return CallbackReturn.SUCCESS
+
+    def _reset(self) -> None:
+        self.slot.reset()
+        self._ramped_command = None
+        if self._intervals is not None:
+            self._intervals.reset()
 
     def on_cleanup(self, previous_state: State) -> CallbackReturn:
         node, sub = self.get_node(), getattr(self, "_subscription", None)
@@ -70,16 +101,26 @@ class ForwardCommandController(ControllerInterface):
 
     def update(self, time: float, period: float) -> return_type:
         command = self.slot.take()
-        if command is not None:
-            for handle, value in zip(self.command_interfaces, command):
-                handle.value = value
+        if command is None:
+            return return_type.OK
+        if self._ramp is not None:
+            if command is not self._ramped_command:   # a new one: ramp on from what was written last
+                self._ramped_command = command
+                interval_s = self._intervals.arrived(time)
+                for i, handle in enumerate(self.command_interfaces):
+                    self._written[i] = handle.value
+                start = self._written if all(map(math.isfinite, self._written)) else command
+                self._ramp.start(start, command, time - period, max(interval_s, period, 1e-6))
+            command = self._ramp.at(time)
+        for handle, value in zip(self.command_interfaces, command):
+            handle.value = float(value)
         return return_type.OK
 
 
 class JointGroupPositionController(ForwardCommandController):
     """ForwardCommandController with interface_name fixed to `position`."""
 
-    PARAMS = (ForwardCommandController.PARAMS[0],)
+    PARAMS = (ForwardCommandController.PARAMS[0], *_RAMP_PARAMS)
 
     def interface_name(self) -> str:
         return "position"

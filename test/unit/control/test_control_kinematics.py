@@ -7,7 +7,6 @@ import pytest
 
 from ball_balance.control.kinematics import (
     Chain,
-    CommandRamp,
     KinematicsError,
     PlateKinematics,
     ShaperConfig,
@@ -141,14 +140,3 @@ def test_step_limit_keeps_the_ik_direction():
     q = kin.command(0.1, 0.0, kin.home_q)
     assert np.max(np.abs(q - kin.home_q)) == pytest.approx(0.01)
     np.testing.assert_allclose(kin.chain.fk(q)[1], kin.p_WP_home, atol=2e-4)  # still (nearly) on the pivot
-
-
-def test_the_command_ramp_runs_in_a_straight_line_from_the_last_command_to_the_target():
-    ramp = CommandRamp(2)
-    ramp.start([0.0, 1.0], [0.6, 0.4], t_from_s=1.0, duration_s=0.02)
-    assert ramp.at(0.9).tolist() == [0.0, 1.0]                       # before: where it was
-    assert ramp.at(1.005) == pytest.approx([0.15, 0.85])             # a quarter of the way
-    assert ramp.at(1.02) == pytest.approx([0.6, 0.4])
-    assert ramp.at(5.0) == pytest.approx([0.6, 0.4])                 # after: it stays at the target
-    out = ramp.at(1.01)
-    assert ramp.at(1.015) is out                                     # one array, reused (no allocation)

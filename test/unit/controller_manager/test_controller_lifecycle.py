@@ -71,6 +71,49 @@ def test_forward_commands_reach_the_mock_and_bad_commands_are_refused_and_counte
     assert fwd.slot.refused == 3
 
 
+def commands(cm):
+    return [cm.rm.command_interfaces[f"{j}/position"].value for j in JOINTS]
+
+
+def test_command_ramp_writes_a_staircase_of_commands_as_ramps_reached_by_the_next_one():
+    cm = make_manager()   # 500 Hz: commands every 10 cycles are a 50 Hz staircase
+    fwd = spawn(cm, "fwd", FORWARD, {"joints": JOINTS, "command_ramp": True})
+    t = 0.0
+    for k in range(1, 6):     # the interval between commands is learnt from their arrivals
+        fwd.slot.offer([HOME[0] + 0.01 * k] + HOME[1:])
+        t = run(cm, 10, start=t)
+    assert commands(cm)[0] == pytest.approx(HOME[0] + 0.05)    # each reached before the next
+    fwd.slot.offer([HOME[0] + 0.06] + HOME[1:])
+    written = []
+    for _ in range(10):
+        t = run(cm, 1, start=t)
+        written.append(commands(cm)[0] - HOME[0])
+    # a straight line from 0.05 to 0.06 over the 10 cycles, not one jump
+    assert written == pytest.approx([0.05 + 0.001 * (i + 1) for i in range(10)], abs=1e-9)
+    assert commands(cm)[1:] == pytest.approx(HOME[1:])
+
+
+def test_command_ramp_is_bounded_and_starts_from_what_was_written():
+    cm = make_manager()
+    fwd = spawn(cm, "fwd", FORWARD, {"joints": JOINTS, "command_ramp": True, "command_ramp_max_s": 0.02})
+    # (steps within the mock's velocity limit, 3.14 rad/s = 6.3 mrad per cycle, so none is clamped)
+    fwd.slot.offer(HOME)      # the mock's commands start unset (NaN): the first is written as it is
+    t = run(cm, 1)
+    assert commands(cm) == pytest.approx(HOME)
+    t = run(cm, 19, start=t)  # the next comes 40 ms later: the interval counts as 20 ms
+    fwd.slot.offer([HOME[0] + 0.02] + HOME[1:])   # from what was written, over the 20 ms at most
+    t = run(cm, 1, start=t)
+    assert commands(cm)[0] == pytest.approx(HOME[0] + 0.002)
+    t = run(cm, 9, start=t)
+    assert commands(cm)[0] == pytest.approx(HOME[0] + 0.02)
+    t = run(cm, 500, start=t)               # a second later: the interval counts as 20 ms at most
+    fwd.slot.offer([HOME[0] + 0.04] + HOME[1:])
+    t = run(cm, 5, start=t)
+    assert commands(cm)[0] == pytest.approx(HOME[0] + 0.03)
+    run(cm, 5, start=t)
+    assert commands(cm)[0] == pytest.approx(HOME[0] + 0.04)
+
+
 def test_reactivation_does_not_replay_a_stale_command():
     cm = make_manager()
     fwd = spawn(cm, "fwd", FORWARD, {"joints": JOINTS})
