@@ -5,7 +5,8 @@ scripts/run_demo.sh (the artifacts), and for the live-graph benchmark cells.
     python -m ball_balance.benchmark.live --duration 30 --out artifacts/demo --video-s 8
 
 Subscribes /sim/ball_truth (true ball, plate frame), /ball_state (tracker), /ball_reference,
-/plate_cmd, /sim/ball_dropped, /clock and, for the video, /camera/image_raw or the tracker's overlay
+/plate_cmd, /sim/ball_dropped, /sim/ball_pushed (each push: the recovery from it is timed as
+the benchmark does), /clock and, for the video, /camera/image_raw or the tracker's overlay
 (/ball_tracker/debug_image); metrics count from the controller's engagement. With use_sim_time the
 duration is simulated time. Camera-to-command is wall-clock time (wall_latency.py): each frame's
 capture (its stamp, mapped to the wall clock through /clock) -> the first /plate_cmd written
@@ -38,6 +39,7 @@ class LiveRecorder:
 
         self.node = node
         self.truth, self.est, self.ref, self.cmd = [], [], [], []
+        self.pushes = []       # simulated times of the pushes applied
         self.latency = CameraToCommand()   # wall clock, from the DDS samples' write times
         self.dropped = False
         self.frames = []       # (t, bgr image)
@@ -47,6 +49,7 @@ class LiveRecorder:
         node.create_subscription(BallState, "/ball_state", self.on_state, qos_profile_sensor_data)
         node.create_subscription(PointStamped, "/ball_reference", self.on_reference, 10)
         node.create_subscription(Vector3Stamped, "/plate_cmd", self.on_cmd, 10)
+        node.create_subscription(Vector3Stamped, "/sim/ball_pushed", lambda msg: self.pushes.append(self._t(msg)), 10)
         node.create_subscription(Clock, "/clock", self.on_clock, QoSProfile(depth=10))
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -140,7 +143,9 @@ class LiveRecorder:
         s = self.series()
         if s is None:
             return None
-        m = episode_metrics(s, self.dropped, float(s["t"][-1]))
+        engaged_at = self.t0 + float(s["t_engaged"][0])   # series time 0, on the truth's clock
+        m = episode_metrics(s, self.dropped, float(s["t"][-1]),
+                            push_times_s=[p - engaged_at for p in self.pushes if p >= engaged_at])
         latency = self.latency.latencies_s()
         if latency.size:
             # camera-to-command, wall clock: frame captured -> the command acting on it written
@@ -232,7 +237,10 @@ def format_metrics(m) -> str:
     return (f"drop {'YES' if m['drop'] else 'no'} | RMSE {1e3 * m['rmse_m']:.1f} mm | after 5 s "
             f"{1e3 * m['rmse_steady_m']:.1f} mm | settled to 5 mm at "
             f"{m['settle_s']:.1f} s | peak tilt {math.degrees(m['peak_tilt_rad']):.1f} deg | "
-            f"tilt rate RMS {m['smoothness_rad_s']:.2f} rad/s | camera-to-command (wall clock) " +
+            f"tilt rate RMS {m['smoothness_rad_s']:.2f} rad/s | " +
+            (f"push recovery mean {m['push_recover_s']:.2f} s, worst {m['push_recover_max_s']:.2f} s, "
+             f"{m['pushes_late']:.0f} of {m['pushes']:.0f} over 1 s | " if m.get("pushes") else "") +
+            "camera-to-command (wall clock) " +
             (f"mean {1e3 * m['latency_s']:.1f} ms, p95 {1e3 * m['latency_p95_s']:.1f} ms"
              if math.isfinite(m.get("latency_p95_s", math.nan)) else "-"))
 

@@ -33,7 +33,9 @@ A thin adapter around ball_balance.sim.SimWorld (the physics) and CameraThread (
   ball's centre, axes of header.frame_id (plate_center, default, or base_link/world), for
   `wrench_duration` s from receipt (a timed external wrench; keep publishing for longer);
   /sim/push_ball (geometry_msgs/Vector3Stamped, topic): an impulse, the ball's velocity
-  changes by the vector [m/s] (plate axes), spin kept consistent with rolling.
+  changes by the vector [m/s] (plate axes), spin kept consistent with rolling;
+  /sim/ball_pushed (geometry_msgs/Vector3Stamped, topic, published): every push applied
+  (asked for, or the domain's), stamped with the simulated time it acted.
   Requests are taken by the real-time loop at its next read().
 
 Hardware parameters (`<hardware><param name=...>` in the URDF; see SCHEMA), optionally from
@@ -327,7 +329,7 @@ class MujocoSystem(SystemInterface):
             self._next_push_s += world.knobs.push_interval_s
             angle = self._push_rng.uniform(0.0, 2.0 * math.pi)
             speed = world.knobs.push_speed_m_s
-            world.push_ball(speed * math.cos(angle), speed * math.sin(angle))
+            self._push(speed * math.cos(angle), speed * math.sin(angle))
         self._copy_states()
         if t >= self._next_frame_s:  # a camera frame (rendered, and/or a truth-fed detection)
             self._next_frame_s = max(self._next_frame_s + 1.0 / self.params["camera_rate_hz"], t)
@@ -445,8 +447,15 @@ class MujocoSystem(SystemInterface):
             dv = np.asarray(dv_m_s, dtype=float)
             if not in_plate_axes:
                 dv = self.world.plate_pose()[1].T @ dv
-            self.world.push_ball(float(dv[0]), float(dv[1]))
+            self._push(float(dv[0]), float(dv[1]))
         self._requests.append(push)
+
+    def _push(self, dvx_m_s: float, dvy_m_s: float) -> None:
+        """(loop) Apply a push and say so on /sim/ball_pushed."""
+        self.world.push_ball(dvx_m_s, dvy_m_s)
+        ros = self.ros
+        if ros is not None:
+            ros.publish_pushed(self.world.time_s, dvx_m_s, dvy_m_s)
 
     def request_wrench(self, force_n, torque_n_m, duration_s: float, in_plate_axes: bool = True) -> None:
         """A force and torque on the ball's centre for `duration_s` (plate or world axes)."""

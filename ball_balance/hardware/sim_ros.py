@@ -65,6 +65,7 @@ class SimRosIo:
         self.info_pub = node.create_publisher(CameraInfo, "/camera/camera_info", image_qos) if in_thread else None
         self.truth_pub = node.create_publisher(BallState, "/sim/ball_truth", qos_profile_sensor_data)
         self.dropped_pub = node.create_publisher(Bool, "/sim/ball_dropped", LATCHED)
+        self.pushed_pub = node.create_publisher(Vector3Stamped, "/sim/ball_pushed", QoSProfile(depth=10))
         self.clock_pub = node.create_publisher(Clock, "/clock", QoSProfile(depth=1))
         self.detection_pub = (node.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
                               if params["truth_fed"] else None)
@@ -143,6 +144,16 @@ class SimRosIo:
         msg.header.frame_id = PLATE_FRAME
         self._publish(self.detection_pub, msg)
 
+    def publish_pushed(self, time_s: float, dvx_m_s: float, dvy_m_s: float) -> None:
+        """A push applied (the domain's, or one asked for on /sim/push_ball): its velocity change
+        in plate axes, stamped with the simulated time it acted, so that monitors can time the
+        recovery."""
+        msg = Vector3Stamped()
+        msg.header.stamp = stamp(time_s + self.stamp_offset_s)
+        msg.header.frame_id = PLATE_FRAME
+        msg.vector.x, msg.vector.y = dvx_m_s, dvy_m_s
+        self._publish(self.pushed_pub, msg)
+
     def publish_clock(self, time_s: float) -> None:
         self._clock.clock = stamp(time_s)
         self._publish(self.clock_pub, self._clock)
@@ -219,8 +230,8 @@ class SimRosIo:
 
     def close(self) -> None:
         self._closed = True
-        for entity in (self.image_pub, self.info_pub, self.truth_pub, self.dropped_pub, self.clock_pub,
-                       self.detection_pub, self.trace_pub):
+        for entity in (self.image_pub, self.info_pub, self.truth_pub, self.dropped_pub, self.pushed_pub,
+                       self.clock_pub, self.detection_pub, self.trace_pub):
             if entity is not None:
                 self.node.destroy_publisher(entity)
         for service in self.services:

@@ -197,8 +197,9 @@ def test_pause_step_reset_and_push_services(launcher, graph, tmp_path):
     clocks = []
     graph.node.create_subscription(Clock, "/clock", lambda m: clocks.append(m.clock.sec + m.clock.nanosec * 1e-9),
                                    QoSProfile(depth=10))
-    truths = []
+    truths, pushed = [], []
     graph.node.create_subscription(BallState, "/sim/ball_truth", truths.append, qos_profile_sensor_data)
+    graph.node.create_subscription(Vector3Stamped, "/sim/ball_pushed", pushed.append, 10)
     graph.spin_until(lambda: len(clocks) > 0, 60, "/clock")
     assert not graph.call(Trigger, "/sim/step_simulation", Trigger.Request()).success  # not paused
     assert graph.call(SetBool, "/sim/set_pause", SetBool.Request(data=True)).success
@@ -231,6 +232,10 @@ def test_pause_step_reset_and_push_services(launcher, graph, tmp_path):
         return True
 
     graph.spin_until(rolling, 30, "the pushed ball to roll")
+    # every push applied is announced, with the simulated time it acted and its velocity change
+    graph.spin_until(lambda: pushed, 30, "the push on /sim/ball_pushed")
+    assert pushed[0].vector.x == pytest.approx(0.1) and pushed[0].header.frame_id == "plate_center"
+    assert pushed[0].header.stamp.sec + pushed[0].header.stamp.nanosec * 1e-9 > second
     assert graph.call(Trigger, "/sim/reset_world", Trigger.Request()).success
     graph.spin_until(lambda: abs(truths[-1].vx) < 0.01 and abs(truths[-1].x) < 0.005, 30,
                      "the ball at rest at the centre after reset_world")

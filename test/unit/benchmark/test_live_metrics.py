@@ -2,7 +2,7 @@
 as error against the last reference, and shows in engaged_frac."""
 import numpy as np
 
-from ball_balance.benchmark.live import LiveRecorder
+from ball_balance.benchmark.live import LiveRecorder, format_metrics
 from ball_balance.benchmark.wall_latency import CameraToCommand
 
 
@@ -12,6 +12,7 @@ def recorder(ref_times):
     rec.truth = [(ti, 0.02, 0.0) for ti in t]   # ball 20 mm off the target throughout
     rec.ref = [(ti, 0.0, 0.0) for ti in ref_times]
     rec.cmd, rec.est, rec.latency, rec.dropped, rec.t0 = [], [], CameraToCommand(), False, 0.0
+    rec.pushes = []
     return rec
 
 
@@ -22,3 +23,15 @@ def test_a_pause_in_the_reference_counts_as_not_engaged_and_as_error():
     assert full["engaged_frac"] == 1.0
     assert 0.6 < paused["engaged_frac"] < 0.75
     assert paused["rmse_m"] == full["rmse_m"] == 0.02
+
+
+def test_pushes_announced_by_the_simulation_are_timed_from_the_engagement():
+    rec = recorder(np.arange(0.5, 4.0, 0.02))   # engaged at 0.5 s on the truth's clock
+    t = np.arange(0.0, 4.0, 0.01)
+    # 20 mm off until 1.0 s, pushed at 1.0 s (simulated time), back inside 5 mm 0.6 s later
+    rec.truth = [(ti, 0.0 if ti < 1.0 or ti >= 1.6 else 0.02, 0.0) for ti in t]
+    rec.pushes = [0.2, 1.0]                     # the one before the engagement does not count
+    m = rec.metrics()
+    assert m["pushes"] == 1 and m["pushes_late"] == 0
+    assert abs(m["push_recover_s"] - 0.6) < 0.011
+    assert "push recovery mean 0.60 s, worst 0.60 s, 0 of 1 over 1 s" in format_metrics(m)
