@@ -2,7 +2,8 @@
 
 /ball_state -> a single-point trajectory_msgs/JointTrajectory on
 /scaled_joint_trajectory_controller/joint_trajectory (JOINT_NAMES, positions, reached
-`trajectory_point_time_s` after receipt), plus /plate_cmd and /ball_reference (see
+`trajectory_point_time_s` after receipt: by default one control period, so the trajectory
+controller ramps each target in by the time the next comes), plus /plate_cmd and /ball_reference (see
 balance_node_base). The QP (OSQP, see ball_balance/control/mpc.py) is solved every control
 step; step-time statistics are logged every 10 s. config/mpc.yaml holds the defaults we run.
 """
@@ -19,8 +20,8 @@ from ball_balance.ros.node_main import main_for
 from controller_manager_py.parameters import Param
 
 SCHEMA = MPC_NODE_SCHEMA + [
-    Param("trajectory_point_time_s", 0.04, "time_from_start of the single trajectory point", "s", 0.001, 1.0,
-          read_only=True),
+    Param("trajectory_point_time_s", 0.0, "time_from_start of the single trajectory point; 0: one control "
+          "period (1 / control_rate_hz)", "s", 0.0, 1.0, read_only=True),
 ]
 
 
@@ -32,7 +33,9 @@ class MpcControllerNode(BalanceControllerNode):
         super().__init__("ball_balance_mpc")
         self.command_pub = self.create_publisher(
             JointTrajectory, "/scaled_joint_trajectory_controller/joint_trajectory", 10)
-        t = self.params["trajectory_point_time_s"]
+        # a point further out than the next step is never reached: each new one replaces it,
+        # and the plate lags the command (0.04 s: 6 of 12 live pushes over 1 s, one period: 1)
+        t = self.params["trajectory_point_time_s"] or 1.0 / self.params["control_rate_hz"]
         self._time_from_start = Duration(sec=int(t), nanosec=int(round((t % 1.0) * 1e9)))
         self._tick_times_s = []
         self.create_timer(10.0, self.log_timing)
