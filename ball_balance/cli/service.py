@@ -19,20 +19,14 @@ def cmd_call(args) -> int:
     if args.rate is not None and args.rate <= 0:
         raise CliError(f"--rate must be positive, got {args.rate}")
     with Session() as session:
-        client = session.node.create_client(srv_cls, service)
+        client = session.node.create_client(srv_cls, service)   # one client for every repeat
         if not session.spin_until(client.service_is_ready, 0.5):
             print("waiting for service to become available...", flush=True)
-            if not session.spin_until(client.service_is_ready, args.timeout):
-                raise CliError(f"service '{service}' is not available (waited {args.timeout:g} s)")
+            session.wait_for_service(client, args.timeout)
         next_time = time.monotonic()
         while True:
             print(f"requester: making request: {request!r}\n", flush=True)
-            future = client.call_async(request)
-            if not session.spin_until(future.done, args.timeout):
-                raise CliError(f"no response from service '{service}' within {args.timeout:g} s")
-            if future.exception() is not None:
-                raise CliError(f"service '{service}' failed: {future.exception()}")
-            print(f"response:\n{future.result()!r}\n", flush=True)
+            print(f"response:\n{session.request(client, request, args.timeout)!r}\n", flush=True)
             if args.rate is None:
                 return 0
             next_time += 1.0 / args.rate

@@ -174,16 +174,24 @@ class Session:
         """Call a service and return the response, or raise a CliError naming the service."""
         client = self.node.create_client(srv_type, service)
         try:
-            if not self.spin_until(client.service_is_ready, timeout_s):
-                raise CliError(f"service '{service}' is not available (waited {timeout_s:.1f} s)")
-            future = client.call_async(request)
-            if not self.spin_until(future.done, timeout_s):
-                raise CliError(f"no response from service '{service}' within {timeout_s:.1f} s")
-            if future.exception() is not None:
-                raise CliError(f"service '{service}' failed: {future.exception()}")
-            return future.result()
+            self.wait_for_service(client, timeout_s)
+            return self.request(client, request, timeout_s)
         finally:
             self.node.destroy_client(client)
+
+    def wait_for_service(self, client, timeout_s: Optional[float]) -> None:
+        """Until the client's service is there (None: forever), else a CliError naming it."""
+        if not self.spin_until(client.service_is_ready, timeout_s):
+            raise CliError(f"service '{client.service_name}' is not available (waited {timeout_s:.1f} s)")
+
+    def request(self, client, request, timeout_s: Optional[float]):
+        """One call through `client`: the response (None: wait forever), else a CliError naming it."""
+        future = client.call_async(request)
+        if not self.spin_until(future.done, timeout_s):
+            raise CliError(f"no response from service '{client.service_name}' within {timeout_s:.1f} s")
+        if future.exception() is not None:
+            raise CliError(f"service '{client.service_name}' failed: {future.exception()}")
+        return future.result()
 
     def adapted_qos(self, topic: str, reliability: Optional[str] = None, durability: Optional[str] = None,
                     depth: int = 10):
