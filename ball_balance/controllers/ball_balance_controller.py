@@ -189,7 +189,6 @@ class BallBalanceController(ControllerInterface):
         self._step_in = None                         # (q measured, ball observation): update() -> step
         self._target: Optional[np.ndarray] = None    # the newest step's joint target: step -> update()
         self._ramp = CommandRamp(len(JOINT_NAMES)) if values["command_ramp"] else None
-        self._ramp_target: Optional[np.ndarray] = None   # the target the ramp leads to
         self._worker: Optional[AsyncHandler] = None
         self.missed_steps = 0
         self.mode: Optional[Mode] = None
@@ -378,11 +377,9 @@ class BallBalanceController(ControllerInterface):
                     self._step(time, period)
         target = self._target
         if target is not None and self._ramp is not None:
-            if target is not self._ramp_target:   # a new step: ramp on from the command last written,
-                self._ramp_target = target         # to reach the target in the last update before the next step
-                last = self.limiter.previous_positions
-                self._ramp.start(last if all(map(math.isfinite, last)) else target, target,
-                                 time - period, max(self._next_step_s - time, period, 1e-6))
+            if target is not self._ramp.target:   # a new step: ramp on from the command last written,
+                # to reach the target in the last update before the next step
+                self._ramp.retarget(target, self.limiter.previous_positions, time, period, self._next_step_s - time)
             target = self._ramp.at(time)
         if target is not None:
             for handle, value in zip(self.command_interfaces, self.limiter.limit_positions(target, period)):

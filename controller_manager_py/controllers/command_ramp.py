@@ -13,7 +13,8 @@ No ROS import; `at` writes into one array it owns (the real-time path allocates 
 """
 from __future__ import annotations
 
-from typing import Sequence
+import math
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -27,6 +28,23 @@ class CommandRamp:
         self._out = np.zeros(n_joints)
         self._t_from_s = 0.0
         self._duration_s = 1.0
+        self._target: Optional[Sequence[float]] = None
+
+    @property
+    def target(self) -> Optional[Sequence[float]]:
+        """The target object the ramp leads to (None before the first): callers tell a new
+        target from it by identity, as controllers hand targets over by reference."""
+        return self._target
+
+    def retarget(self, target: Sequence[float], written: Sequence[float], t_s: float, period_s: float,
+                 duration_s: float) -> None:
+        """A new target at the update at t_s: ramp on from `written`, the command last written
+        (from the target itself while that holds a non-finite value: nothing written yet), as
+        if started one update (period_s) before, so that this update already moves; reached
+        after duration_s, at least one update."""
+        self._target = target
+        self.start(written if all(map(math.isfinite, written)) else target, target,
+                   t_s - period_s, max(duration_s, period_s, 1e-6))
 
     def start(self, q_from: Sequence[float], q_to: Sequence[float], t_from_s: float, duration_s: float) -> None:
         """Ramp from q_from (the command at t_from_s) to q_to over duration_s (> 0)."""

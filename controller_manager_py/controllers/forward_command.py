@@ -13,8 +13,6 @@ matters). How far apart commands come is measured, at most `command_ramp_max_s`.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..controller_interface.base import (
@@ -60,7 +58,6 @@ class ForwardCommandController(ControllerInterface):
         ramped = self.params["command_ramp"]
         self._ramp = CommandRamp(len(joints)) if ramped else None
         self._intervals = CommandIntervalEstimate(self.params["command_ramp_max_s"]) if ramped else None
-        self._ramped_command = None
         self._written = np.zeros(len(joints))
         self.introspection.clear()  # (re)configure: the getters read the live attributes
         self.register_introspection("refused_commands", lambda: float(self.slot.refused))
@@ -88,7 +85,6 @@ class ForwardCommandController(ControllerInterface):
 
     def _reset(self) -> None:
         self.slot.reset()
-        self._ramped_command = None
         if self._intervals is not None:
             self._intervals.reset()
 
@@ -104,13 +100,10 @@ class ForwardCommandController(ControllerInterface):
         if command is None:
             return return_type.OK
         if self._ramp is not None:
-            if command is not self._ramped_command:   # a new one: ramp on from what was written last
-                self._ramped_command = command
-                interval_s = self._intervals.arrived(time)
+            if command is not self._ramp.target:   # a new one: ramp on from what was written last
                 for i, handle in enumerate(self.command_interfaces):
                     self._written[i] = handle.value
-                start = self._written if all(map(math.isfinite, self._written)) else command
-                self._ramp.start(start, command, time - period, max(interval_s, period, 1e-6))
+                self._ramp.retarget(command, self._written, time, period, self._intervals.arrived(time))
             command = self._ramp.at(time)
         for handle, value in zip(self.command_interfaces, command):
             handle.value = float(value)

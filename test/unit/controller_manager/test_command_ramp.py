@@ -24,3 +24,13 @@ def test_the_interval_estimate_takes_the_first_interval_then_averages_bounded_on
     estimate.reset()                                     # a new stream: no interval across it
     assert estimate.arrived(10.0) == pytest.approx(0.035)
     assert estimate.arrived(10.02) == pytest.approx(0.0275)
+
+
+def test_retarget_starts_one_update_back_from_what_was_written_or_the_target_itself():
+    ramp = CommandRamp(1)
+    target = [1.0]
+    ramp.retarget(target, [0.0], t_s=1.0, period_s=0.002, duration_s=0.02)
+    assert ramp.target is target
+    assert ramp.at(1.0) == pytest.approx([0.1])        # this update already moves: one of ten
+    ramp.retarget([2.0], [float("nan")], t_s=2.0, period_s=0.002, duration_s=0.0)
+    assert ramp.at(2.0) == pytest.approx([2.0])        # nothing written yet; at least one update
