@@ -161,9 +161,13 @@ class TickResult:
     q_cmd: np.ndarray               # (6,) joint positions [rad]
     u: tuple                        # (u_x, u_y) commanded tilt [rad]
     mode: Mode
-    ref: Optional[RefSample]        # reference used (None when not engaged)
+    ref: Optional[RefSample]        # reference used: at now + the actuation delay (None when not engaged)
     predicted: Optional[np.ndarray]  # (4,) x, y, vx, vy after latency compensation
     refused: bool = False           # the guard rejected a non-finite/out-of-limit command
+    # the reference at this tick's own time (x, y) [m], what /ball_reference publishes with the
+    # tick's stamp: `ref` is ahead of it by the look-ahead, so a ball on a moving target would
+    # seem to trail it by that much (None when not engaged)
+    target_m: Optional[tuple] = None
 
 
 class ControlPipeline:
@@ -233,12 +237,14 @@ class ControlPipeline:
                     self._tracked = None  # led in from the ball at the first state
         if mode in (Mode.ENGAGED, Mode.HOLDING):
             self.t_last_active = now_s
-        ref = predicted = None
+        ref = predicted = target = None
         braking = False
         if mode == Mode.ENGAGED or (mode == Mode.HOLDING and self.safety.usable_except_age(obs)):
             # a late but otherwise good state: keep controlling on its prediction (capped at
             # max_prediction_s)
             ref, predicted = self._control(now_s, obs)
+            target_p = self._tracked.sample(now_s - self.t_engaged).p
+            target = (float(target_p[0]), float(target_p[1]))
             self._t_lost = None
         elif mode in (Mode.HOLDING, Mode.RETURNING):
             # the ball is lost: brake its predicted motion for a bounded time, then level (a
@@ -275,7 +281,7 @@ class ControlPipeline:
             self.plant.add_tilt(now_s, tilt_measured)   # the tilt the ball really felt
         else:
             self.plant.add_tilt(now_s + self.actuation_delay_s, tilt_cmd)
-        return TickResult(q_new.copy(), (float(self.u[0]), float(self.u[1])), mode, ref, predicted, refused)
+        return TickResult(q_new.copy(), (float(self.u[0]), float(self.u[1])), mode, ref, predicted, refused, target)
 
     def _brake(self, now_s: float):
         """(tilt, predicted state) that decelerates the last good state's motion, dead-reckoned

@@ -396,7 +396,7 @@ class BallBalanceController(ControllerInterface):
         self._fresh = False
         self._target = result.q_cmd                    # one reference assignment, for update()
         self.u = result.u
-        self._tilt_out = (time, result.u, None if result.ref is None else (result.ref.p[0], result.ref.p[1]))
+        self._tilt_out = (time, result.u, result.target_m)
         if result.mode != self.mode:
             self.mode = result.mode
             if self.throttle.due(f"mode {result.mode.value}"):

@@ -14,8 +14,9 @@ Inputs
 Outputs
   /plate_cmd      geometry_msgs/Vector3Stamped, frame plate_center: x = u_x, y = u_y [rad]
                   (z = 0), the commanded tilt, for the tracker's Kalman feed-forward.
-  /ball_reference geometry_msgs/PointStamped, frame plate_center: the current target (z = 0)
-                  while engaged; not published otherwise.
+  /ball_reference geometry_msgs/PointStamped, frame plate_center: the target at the message's
+                  stamp (z = 0; the control itself aims at it a latency ahead) while engaged;
+                  not published otherwise.
 
 Every /ball_state is judged on arrival (control/plausibility.py) and only a plausible one
 from the publisher the node locked onto replaces the state in use: stamps in the future or
@@ -411,10 +412,10 @@ class BalanceControllerNode(Node):
         cmd.header.stamp, cmd.header.frame_id = stamp, PLATE_FRAME
         cmd.vector.x, cmd.vector.y = result.u
         self.plate_cmd_pub.publish(cmd)
-        if result.ref is not None:
+        if result.target_m is not None:
             ref = PointStamped()
             ref.header.stamp, ref.header.frame_id = stamp, PLATE_FRAME
-            ref.point.x, ref.point.y = float(result.ref.p[0]), float(result.ref.p[1])
+            ref.point.x, ref.point.y = result.target_m
             self.reference_pub.publish(ref)
 
     def publish_joints(self, q_cmd: np.ndarray, stamp) -> None:

@@ -198,6 +198,30 @@ def test_a_fresh_engagement_leads_the_reference_in_from_the_ball():
         TILT_LAWS.pop("constant_for_lead_in")
 
 
+def test_the_published_target_is_the_reference_at_the_tick_not_the_look_ahead():
+    # the law aims a latency ahead (ref); /ball_reference, stamped with the tick's time,
+    # carries the target at that time, or a ball on the circle would seem to trail it
+    circle = Circle(0.1, 10.0)
+    pipe = _pipeline("pid", reference=circle, engage_accel_m_s2=0.0, actuation_delay_s=0.05,
+                     estimate_delay=False)
+    plant = DelayedPlant(x0=(0.1, 0.0))
+    q = np.array(LEVEL_HOME)
+    engaged = []
+    for i in range(int(3.0 / DT)):
+        result = pipe.step(i * DT, _observe(plant), q)
+        q = result.q_cmd
+        plant.advance(pipe.kin.tilt_of(q) if result.mode != Mode.HOMING else (0.0, 0.0), DT)
+        if result.mode == Mode.ENGAGED:
+            engaged.append((i * DT, result))
+        else:
+            assert result.target_m is None
+    assert engaged
+    for now_s, result in engaged:
+        t_s = now_s - pipe.t_engaged
+        np.testing.assert_allclose(result.target_m, circle.sample(t_s).p, atol=1e-12)
+        np.testing.assert_allclose(result.ref.p, circle.sample(t_s + 0.05).p, atol=1e-12)
+
+
 @pytest.mark.parametrize("controller", ["pid", "mpc"])
 def test_a_strong_plant_with_a_long_unknown_delay_is_not_thrown_at_engagement(controller):
     """Twice the model's k g and 0.18 s from command to plate (the arm's joints show it that
