@@ -26,6 +26,7 @@ from ball_balance.benchmark.metrics import episode_metrics
 from ball_balance.benchmark.wall_latency import CameraToCommand, source_wall_s
 
 REFERENCE_FRESH_S = 0.1   # /ball_reference older than this: the controller is not engaged
+RECORD_DEPTH = 2000        # samples a subscription keeps unread: 20 s of /sim/ball_truth at 100 Hz
 
 
 class LiveRecorder:
@@ -45,12 +46,19 @@ class LiveRecorder:
         self.frames = []       # (t, bgr image)
         self.video_s, self.video_start_s, self.video_fps = video_s, video_start_s, video_fps
         self.t0 = None
-        node.create_subscription(BallState, "/sim/ball_truth", self.on_truth, qos_profile_sensor_data)
-        node.create_subscription(BallState, "/ball_state", self.on_state, qos_profile_sensor_data)
-        node.create_subscription(PointStamped, "/ball_reference", self.on_reference, 10)
-        node.create_subscription(Vector3Stamped, "/plate_cmd", self.on_cmd, 10)
-        node.create_subscription(Vector3Stamped, "/sim/ball_pushed", lambda msg: self.pushes.append(self._t(msg)), 10)
-        node.create_subscription(Clock, "/clock", self.on_clock, QoSProfile(depth=10))
+        # A recorder keeps every sample: when the loaded machine leaves this process waiting,
+        # a queue of a few samples overflowed and lost up to half of /sim/ball_truth, and a
+        # target held over the gap became error that was not there. Best effort takes both
+        # kinds of publisher (the truth and the states are sensor data); the write times the
+        # latency is taken from do not depend on when a sample is read.
+        everything = QoSProfile(depth=RECORD_DEPTH, reliability=ReliabilityPolicy.BEST_EFFORT)
+        node.create_subscription(BallState, "/sim/ball_truth", self.on_truth, everything)
+        node.create_subscription(BallState, "/ball_state", self.on_state, everything)
+        node.create_subscription(PointStamped, "/ball_reference", self.on_reference, everything)
+        node.create_subscription(Vector3Stamped, "/plate_cmd", self.on_cmd, everything)
+        node.create_subscription(Vector3Stamped, "/sim/ball_pushed", lambda msg: self.pushes.append(self._t(msg)),
+                                 QoSProfile(depth=RECORD_DEPTH))
+        node.create_subscription(Clock, "/clock", self.on_clock, everything)
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         node.create_subscription(Bool, "/sim/ball_dropped", self.on_dropped, latched)
