@@ -22,10 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ball_balance.benchmark.metrics import episode_metrics
+from ball_balance.benchmark.metrics import RECOVER_HOLD_S, episode_metrics
 from ball_balance.benchmark.wall_latency import CameraToCommand, source_wall_s
 
 REFERENCE_FRESH_S = 0.1   # /ball_reference older than this: the controller is not engaged
+PUSH_TIMED_S = 1.0 + RECOVER_HOLD_S   # a push is timed when the recording goes on this long after it
 RECORD_DEPTH = 2000        # samples a subscription keeps unread: 20 s of /sim/ball_truth at 100 Hz
 
 
@@ -161,8 +162,11 @@ class LiveRecorder:
         if s is None:
             return None
         engaged_at = self.t0 + float(s["t_engaged"][0])   # series time 0, on the truth's clock
+        # a push too close to the end of the recording cannot be timed (the run stops while
+        # the ball is still on its way back), nor one after it (announced before its truth was read)
+        last_timed = engaged_at + float(s["t"][-1]) - PUSH_TIMED_S
         m = episode_metrics(s, self.dropped, float(s["t"][-1]),
-                            push_times_s=[p - engaged_at for p in self.pushes if p >= engaged_at])
+                            push_times_s=[p - engaged_at for p in self.pushes if engaged_at <= p <= last_timed])
         latency = self.latency.latencies_s()
         if latency.size:
             # camera-to-command, wall clock: frame captured -> the command acting on it written
@@ -264,7 +268,7 @@ def format_metrics(m) -> str:
 
 def main(argv=None) -> int:
     import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
     from ball_balance.ros.node_main import ignore_stop_signals
@@ -308,10 +312,15 @@ def main(argv=None) -> int:
             line += "  DROPPED"
         print(line, flush=True)
 
+    # one executor for the whole run: rclpy.spin_once(node) adds the node and removes it again
+    # on every call, rebuilding the wait set per sample; at ~400 samples/s on a loaded machine
+    # the monitor then fell seconds behind its topics
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
     code = 0
     try:
         while rclpy.ok():
-            rclpy.spin_once(node, timeout_sec=0.1)
+            executor.spin_once(timeout_sec=0.1)
             progress()
             if rec.dropped and args.duration > 0:
                 break

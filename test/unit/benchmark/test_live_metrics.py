@@ -49,3 +49,10 @@ def test_a_moving_target_is_taken_at_the_truths_instant_not_held():
     rec.ref = [r for r in rec.ref if not 2.0 < r[0] < 3.0]
     m = rec.metrics()
     assert m["engaged_frac"] < 0.9 and m["rmse_m"] > 0.01
+
+
+def test_a_push_the_recording_ends_on_is_not_timed():
+    rec = recorder(np.arange(0.5, 4.0, 0.02))   # truth until 3.99 s
+    rec.pushes = [1.0, 3.0, 4.5]                # 3.0: the run stops 1 s later; 4.5: after the last truth read
+    m = rec.metrics()
+    assert m["pushes"] == 1
