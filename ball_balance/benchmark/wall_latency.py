@@ -59,8 +59,14 @@ class CameraToCommand:
     def latencies_s(self) -> np.ndarray:
         """Capture -> first command written after the frame's /ball_state, s, per state."""
         commands = sorted(self._commands_wall_s)
+        # no extrapolation past the last /clock sample read: slower than real time, the offset
+        # grows by (1 - real-time factor) per simulated second, and a monitor that read its
+        # states ahead of its clock put seconds of that into the latency
+        last_clock_s = self._clock_sim_s[-1] if self._clock_sim_s else float("inf")
         out = []
         for stamp_s, state_written_s in self._states:
+            if stamp_s > last_clock_s:
+                continue
             i = bisect.bisect_right(commands, state_written_s)
             if i < len(commands):
                 out.append(commands[i] - self.capture_wall_s(stamp_s))

@@ -52,3 +52,17 @@ def test_a_clock_that_goes_back_starts_the_map_over():
     for sim_s in (0.0, 5.0):             # simulation restarted 20 s of wall time later
         latency.add_clock(sim_s, 1030.0 + sim_s)
     assert abs(latency.capture_wall_s(2.5) - 1032.5) < 1e-9
+
+
+def test_a_state_after_the_last_clock_sample_read_is_not_counted():
+    # slower than real time (wall = 1.4 x simulated): the offset grows, so a stamp past the
+    # clock samples read cannot be mapped by holding the last offset
+    latency = CameraToCommand()
+    for sim_s in np.arange(0.0, 1.0, 0.01):
+        latency.add_clock(sim_s, WALL0_S + 1.4 * sim_s)
+    for stamp_s in np.arange(0.1, 2.0, 1.0 / 60.0):
+        latency.add_state(stamp_s, WALL0_S + 1.4 * stamp_s + 0.008)
+        latency.add_command(WALL0_S + 1.4 * stamp_s + 0.012)
+    out = latency.latencies_s()
+    assert out.size == 54                           # the states stamped 0.1-0.99 s
+    assert np.all(np.abs(out - 0.012) < 1e-6)
