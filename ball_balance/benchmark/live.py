@@ -121,8 +121,8 @@ class LiveRecorder:
         truth = np.array(self.truth)
         t = truth[:, 0]
 
-        def hold(rows, cols, default=0.0):
-            out = np.full((len(t), cols), np.nan if default is None else default)
+        def hold(rows, cols):
+            out = np.zeros((len(t), cols))
             if rows:
                 a = np.array(rows)
                 idx = np.searchsorted(a[:, 0], t, side="right") - 1
@@ -130,7 +130,13 @@ class LiveRecorder:
                 out[ok] = a[idx[ok], 1:1 + cols]
             return out
 
-        ref = hold(self.ref, 2, None)
+        if not self.ref:
+            return None
+        targets = np.array(self.ref)
+        stamps, points = targets[:, 0], targets[:, 1:3]
+        last = np.searchsorted(stamps, t, side="right") - 1      # the newest target at each truth sample
+        before = np.maximum(last, 0)
+        ref = np.where((last >= 0)[:, None], points[before], np.nan)
         published = np.all(np.isfinite(ref), axis=1)
         if not np.any(published):
             return None
@@ -138,18 +144,15 @@ class LiveRecorder:
         first = int(np.argmax(published))
         # engaged while /ball_reference keeps coming (the controllers publish it each engaged
         # tick); in between, the last target stays the reference the error counts against
-        stamps = np.array([r[0] for r in self.ref])
-        last = np.searchsorted(stamps, t, side="right") - 1
-        engaged = published & (t - stamps[np.maximum(last, 0)] <= REFERENCE_FRESH_S)
+        engaged = published & (t - stamps[before] <= REFERENCE_FRESH_S)
         # between two targets of one engaged stretch, the target at the truth's own instant (as
         # the benchmark takes it): held, a target moving on a circle would lead or trail the
         # ball by up to one control period of its motion
-        points = np.array([r[1:3] for r in self.ref])
         after = np.minimum(last + 1, len(stamps) - 1)
-        span = stamps[after] - stamps[np.maximum(last, 0)]
+        span = stamps[after] - stamps[before]
         between = published & (after > last) & (span <= REFERENCE_FRESH_S)
-        w = np.where(between, (t - stamps[np.maximum(last, 0)]) / np.where(between, span, 1.0), 0.0)[:, None]
-        ref = np.where(between[:, None], (1.0 - w) * points[np.maximum(last, 0)] + w * points[after], ref)
+        w = np.where(between, (t - stamps[before]) / np.where(between, span, 1.0), 0.0)[:, None]
+        ref = np.where(between[:, None], (1.0 - w) * points[before] + w * points[after], ref)
         cmd = hold(self.cmd, 2)[first:]
         ref = ref[first:]
         t = t[first:]
