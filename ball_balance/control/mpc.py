@@ -209,6 +209,14 @@ class PlateMpc:
         self.last_solve_s = time.perf_counter() - t_start
         return float(u_x), float(u_y)
 
+    def first_move_gains(self):
+        """The unconstrained optimum's first move as a linear law, for batched use (the policy's
+        training plant): v_0 = Z g + c v_prev per axis, with Z = [p0, v0, ref_p (N), ref_v (N),
+        ref_a (N)] as `solve` fills it and v_prev the previous tilt, in the model's tilt.
+        Returns (g (2 + 3N,), c)."""
+        first = self._free_gain[:, 0]
+        return self._G @ first, -self._prev_weight * float(first[0])
+
     def plan(self) -> np.ndarray:
         """The current plan, shape (N, 2) [rad]."""
         return np.stack([self._plan[:self.n], self._plan[self.n:]], axis=1)

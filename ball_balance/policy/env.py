@@ -41,8 +41,9 @@ SUBSTEPS = 4                          # the plant's integration steps per tick (
 SUBSTEP_S = CONTROL_DT_S / SUBSTEPS
 REFERENCES = ("stationary", "circle", "figure_eight")
 # the privileged law whose tilt is the label (PlateBatch.teacher_tilt): "pid" the PID itself on
-# the true state with the true gain and bias, "pd" a stiffer PD law (wn, zeta) on the true state
-TEACHERS = ("pid", "pd")
+# the true state with the true gain and bias, "pd" a stiffer PD law (wn, zeta) on the true state,
+# "mpc" the MPC's unconstrained first move (config/mpc.yaml) on the true state, gain and bias
+TEACHERS = ("pid", "pd", "mpc")
 # the PID parameters the residual is trained on top of (recorded in the model, checked at run time)
 BASE_PID_KEYS = ("kp", "ki", "kd", "i_limit_rad", "i_zone_m", "deadband_m", "antiwindup_time_s", "max_tilt_cmd_rad",
                  "rolling_factor", "gravity_m_s2", "derivative_filter_s", "i_max_vel_error_m_s", "adapt_pid_feedback",
@@ -385,13 +386,29 @@ class PlateBatch:
         self.max_delay_s = max(self.pid_values["actuation_delay_s"],
                                self.delay_settings.max_lag * CONTROL_DT_S if self.pid_values["estimate_actuation_delay"]
                                else 0.0)
-        pad = int(0.5 / CONTROL_DT_S) + 2   # the teacher looks ahead up to its latency + lag
+        self.mpc_law = self._mpc_first_move() if teacher == "mpc" else None
+        # the teacher looks ahead up to its latency + lag (and the MPC's horizon beyond)
+        pad = int(0.5 / CONTROL_DT_S) + 2 + (self.mpc_law[0] if self.mpc_law else 0)
         self.refs = np.stack([reference_table(k, self.n_ticks + pad) for k in REFERENCES])   # (R, n, 3, 2)
         self.builder = ObservationBuilder(batch)
         self.tracker_cfg = tracker_config() if tracker_cfg is None else tracker_cfg
         # the known acceleration the tracker derives from /plate_cmd (the law's tilt)
         self.tracker_k_g = self.tracker_cfg.rolling_factor * GRAVITY_M_S2
         self.lever_m = float(self.tracker_cfg.tilt_lever_m)
+
+    @staticmethod
+    def _mpc_first_move():
+        """(horizon, g, c, k_g, u_max, du per tick): the MPC of config/mpc.yaml as the linear law
+        of its unconstrained first move (PlateMpc.first_move_gains), stepping at this plant's tick."""
+        from ball_balance.benchmark.episode import controller_values
+        from ball_balance.control.mpc import PlateMpc
+
+        cfg = control_config.pipeline_config(controller_values("mpc", "stationary"), "mpc").mpc
+        if not np.isclose(cfg.dt_s, CONTROL_DT_S):
+            raise ValueError(f"the MPC teacher steps at the plant's {1 / CONTROL_DT_S:.0f} Hz: config/mpc.yaml's "
+                             f"control_rate_hz must be that")
+        g, c = PlateMpc(cfg).first_move_gains()
+        return cfg.horizon, g, c, cfg.k_g, cfg.u_max_rad, cfg.du_max_rad_s * cfg.dt_s
 
     def _delay_estimator(self):
         from ball_balance.control.prediction import DelayEstimator
@@ -578,6 +595,8 @@ class PlateBatch:
     # ---- the label -------------------------------------------------------------------
     def teacher_tilt(self) -> np.ndarray:
         """The label: the tilt (b, 2) a privileged law commands this tick (`teacher`)."""
+        if self.teacher == "mpc":
+            return self._mpc_teacher()
         return self.u_teacher if self.teacher == "pid" else self._pd_teacher()
 
     def _true_prediction(self):
@@ -616,6 +635,23 @@ class PlateBatch:
         acc = -self.wn ** 2 * e - 2 * self.zeta * self.wn * ve + ref[:, 2]
         u = -acc / self.k_g_true - self.bias
         return np.clip(u, -self.nom.u_max_rad, self.nom.u_max_rad)
+
+    def _mpc_teacher(self) -> np.ndarray:
+        """Tilt (b, 2) of the MPC's unconstrained first move on the true state predicted exactly
+        to when this tick's command reaches the plate, previewing the reference from there, with
+        the true k g and plate bias (planned in the model's tilt v = s (u + bias), s = true k g /
+        the model's, as PlateMpc.solve does with the plant estimate) and the law's previous tilt;
+        the first move then clipped to the MPC's rate and tilt limits."""
+        horizon, g, c, k_model, u_max, du = self.mpc_law
+        px, pv, _ = self._true_prediction()
+        base = np.round((self.latency + self.servo_lag) / CONTROL_DT_S).astype(int)
+        preview = np.stack([self._ref(base + k) for k in range(1, horizon + 1)], axis=3)   # (b, 3, 2, N)
+        z = np.concatenate([px[..., None], pv[..., None], preview[:, 0], preview[:, 1], preview[:, 2]], axis=2)
+        s = self.k_g_true / k_model
+        v_prev = s * (self.u_law + self.bias)
+        v = z @ g + c * v_prev
+        u = np.clip(v / s - self.bias, self.u_law - du, self.u_law + du)
+        return np.where(self.engaged[:, None], np.clip(u, -u_max, u_max), 0.0)
 
     def push_visible(self, frames: int) -> np.ndarray:
         """Per episode (b,): False from a push until `frames` camera frames captured after it

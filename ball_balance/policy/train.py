@@ -172,7 +172,8 @@ def main(argv=None) -> int:
     parser.add_argument("--teacher", choices=TEACHERS, default="pid",
                         help="the label: pid = the PID itself on the true state (exact latency prediction, true "
                         "gain and bias: the correction is zero where the PID's estimates are right); pd = a "
-                        "stiffer PD law on the true state")
+                        "stiffer PD law on the true state; mpc = the MPC (config/mpc.yaml) on the true state, "
+                        "its unconstrained first move clipped to its limits")
     parser.add_argument("--residual-penalty", type=float, default=0.05,
                         help="weight of the mean absolute action (in [-1, 1] units) added to the loss: a "
                         "correction whose expected label is below half of it is learned as zero (corrections "
@@ -287,9 +288,11 @@ def main(argv=None) -> int:
     def act_student(obs, env):
         return "action", student(obs)
 
-    method = ("DAgger imitation of the PID itself on the true state (exact latency prediction, true gain and "
-              "bias), residual on the PID" if args.teacher == "pid"
-              else "DAgger imitation of a privileged PD teacher, residual on the PID")
+    method = {"pid": "DAgger imitation of the PID itself on the true state (exact latency prediction, true gain and "
+                     "bias), residual on the PID",
+              "mpc": "DAgger imitation of the MPC's unconstrained first move on the true state (exact latency "
+                     "prediction, true gain and bias), residual on the PID",
+              "pd": "DAgger imitation of a privileged PD teacher, residual on the PID"}[args.teacher]
 
     def export(path: Path, network, evaluation: dict, evaluated: list, elapsed_s: float, gain: float = 1.0,
                gains_evaluated=()) -> None:

@@ -163,6 +163,33 @@ def test_pid_teacher_is_the_pid_where_its_estimates_are_exact():
     assert env.alive.all() and np.mean(labels) < 0.0015
 
 
+def test_mpc_teacher_is_the_mpcs_first_move_on_the_truth():
+    """The MPC teacher is PlateMpc.solve on the true state predicted to the plate, the reference
+    previewed from there, the true gain and bias, where no constraint is active."""
+    from ball_balance.control.mpc import PlateMpc
+
+    ranges = DomainRanges(gain_error=(1.0, 1.0), push_prob_per_s=0.0, release_speed_m_s=(0.0, 0.02))
+    env = PlateBatch(6, seed=3, ranges=ranges, duration_s=3.0, teacher="mpc")
+    env.reset()
+    while env.time_s < 2.0:
+        env.step(tilt=env.teacher_tilt())
+    tilt = env.teacher_tilt()
+    cfg = control_config.pipeline_config(controller_values("mpc", "stationary"), "mpc").mpc
+    px, pv, _ = env._true_prediction()
+    base = np.round((env.latency + env.servo_lag) / CONTROL_DT_S).astype(int)
+    checked = 0
+    for i in range(env.b):
+        preview = np.stack([env._ref(base + k)[i] for k in range(1, cfg.horizon + 1)])   # (N, 3, 2)
+        mpc = PlateMpc(cfg)
+        s = env.k_g_true[i, 0] / cfg.k_g
+        u = mpc.solve(px[i], pv[i], preview[:, 0], preview[:, 1], preview[:, 2], env.u_law[i], gain_ratio=s,
+                      offset_rad=-s * env.bias[i])
+        if mpc.unconstrained:
+            np.testing.assert_allclose(tilt[i], u, atol=1e-9)
+            checked += 1
+    assert checked >= 4
+
+
 def test_pid_alone_balances_the_nominal_plant():
     nominal = DomainRanges(gravity_scale=(1.0, 1.0), solid_ball_prob=0.0, latency_s=(0.0, 0.0),
                            detection_noise_m=(0.0005, 0.0005), frame_drop_prob=(0.0, 0.0), tilt_bias_rad=(0, 0),
