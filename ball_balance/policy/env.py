@@ -42,8 +42,10 @@ SUBSTEP_S = CONTROL_DT_S / SUBSTEPS
 REFERENCES = ("stationary", "circle", "figure_eight")
 # the privileged law whose tilt is the label (PlateBatch.teacher_tilt): "pid" the PID itself on
 # the true state with the true gain and bias, "pd" a stiffer PD law (wn, zeta) on the true state,
-# "mpc" the MPC's unconstrained first move (config/mpc.yaml) on the true state, gain and bias
-TEACHERS = ("pid", "pd", "mpc")
+# "mpc" the MPC's unconstrained first move (config/mpc.yaml) on the true state, gain and bias,
+# "pid_mpc" the PID teacher near the reference and the MPC on the controller's own estimate far
+# from it (after a push: the MPC brings the ball back sooner), blended per axis on the error
+TEACHERS = ("pid", "pd", "mpc", "pid_mpc")
 # the PID parameters the residual is trained on top of (recorded in the model, checked at run time)
 BASE_PID_KEYS = ("kp", "ki", "kd", "i_limit_rad", "i_zone_m", "deadband_m", "antiwindup_time_s", "max_tilt_cmd_rad",
                  "rolling_factor", "gravity_m_s2", "derivative_filter_s", "i_max_vel_error_m_s", "adapt_pid_feedback",
@@ -359,7 +361,7 @@ class PlateBatch:
     def __init__(self, batch: int, seed: int, ranges: DomainRanges = DomainRanges(),
                  nominal: Optional[Nominal] = None, duration_s: float = 20.0, action_scale_rad: float = 0.1,
                  teacher_wn: float = 4.0, teacher_zeta: float = 0.85, tracker_cfg=None, teacher: str = "pid",
-                 pid_overrides=(), correction_fade_m: float = 0.0):
+                 pid_overrides=(), correction_fade_m: float = 0.0, teacher_far_m: float = 0.008):
         if teacher not in TEACHERS:
             raise ValueError(f"teacher = {teacher!r} must be one of {TEACHERS}")
         self.b, self.ranges, self.teacher = batch, ranges, teacher
@@ -369,6 +371,7 @@ class PlateBatch:
         self.action_scale = action_scale_rad
         self.correction_fade_m = correction_fade_m   # observation.correction_weight, as the runtime applies it
         self.wn, self.zeta = teacher_wn, teacher_zeta
+        self.teacher_far_m = teacher_far_m   # pid_mpc: the PID's label within it, the MPC's beyond twice it
         from ball_balance.benchmark.episode import controller_values
 
         # the PID under the policy: config/policy.yaml over the schema (pid_overrides: (name, value) pairs
@@ -386,7 +389,7 @@ class PlateBatch:
         self.max_delay_s = max(self.pid_values["actuation_delay_s"],
                                self.delay_settings.max_lag * CONTROL_DT_S if self.pid_values["estimate_actuation_delay"]
                                else 0.0)
-        self.mpc_law = self._mpc_first_move() if teacher == "mpc" else None
+        self.mpc_law = self._mpc_first_move() if teacher in ("mpc", "pid_mpc") else None
         # the teacher looks ahead up to its latency + lag (and the MPC's horizon beyond)
         pad = int(0.5 / CONTROL_DT_S) + 2 + (self.mpc_law[0] if self.mpc_law else 0)
         self.refs = np.stack([reference_table(k, self.n_ticks + pad) for k in REFERENCES])   # (R, n, 3, 2)
@@ -575,7 +578,7 @@ class PlateBatch:
                                    gain_scale=scale, u_bias=self.estimator.offset / k_est)
         self.u_pid = np.where(self.engaged[:, None], self.u_pid, 0.0)
         self.age = np.where(have, age, 0.0)
-        if self.teacher == "pid":
+        if self.teacher in ("pid", "pid_mpc"):
             self.u_teacher = self._pid_teacher()
         return self.builder.build(self.e, self.ve, -self.a_ref / self.nom.k_g, self.u_pid, self.age)
 
@@ -597,6 +600,9 @@ class PlateBatch:
         """The label: the tilt (b, 2) a privileged law commands this tick (`teacher`)."""
         if self.teacher == "mpc":
             return self._mpc_teacher()
+        if self.teacher == "pid_mpc":
+            far = np.clip(np.abs(self.e) / self.teacher_far_m - 1.0, 0.0, 1.0)
+            return far * self._mpc_on_estimate() + (1.0 - far) * self.u_teacher
         return self.u_teacher if self.teacher == "pid" else self._pd_teacher()
 
     def _true_prediction(self):
@@ -637,20 +643,36 @@ class PlateBatch:
         return np.clip(u, -self.nom.u_max_rad, self.nom.u_max_rad)
 
     def _mpc_teacher(self) -> np.ndarray:
-        """Tilt (b, 2) of the MPC's unconstrained first move on the true state predicted exactly
-        to when this tick's command reaches the plate, previewing the reference from there, with
-        the true k g and plate bias (planned in the model's tilt v = s (u + bias), s = true k g /
-        the model's, as PlateMpc.solve does with the plant estimate) and the law's previous tilt;
-        the first move then clipped to the MPC's rate and tilt limits."""
-        horizon, g, c, k_model, u_max, du = self.mpc_law
+        """Tilt (b, 2) of the MPC on the true state predicted exactly to when this tick's command
+        reaches the plate, previewing the reference from there, with the true k g and plate bias
+        (the plant x'' = -k g (u + bias) is the model's tilt v = s (u + bias), s = true k g / the
+        model's: PlateMpc.solve's gain ratio s and offset -s bias)."""
         px, pv, _ = self._true_prediction()
         base = np.round((self.latency + self.servo_lag) / CONTROL_DT_S).astype(int)
-        preview = np.stack([self._ref(base + k) for k in range(1, horizon + 1)], axis=3)   # (b, 3, 2, N)
-        z = np.concatenate([px[..., None], pv[..., None], preview[:, 0], preview[:, 1], preview[:, 2]], axis=2)
-        s = self.k_g_true / k_model
-        v_prev = s * (self.u_law + self.bias)
-        v = z @ g + c * v_prev
-        u = np.clip(v / s - self.bias, self.u_law - du, self.u_law + du)
+        preview = np.stack([self._ref(base + k) for k in range(1, self.mpc_law[0] + 1)], axis=3)   # (b, 3, 2, N)
+        s = self.k_g_true / self.mpc_law[3]
+        return self._mpc_tilt(px, pv, preview, s, -s * self.bias)
+
+    def _mpc_on_estimate(self) -> np.ndarray:
+        """Tilt (b, 2) of the MPC as the mpc node runs it: on this tick's latency-predicted
+        estimate, the reference previewed from the actuation delay on, the plant estimate's gain
+        and disturbance."""
+        delay = self.actuation_delay_s
+        ref = self._ref_ahead(delay)
+        preview = np.stack([self._ref_ahead(delay + k * CONTROL_DT_S) for k in range(1, self.mpc_law[0] + 1)],
+                           axis=3)
+        k_model = self.mpc_law[3]
+        return self._mpc_tilt(self.e + ref[:, 0], self.ve + ref[:, 1], preview,
+                              (self.estimator.k_g / k_model)[:, None], self.estimator.offset / k_model)
+
+    def _mpc_tilt(self, pos_m, vel_m_s, preview, gain_ratio, offset_rad) -> np.ndarray:
+        """The MPC's unconstrained first move (PlateMpc.first_move_gains) for states (b, 2) and
+        a reference preview (b, 3, 2, N), planned in the model's tilt v = s u - o (PlateMpc.solve)
+        from the law's previous tilt, then clipped to the MPC's rate and tilt limits."""
+        _, g, c, _, u_max, du = self.mpc_law
+        z = np.concatenate([pos_m[..., None], vel_m_s[..., None], preview[:, 0], preview[:, 1], preview[:, 2]], axis=2)
+        v = z @ g + c * (gain_ratio * self.u_law - offset_rad)
+        u = np.clip((v + offset_rad) / gain_ratio, self.u_law - du, self.u_law + du)
         return np.where(self.engaged[:, None], np.clip(u, -u_max, u_max), 0.0)
 
     def push_visible(self, frames: int) -> np.ndarray:

@@ -173,7 +173,13 @@ def main(argv=None) -> int:
                         help="the label: pid = the PID itself on the true state (exact latency prediction, true "
                         "gain and bias: the correction is zero where the PID's estimates are right); pd = a "
                         "stiffer PD law on the true state; mpc = the MPC (config/mpc.yaml) on the true state, "
-                        "its unconstrained first move clipped to its limits")
+                        "its unconstrained first move clipped to its limits; pid_mpc = pid within --teacher-far-mm "
+                        "of the reference (per axis), the MPC on the running controller's own estimate beyond twice "
+                        "it, blended between (after a push the MPC brings the ball back sooner, and its label is "
+                        "what the controller can see)")
+    parser.add_argument("--teacher-far-mm", type=float, default=8.0,
+                        help="pid_mpc: the error per axis up to which the label is the PID teacher's (the MPC's "
+                        "from twice it)")
     parser.add_argument("--residual-penalty", type=float, default=0.05,
                         help="weight of the mean absolute action (in [-1, 1] units) added to the loss: a "
                         "correction whose expected label is below half of it is learned as zero (corrections "
@@ -234,7 +240,7 @@ def main(argv=None) -> int:
     pid_overrides = tuple((name, yaml.safe_load(value)) for name, value in
                           (item.split("=", 1) for item in args.base_pid))
     env_args = dict(action_scale_rad=args.action_scale, teacher=args.teacher, pid_overrides=pid_overrides,
-                    correction_fade_m=args.correction_fade_mm * 1e-3)
+                    correction_fade_m=args.correction_fade_mm * 1e-3, teacher_far_m=args.teacher_far_mm * 1e-3)
     bucket_ranges = buckets(ranges) if args.bucket_batch > 0 else {}
 
     def evaluate_all(act):
@@ -292,12 +298,16 @@ def main(argv=None) -> int:
                      "bias), residual on the PID",
               "mpc": "DAgger imitation of the MPC's unconstrained first move on the true state (exact latency "
                      "prediction, true gain and bias), residual on the PID",
+              "pid_mpc": "DAgger imitation of the PID on the true state (exact latency prediction, true gain and "
+                         "bias) near the reference and of the MPC on the running estimate far from it, residual on "
+                         "the PID",
               "pd": "DAgger imitation of a privileged PD teacher, residual on the PID"}[args.teacher]
 
     def export(path: Path, network, evaluation: dict, evaluated: list, elapsed_s: float, gain: float = 1.0,
                gains_evaluated=()) -> None:
         training = {"method": method, "output_gain": gain, "output_gains_evaluated": list(gains_evaluated),
                     "teacher": args.teacher, "residual_penalty": args.residual_penalty,
+                    "teacher_far_m": args.teacher_far_mm * 1e-3,
                     "first_rollout": args.first_rollout, "push_label_frames": args.push_label_frames,
                     "correction_fade_error_m": args.correction_fade_mm * 1e-3,
                     "weight_power": args.weight_power,
