@@ -190,6 +190,39 @@ def test_mpc_teacher_is_the_mpcs_first_move_on_the_truth():
     assert checked >= 4
 
 
+def test_pid_mpc_teacher_is_the_pid_teacher_near_and_the_mpc_on_the_estimate_far():
+    from ball_balance.control.mpc import PlateMpc
+
+    ranges = DomainRanges(push_prob_per_s=0.0, release_radius_m=(0.03, 0.1))
+    env = PlateBatch(8, seed=5, ranges=ranges, duration_s=3.0, teacher="pid_mpc", teacher_far_m=0.008)
+    env.reset()
+    near_seen = far_seen = unconstrained = 0
+    cfg = control_config.pipeline_config(controller_values("mpc", "stationary"), "mpc").mpc
+    while not env.finished:
+        tilt = env.teacher_tilt()
+        near, far = np.abs(env.e) <= 0.008, np.abs(env.e) >= 0.016
+        near &= env.engaged[:, None]
+        far &= env.engaged[:, None]
+        np.testing.assert_allclose(tilt[near], env.u_teacher[near], atol=1e-12)
+        on_estimate = env._mpc_on_estimate()
+        np.testing.assert_allclose(tilt[far], on_estimate[far], atol=1e-12)
+        near_seen, far_seen = near_seen + near.sum(), far_seen + far.sum()
+        if env.tick % 45 == 5:   # the estimate's MPC is the mpc node's, where no constraint is active
+            delay = env.actuation_delay_s
+            for i in np.flatnonzero(env.engaged):
+                mpc = PlateMpc(cfg)
+                ref = env._ref_ahead(delay)[i]
+                preview = np.stack([env._ref_ahead(delay + k * CONTROL_DT_S)[i] for k in range(1, cfg.horizon + 1)])
+                u = mpc.solve(env.e[i] + ref[0], env.ve[i] + ref[1], preview[:, 0], preview[:, 1], preview[:, 2],
+                              env.u_law[i], gain_ratio=env.estimator.k_g[i] / cfg.k_g,
+                              offset_rad=env.estimator.offset[i] / cfg.k_g)
+                if mpc.unconstrained:
+                    np.testing.assert_allclose(on_estimate[i], u, atol=1e-9)
+                    unconstrained += 1
+        env.step()
+    assert near_seen > 100 and far_seen > 20 and unconstrained > 5
+
+
 def test_pid_alone_balances_the_nominal_plant():
     nominal = DomainRanges(gravity_scale=(1.0, 1.0), solid_ball_prob=0.0, latency_s=(0.0, 0.0),
                            detection_noise_m=(0.0005, 0.0005), frame_drop_prob=(0.0, 0.0), tilt_bias_rad=(0, 0),
