@@ -44,8 +44,10 @@ REFERENCES = ("stationary", "circle", "figure_eight")
 # the true state with the true gain and bias, "pd" a stiffer PD law (wn, zeta) on the true state,
 # "mpc" the MPC's unconstrained first move (config/mpc.yaml) on the true state, gain and bias,
 # "pid_mpc" the PID teacher near the reference and the MPC on the controller's own estimate far
-# from it (after a push: the MPC brings the ball back sooner), blended per axis on the error
-TEACHERS = ("pid", "pd", "mpc", "pid_mpc")
+# from it (after a push: the MPC brings the ball back sooner), blended per axis on the error;
+# "mpc_far" the same with the running PID itself near the reference (no correction there): every
+# label a function of what the controller sees
+TEACHERS = ("pid", "pd", "mpc", "pid_mpc", "mpc_far")
 # the PID parameters the residual is trained on top of (recorded in the model, checked at run time)
 BASE_PID_KEYS = ("kp", "ki", "kd", "i_limit_rad", "i_zone_m", "deadband_m", "antiwindup_time_s", "max_tilt_cmd_rad",
                  "rolling_factor", "gravity_m_s2", "derivative_filter_s", "i_max_vel_error_m_s", "adapt_pid_feedback",
@@ -361,7 +363,8 @@ class PlateBatch:
     def __init__(self, batch: int, seed: int, ranges: DomainRanges = DomainRanges(),
                  nominal: Optional[Nominal] = None, duration_s: float = 20.0, action_scale_rad: float = 0.1,
                  teacher_wn: float = 4.0, teacher_zeta: float = 0.85, tracker_cfg=None, teacher: str = "pid",
-                 pid_overrides=(), correction_fade_m: float = 0.0, teacher_far_m: float = 0.008):
+                 pid_overrides=(), correction_fade_m: float = 0.0, teacher_far_m: float = 0.008,
+                 correction_onset_m: float = 0.0):
         if teacher not in TEACHERS:
             raise ValueError(f"teacher = {teacher!r} must be one of {TEACHERS}")
         self.b, self.ranges, self.teacher = batch, ranges, teacher
@@ -369,7 +372,8 @@ class PlateBatch:
         self.rng = np.random.default_rng(seed)
         self.n_ticks = int(round(duration_s / CONTROL_DT_S))
         self.action_scale = action_scale_rad
-        self.correction_fade_m = correction_fade_m   # observation.correction_weight, as the runtime applies it
+        # observation.correction_weight, as the runtime applies it
+        self.correction_fade_m, self.correction_onset_m = correction_fade_m, correction_onset_m
         self.wn, self.zeta = teacher_wn, teacher_zeta
         self.teacher_far_m = teacher_far_m   # pid_mpc: the PID's label within it, the MPC's beyond twice it
         from ball_balance.benchmark.episode import controller_values
@@ -389,7 +393,7 @@ class PlateBatch:
         self.max_delay_s = max(self.pid_values["actuation_delay_s"],
                                self.delay_settings.max_lag * CONTROL_DT_S if self.pid_values["estimate_actuation_delay"]
                                else 0.0)
-        self.mpc_law = self._mpc_first_move() if teacher in ("mpc", "pid_mpc") else None
+        self.mpc_law = self._mpc_first_move() if teacher in ("mpc", "pid_mpc", "mpc_far") else None
         # the teacher looks ahead up to its latency + lag (and the MPC's horizon beyond)
         pad = int(0.5 / CONTROL_DT_S) + 2 + (self.mpc_law[0] if self.mpc_law else 0)
         self.refs = np.stack([reference_table(k, self.n_ticks + pad) for k in REFERENCES])   # (R, n, 3, 2)
@@ -600,9 +604,10 @@ class PlateBatch:
         """The label: the tilt (b, 2) a privileged law commands this tick (`teacher`)."""
         if self.teacher == "mpc":
             return self._mpc_teacher()
-        if self.teacher == "pid_mpc":
+        if self.teacher in ("pid_mpc", "mpc_far"):
             far = np.clip(np.abs(self.e) / self.teacher_far_m - 1.0, 0.0, 1.0)
-            return far * self._mpc_on_estimate() + (1.0 - far) * self.u_teacher
+            near_tilt = self.u_teacher if self.teacher == "pid_mpc" else self.u_pid
+            return far * self._mpc_on_estimate() + (1.0 - far) * near_tilt
         return self.u_teacher if self.teacher == "pid" else self._pd_teacher()
 
     def _true_prediction(self):
@@ -711,7 +716,7 @@ class PlateBatch:
         advance one tick."""
         if tilt is None:
             a = np.zeros((self.b, 2)) if action is None else np.clip(action, -1.0, 1.0)
-            a = a * correction_weight(self.e, self.correction_fade_m)[:, None]
+            a = a * correction_weight(self.e, self.correction_fade_m, self.correction_onset_m)[:, None]
             tilt = self.u_pid + self.action_scale * a
         u = np.clip(tilt, -self.nom.u_max_rad, self.nom.u_max_rad)
         u = np.where(self.engaged[:, None], u, 0.0)

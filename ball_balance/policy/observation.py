@@ -85,15 +85,23 @@ class ObservationBuilder:
         self.tilts[:, :, 0] = tilt_rad
 
 
-def correction_weight(error_m, fade_error_m: float) -> np.ndarray:
-    """The share of the policy's correction that applies, from the ball's error (..., 2) [m]
-    (error_m[0] of both axes): all of it within fade_error_m of the reference, none beyond
-    twice that, linear between; fade_error_m 0: all of it everywhere. Far from the reference
-    the ball is coming back from a push, where the imitation's labels explain least (the
-    teacher, on the truth, answers a push before the controller can see it) and where the
-    correction cost the PID's recovery in every held-out pushes episode set."""
+def correction_weight(error_m, fade_error_m: float, onset_error_m: float = 0.0) -> np.ndarray:
+    """The share of the policy's correction that applies, from the ball's distance to the
+    reference (error_m (..., 2) [m], error_m[0] of both axes).
+
+    fade_error_m: all of it within that distance, none beyond twice it, linear between (0: no
+    fade). Far from the reference the ball is coming back from a push, where a teacher on the
+    truth labels what the controller cannot see yet.
+    onset_error_m: none within that distance, all of it beyond twice it (0: no onset). A model
+    that only corrects the recovery from a push (the mpc_far teacher: no correction near the
+    reference) leaves the PID alone where it is already good, with no imitation error there."""
     error_m = np.asarray(error_m, dtype=float)
-    if fade_error_m <= 0.0:
-        return np.ones(error_m.shape[:-1])
+    weight = np.ones(error_m.shape[:-1])
+    if fade_error_m <= 0.0 and onset_error_m <= 0.0:
+        return weight
     distance_m = np.hypot(error_m[..., 0], error_m[..., 1])
-    return np.clip(2.0 - distance_m / fade_error_m, 0.0, 1.0)
+    if fade_error_m > 0.0:
+        weight = weight * np.clip(2.0 - distance_m / fade_error_m, 0.0, 1.0)
+    if onset_error_m > 0.0:
+        weight = weight * np.clip(distance_m / onset_error_m - 1.0, 0.0, 1.0)
+    return weight

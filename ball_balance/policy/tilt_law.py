@@ -3,8 +3,9 @@
     u = clamp(u_pid + blend(t) * weight(error) * scale * policy(observation), low, high)
 
 `blend` ramps from 0 to 1 over `blend_s` after every (re-)engagement, so switching the policy
-in never jumps the plate. `weight` fades the correction out far from the reference, as the
-model was trained (its metadata's `correction_fade_error_m`; observation.correction_weight).
+in never jumps the plate. `weight` fades the correction out far from the reference or in only
+away from it, as the model was trained (its metadata's `correction_fade_error_m` and
+`correction_onset_error_m`; observation.correction_weight).
 A non-finite observation or model output never reaches the command: the law holds its last
 tilt and counts it (`held_count`).
 """
@@ -33,6 +34,7 @@ class PolicyTiltLaw:
         self.runner, self.k_g, self.blend_s = runner, k_g, blend_s
         # as the model was trained (a model from before the fade has none)
         self.correction_fade_m = float(runner.metadata.training.get("correction_fade_error_m", 0.0))
+        self.correction_onset_m = float(runner.metadata.training.get("correction_onset_error_m", 0.0))
         self.scale_feedback = scale_feedback   # adapt_pid_feedback, as the PID law
         self.use_estimate = use_estimate       # the PID takes the plant estimate (as the model was trained)
         self.pid = PlatePid(gains, k_g)
@@ -81,8 +83,8 @@ class PolicyTiltLaw:
             return float(self.u[0]), float(self.u[1])
         self.inferences += 1
         action = self.blend * action
-        if self.correction_fade_m > 0.0:   # no weight to compute on the tick of a model without a fade
-            action = correction_weight((pos - ref.p)[None], self.correction_fade_m)[0] * action
+        if self.correction_fade_m > 0.0 or self.correction_onset_m > 0.0:   # nothing to compute without either
+            action = correction_weight((pos - ref.p)[None], self.correction_fade_m, self.correction_onset_m)[0] * action
         self.last_correction = action * self.runner.scale
         self.u = self.runner.command(action, base=u_pid)
         self.builder.record_tilt(self.u)

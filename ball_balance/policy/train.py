@@ -176,7 +176,8 @@ def main(argv=None) -> int:
                         "its unconstrained first move clipped to its limits; pid_mpc = pid within --teacher-far-mm "
                         "of the reference (per axis), the MPC on the running controller's own estimate beyond twice "
                         "it, blended between (after a push the MPC brings the ball back sooner, and its label is "
-                        "what the controller can see)")
+                        "what the controller can see); mpc_far = as pid_mpc with the running PID itself near the "
+                        "reference (no correction there)")
     parser.add_argument("--teacher-far-mm", type=float, default=8.0,
                         help="pid_mpc: the error per axis up to which the label is the PID teacher's (the MPC's "
                         "from twice it)")
@@ -215,6 +216,11 @@ def main(argv=None) -> int:
                         "default: at 5 mm the training chose gain 0.15, worse than the shipped model in the MuJoCo "
                         "benchmark (summed RMSE after 5 s 24.56 against 24.47 mm), and at gain 0.05 it ties it "
                         "(24.46) with a worst push recovery of 1.65 s against 1.12 (docs/policy.md, Results)")
+    parser.add_argument("--correction-onset-mm", type=float, default=0.0,
+                        help="no correction within this distance of the reference, all of it beyond twice it "
+                        "(observation.correction_weight; recorded in the model, the runtime applies the same; 0: "
+                        "everywhere). With the mpc_far teacher the label is zero near the reference: the onset "
+                        "keeps the network's imitation error out of where the PID is already good")
     parser.add_argument("--save-iterations", default="", help="also write every iteration's model into this folder")
     parser.add_argument("--base-pid", nargs="*", default=[], metavar="NAME=VALUE",
                         help="PID parameters over config/policy.yaml's for the training (recorded in the model; "
@@ -240,7 +246,8 @@ def main(argv=None) -> int:
     pid_overrides = tuple((name, yaml.safe_load(value)) for name, value in
                           (item.split("=", 1) for item in args.base_pid))
     env_args = dict(action_scale_rad=args.action_scale, teacher=args.teacher, pid_overrides=pid_overrides,
-                    correction_fade_m=args.correction_fade_mm * 1e-3, teacher_far_m=args.teacher_far_mm * 1e-3)
+                    correction_fade_m=args.correction_fade_mm * 1e-3, teacher_far_m=args.teacher_far_mm * 1e-3,
+                    correction_onset_m=args.correction_onset_mm * 1e-3)
     bucket_ranges = buckets(ranges) if args.bucket_batch > 0 else {}
 
     def evaluate_all(act):
@@ -301,6 +308,8 @@ def main(argv=None) -> int:
               "pid_mpc": "DAgger imitation of the PID on the true state (exact latency prediction, true gain and "
                          "bias) near the reference and of the MPC on the running estimate far from it, residual on "
                          "the PID",
+              "mpc_far": "DAgger imitation of the MPC on the running estimate far from the reference and of the "
+                         "PID itself near it, residual on the PID",
               "pd": "DAgger imitation of a privileged PD teacher, residual on the PID"}[args.teacher]
 
     def export(path: Path, network, evaluation: dict, evaluated: list, elapsed_s: float, gain: float = 1.0,
@@ -310,6 +319,7 @@ def main(argv=None) -> int:
                     "teacher_far_m": args.teacher_far_mm * 1e-3,
                     "first_rollout": args.first_rollout, "push_label_frames": args.push_label_frames,
                     "correction_fade_error_m": args.correction_fade_mm * 1e-3,
+                    "correction_onset_error_m": args.correction_onset_mm * 1e-3,
                     "weight_power": args.weight_power,
                     "weight_floor_rad": args.weight_floor_rad,
                     "seed": args.seed, "commit": commit_id(), "iterations": args.iterations, "batch": args.batch,

@@ -139,6 +139,12 @@ def test_correction_weight_is_whole_near_the_reference_and_none_beyond_twice_the
     np.testing.assert_allclose(correction_weight(errors, 0.0), [1.0] * 4)
 
 
+def test_correction_weight_with_an_onset_is_none_near_the_reference_and_whole_beyond_twice_it():
+    errors = np.array([[0.003, 0.004], [0.0, 0.0075], [-0.006, 0.008], [0.05, 0.0]])   # 5, 7.5, 10, 50 mm
+    np.testing.assert_allclose(correction_weight(errors, 0.0, 0.005), [0.0, 0.5, 1.0, 1.0])
+    np.testing.assert_allclose(correction_weight(errors, 0.03, 0.005), [0.0, 0.5, 1.0, 2.0 - 50.0 / 30.0])
+
+
 def test_the_law_applies_the_models_correction_fade():
     _, md = read_model(SHIPPED)
     law = load_tilt_law(policy_values(policy_blend_s=0.0))
@@ -150,6 +156,22 @@ def test_the_law_applies_the_models_correction_fade():
         for _ in range(30):   # 30 mm off, as after a push
             law.step((0.03, -0.01), (0.2, 0.0), _ref(), 1.0 / 60.0, 0.03)
         corrections[fade_m] = law.last_correction.copy()
+    assert np.abs(corrections[0.0]).max() > 0.0
+    np.testing.assert_array_equal(corrections[0.005], [0.0, 0.0])
+
+
+def test_the_law_applies_the_models_correction_onset():
+    _, md = read_model(SHIPPED)
+    law = load_tilt_law(policy_values(policy_blend_s=0.0))
+    assert law.correction_onset_m == md.training.get("correction_onset_error_m", 0.0)
+    law.correction_fade_m = 0.0
+    corrections = {}
+    for onset_m in (0.0, 0.005):
+        law.reset()
+        law.correction_onset_m = onset_m
+        for _ in range(30):   # 3 mm off: within the onset
+            law.step((0.003, -0.001), (0.02, 0.0), _ref(), 1.0 / 60.0, 0.03)
+        corrections[onset_m] = law.last_correction.copy()
     assert np.abs(corrections[0.0]).max() > 0.0
     np.testing.assert_array_equal(corrections[0.005], [0.0, 0.0])
 
