@@ -106,7 +106,8 @@ def manager_with_policy(model: str):
 
     cm = ControllerManager(MANAGER_HZ)
     cm.load_robot_description((ROOT / "config" / "mock_ur.urdf").read_text())
-    inputs = [f"{a}.{n}" for a in "xy" for n in ("error_m", "vel_error_m_s", "ff_tilt_rad", "pid_tilt_rad", "age_s")]
+    inputs = [f"{a}.{n}" for a in "xy" for n in ("error_m", "vel_error_m_s", "ff_tilt_rad", "pid_tilt_rad", "age_s",
+                                                      "gain_ratio")]
     cm.load_controller("policy", "controller_manager_py.controllers.onnx_policy:OnnxPolicyController", {
         "model_path": model, "inputs": inputs, "observation_sources": ["x.tilt_rad=command.0", "y.tilt_rad=command.1"],
         "command_interfaces": ["shoulder_pan_joint/position", "wrist_3_joint/position"],
@@ -115,7 +116,7 @@ def manager_with_policy(model: str):
     cm.configure_controller("policy")
     cm.switch_controller(["policy"], [], 2)
     ctrl = cm.controllers["policy"].c
-    ctrl.set_inputs([0.01, 0.0, 0.0, 0.02, 0.03] * 2)
+    ctrl.set_inputs([0.01, 0.0, 0.0, 0.02, 0.03, 1.0] * 2)
     return cm, ctrl
 
 

@@ -584,7 +584,8 @@ class PlateBatch:
         self.age = np.where(have, age, 0.0)
         if self.teacher in ("pid", "pid_mpc"):
             self.u_teacher = self._pid_teacher()
-        return self.builder.build(self.e, self.ve, -self.a_ref / self.nom.k_g, self.u_pid, self.age)
+        return self.builder.build(self.e, self.ve, -self.a_ref / self.nom.k_g, self.u_pid, self.age,
+                                  self.estimator.k_g / self.nom.k_g)
 
     def _ref(self, ahead_ticks) -> np.ndarray:
         """(b, 3, 2) reference p, v, a at this tick + ahead_ticks (per env array or int)."""

@@ -12,6 +12,9 @@ Per axis, newest first, everything in the plate frame and in SI units:
     ff_tilt_rad           reference feed-forward -a_ref / (k g_nominal)
     pid_tilt_rad          what the PID alone would command this tick (the residual's base)
     age_s                 age of the ball state (capture -> this tick)
+    gain_ratio            the plant estimate's k g over the k g the PID was tuned for (1 without
+                          an estimate): how hard a tilt moves this ball, which the history shows
+                          only slowly and an MPC-like correction scales with
 
 The history lets the network see how the ball answered earlier tilts (the plant's gain and
 the command-to-plate delay it lives with), which the PID cannot. The action per axis is a
@@ -31,7 +34,7 @@ AXES = ("x", "y")
 def layout(history: int = HISTORY) -> List[Tuple[str, int, str]]:
     """(name, size, unit) of each field of one axis, in order."""
     return [("error_m", history, "m"), ("tilt_rad", history, "rad"), ("vel_error_m_s", 1, "m/s"),
-            ("ff_tilt_rad", 1, "rad"), ("pid_tilt_rad", 1, "rad"), ("age_s", 1, "s")]
+            ("ff_tilt_rad", 1, "rad"), ("pid_tilt_rad", 1, "rad"), ("age_s", 1, "s"), ("gain_ratio", 1, "1")]
 
 
 def axis_size(history: int = HISTORY) -> int:
@@ -67,16 +70,17 @@ class ObservationBuilder:
             self.errors[which] = 0.0
             self.tilts[which] = 0.0
 
-    def build(self, error_m, vel_error_m_s, ff_tilt_rad, pid_tilt_rad, age_s) -> np.ndarray:
+    def build(self, error_m, vel_error_m_s, ff_tilt_rad, pid_tilt_rad, age_s, gain_ratio=1.0) -> np.ndarray:
         """Push this tick's errors and return the raw observations, shape (batch, 2 * axis_size).
-        age_s is (batch,) or a scalar; the others (batch, 2)."""
+        age_s and gain_ratio are (batch,) or scalars; the others (batch, 2)."""
         self.errors[:, :, 1:] = self.errors[:, :, :-1]
         self.errors[:, :, 0] = error_m
         b = self.batch
         age = np.broadcast_to(np.asarray(age_s, dtype=float).reshape(-1, 1), (b, 2))
+        ratio = np.broadcast_to(np.asarray(gain_ratio, dtype=float).reshape(-1, 1), (b, 2))
         per_axis = np.concatenate([self.errors, self.tilts, np.asarray(vel_error_m_s).reshape(b, 2, 1),
                                    np.asarray(ff_tilt_rad).reshape(b, 2, 1), np.asarray(pid_tilt_rad).reshape(b, 2, 1),
-                                   age.reshape(b, 2, 1)], axis=2)
+                                   age.reshape(b, 2, 1), ratio.reshape(b, 2, 1)], axis=2)
         return per_axis.reshape(b, -1)
 
     def record_tilt(self, tilt_rad) -> None:

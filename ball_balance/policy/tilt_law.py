@@ -74,7 +74,7 @@ class PolicyTiltLaw:
         u_pid = np.asarray(adapted_pid_step(self.pid, self.k_g, scale_feedback, pos, vel, ref, dt_s,
                                             self.k_g if k_g is None else k_g, accel_offset_m_s2), dtype=float)
         obs = self.builder.build((pos - ref.p)[None], (vel - ref.v)[None], (-np.asarray(ref.a) / self.k_g)[None],
-                                 u_pid[None], age_s)
+                                 u_pid[None], age_s, 1.0 if k_g is None else k_g / self.k_g)
         action = self.runner.infer(obs[0])
         self.last_inference_s = self.runner.last_inference_s
         if action is None or not np.all(np.isfinite(u_pid)):
