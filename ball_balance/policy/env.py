@@ -24,7 +24,7 @@ what it can observe.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Optional
+from typing import NamedTuple, Optional
 
 import numpy as np
 
@@ -63,6 +63,18 @@ TRACKER_FILTER_KEYS = ("meas_noise_m", "accel_noise_m_s2", "init_vel_std_m_s", "
                        "meas_noise_window_frames", "maneuver_sigma", "maneuver_hold_s", "maneuver_accel_noise_m_s2",
                        "maneuver_confirm_frames", "maneuver_confirm_sigma", "maneuver_confirm_noise_m", "tilt_lever_m",
                        "rolling_factor")
+
+
+class MpcFirstMove(NamedTuple):
+    """The MPC of config/mpc.yaml as the linear law of its unconstrained first move
+    (PlateMpc.first_move_gains): v_0 = z . state_gain + prev_gain v_prev in the model's tilt."""
+
+    horizon: int                # N: reference preview steps
+    state_gain: np.ndarray      # (2 + 3N,) on z = [p0, v0, ref_p (N), ref_v (N), ref_a (N)]
+    prev_gain: float            # on the previous tilt
+    k_g: float                  # the model's gain [m/s^2 per rad]
+    u_max_rad: float            # tilt limit
+    du_max_rad: float           # tilt change per tick
 
 
 @dataclass(frozen=True)
@@ -395,7 +407,7 @@ class PlateBatch:
                                else 0.0)
         self.mpc_law = self._mpc_first_move() if teacher in ("mpc", "pid_mpc", "mpc_far") else None
         # the teacher looks ahead up to its latency + lag (and the MPC's horizon beyond)
-        pad = int(0.5 / CONTROL_DT_S) + 2 + (self.mpc_law[0] if self.mpc_law else 0)
+        pad = int(0.5 / CONTROL_DT_S) + 2 + (self.mpc_law.horizon if self.mpc_law else 0)
         self.refs = np.stack([reference_table(k, self.n_ticks + pad) for k in REFERENCES])   # (R, n, 3, 2)
         self.builder = ObservationBuilder(batch)
         self.tracker_cfg = tracker_config() if tracker_cfg is None else tracker_cfg
@@ -404,9 +416,9 @@ class PlateBatch:
         self.lever_m = float(self.tracker_cfg.tilt_lever_m)
 
     @staticmethod
-    def _mpc_first_move():
-        """(horizon, g, c, k_g, u_max, du per tick): the MPC of config/mpc.yaml as the linear law
-        of its unconstrained first move (PlateMpc.first_move_gains), stepping at this plant's tick."""
+    def _mpc_first_move() -> MpcFirstMove:
+        """The MPC of config/mpc.yaml as the linear law of its first move, stepping at this
+        plant's tick."""
         from ball_balance.benchmark.episode import controller_values
         from ball_balance.control.mpc import PlateMpc
 
@@ -414,8 +426,8 @@ class PlateBatch:
         if not np.isclose(cfg.dt_s, CONTROL_DT_S):
             raise ValueError(f"the MPC teacher steps at the plant's {1 / CONTROL_DT_S:.0f} Hz: config/mpc.yaml's "
                              f"control_rate_hz must be that")
-        g, c = PlateMpc(cfg).first_move_gains()
-        return cfg.horizon, g, c, cfg.k_g, cfg.u_max_rad, cfg.du_max_rad_s * cfg.dt_s
+        state_gain, prev_gain = PlateMpc(cfg).first_move_gains()
+        return MpcFirstMove(cfg.horizon, state_gain, prev_gain, cfg.k_g, cfg.u_max_rad, cfg.du_max_rad_s * cfg.dt_s)
 
     def _delay_estimator(self):
         from ball_balance.control.prediction import DelayEstimator
@@ -655,8 +667,8 @@ class PlateBatch:
         model's: PlateMpc.solve's gain ratio s and offset -s bias)."""
         px, pv, _ = self._true_prediction()
         base = np.round((self.latency + self.servo_lag) / CONTROL_DT_S).astype(int)
-        preview = np.stack([self._ref(base + k) for k in range(1, self.mpc_law[0] + 1)], axis=3)   # (b, 3, 2, N)
-        s = self.k_g_true / self.mpc_law[3]
+        preview = np.stack([self._ref(base + k) for k in range(1, self.mpc_law.horizon + 1)], axis=3)   # (b, 3, 2, N)
+        s = self.k_g_true / self.mpc_law.k_g
         return self._mpc_tilt(px, pv, preview, s, -s * self.bias)
 
     def _mpc_on_estimate(self) -> np.ndarray:
@@ -665,9 +677,9 @@ class PlateBatch:
         and disturbance."""
         delay = self.actuation_delay_s
         ref = self._ref_ahead(delay)
-        preview = np.stack([self._ref_ahead(delay + k * CONTROL_DT_S) for k in range(1, self.mpc_law[0] + 1)],
+        preview = np.stack([self._ref_ahead(delay + k * CONTROL_DT_S) for k in range(1, self.mpc_law.horizon + 1)],
                            axis=3)
-        k_model = self.mpc_law[3]
+        k_model = self.mpc_law.k_g
         return self._mpc_tilt(self.e + ref[:, 0], self.ve + ref[:, 1], preview,
                               (self.estimator.k_g / k_model)[:, None], self.estimator.offset / k_model)
 
@@ -675,11 +687,11 @@ class PlateBatch:
         """The MPC's unconstrained first move (PlateMpc.first_move_gains) for states (b, 2) and
         a reference preview (b, 3, 2, N), planned in the model's tilt v = s u - o (PlateMpc.solve)
         from the law's previous tilt, then clipped to the MPC's rate and tilt limits."""
-        _, g, c, _, u_max, du = self.mpc_law
+        law = self.mpc_law
         z = np.concatenate([pos_m[..., None], vel_m_s[..., None], preview[:, 0], preview[:, 1], preview[:, 2]], axis=2)
-        v = z @ g + c * (gain_ratio * self.u_law - offset_rad)
-        u = np.clip((v + offset_rad) / gain_ratio, self.u_law - du, self.u_law + du)
-        return np.where(self.engaged[:, None], np.clip(u, -u_max, u_max), 0.0)
+        v = z @ law.state_gain + law.prev_gain * (gain_ratio * self.u_law - offset_rad)
+        u = np.clip((v + offset_rad) / gain_ratio, self.u_law - law.du_max_rad, self.u_law + law.du_max_rad)
+        return np.where(self.engaged[:, None], np.clip(u, -law.u_max_rad, law.u_max_rad), 0.0)
 
     def push_visible(self, frames: int) -> np.ndarray:
         """Per episode (b,): False from a push until `frames` camera frames captured after it
