@@ -8,10 +8,12 @@ from geometry_msgs.msg import Vector3Stamped
 from std_msgs.msg import Float64MultiArray
 from test_balance_controllers import FakeWorld, _kinematics
 
+from ball_balance.policy.observation import flat_names
 from harness import ROOT, executable
 
 pytestmark = pytest.mark.integration
 DATA = ROOT / "test" / "unit" / "policy" / "data"
+WIDTH = len(flat_names())   # the ball controller's observation; wrong_width.onnx's graph takes two fewer
 
 
 def _cmd(*params):
@@ -34,8 +36,9 @@ def test_policy_node_tilts_toward_the_ball_with_finite_six_joint_commands(launch
     assert u_x > 0.01 and u_y < -0.005
 
 
-@pytest.mark.parametrize("model, says", [("wrong_width.onnx", "input width 70 but the metadata names 72"),
-                                         ("no_metadata.onnx", "metadata lacks")])
+@pytest.mark.parametrize("model, says", [
+    ("wrong_width.onnx", f"input width {WIDTH - 2} but the metadata names {WIDTH}"),
+    ("no_metadata.onnx", "metadata lacks")])
 def test_policy_node_refuses_a_model_that_does_not_fit_with_one_line(launcher, model, says):
     result = launcher.run(_cmd(f"policy_model:={DATA / model}"), timeout=60)
     assert result.returncode != 0
