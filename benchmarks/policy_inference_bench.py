@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from ball_balance.control.references import RefSample  # noqa: E402
-from ball_balance.policy.observation import flat_names  # noqa: E402
+from ball_balance.policy.observation import AXES, flat_names, layout  # noqa: E402
 from ball_balance.policy.params import DEFAULT_MODEL, model_path  # noqa: E402
 from ball_balance.policy.tilt_law import ACTION_KIND, PolicyTiltLaw  # noqa: E402
 
@@ -106,8 +106,12 @@ def manager_with_policy(model: str):
 
     cm = ControllerManager(MANAGER_HZ)
     cm.load_robot_description((ROOT / "config" / "mock_ur.urdf").read_text())
-    inputs = [f"{a}.{n}" for a in "xy" for n in ("error_m", "vel_error_m_s", "ff_tilt_rad", "pid_tilt_rad", "age_s",
-                                                      "gain_ratio")]
+    # every field of the ball's layout is a named input, but the tilts, which the controller
+    # takes from its own commands; fed once with these values
+    values = {"error_m": 0.01, "vel_error_m_s": 0.0, "ff_tilt_rad": 0.0, "pid_tilt_rad": 0.02, "age_s": 0.03,
+              "gain_ratio": 1.0}
+    fields = [name for name, _, _ in layout() if name != "tilt_rad"]
+    inputs = [f"{a}.{name}" for a in AXES for name in fields]
     cm.load_controller("policy", "controller_manager_py.controllers.onnx_policy:OnnxPolicyController", {
         "model_path": model, "inputs": inputs, "observation_sources": ["x.tilt_rad=command.0", "y.tilt_rad=command.1"],
         "command_interfaces": ["shoulder_pan_joint/position", "wrist_3_joint/position"],
@@ -116,7 +120,7 @@ def manager_with_policy(model: str):
     cm.configure_controller("policy")
     cm.switch_controller(["policy"], [], 2)
     ctrl = cm.controllers["policy"].c
-    ctrl.set_inputs([0.01, 0.0, 0.0, 0.02, 0.03, 1.0] * 2)
+    ctrl.set_inputs([values[name] for _ in AXES for name in fields])
     return cm, ctrl
 
 

@@ -387,7 +387,7 @@ class PlateBatch:
         # observation.correction_weight, as the runtime applies it
         self.correction_fade_m, self.correction_onset_m = correction_fade_m, correction_onset_m
         self.wn, self.zeta = teacher_wn, teacher_zeta
-        self.teacher_far_m = teacher_far_m   # pid_mpc: the PID's label within it, the MPC's beyond twice it
+        self.teacher_far_m = teacher_far_m   # pid_mpc, mpc_far: the near label within it, the MPC's beyond twice it
         from ball_balance.benchmark.episode import controller_values
 
         # the PID under the policy: config/policy.yaml over the schema (pid_overrides: (name, value) pairs

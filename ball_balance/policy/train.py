@@ -189,8 +189,8 @@ def main(argv=None) -> int:
                         "what the controller can see); mpc_far = as pid_mpc with the running PID itself near the "
                         "reference (no correction there)")
     parser.add_argument("--teacher-far-mm", type=float, default=8.0,
-                        help="pid_mpc: the error per axis up to which the label is the PID teacher's (the MPC's "
-                        "from twice it)")
+                        help="pid_mpc and mpc_far: the error per axis up to which the label is the near law's (the "
+                        "MPC's from twice it)")
     parser.add_argument("--residual-penalty", type=float, default=0.0,
                         help="weight of the mean absolute action (in [-1, 1] units) added to the loss: a "
                         "correction whose expected label is below half of it is learned as zero. For the pid "
