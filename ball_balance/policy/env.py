@@ -32,7 +32,7 @@ from ball_balance.control import config as control_config
 from ball_balance.control.estimation import EstimatorConfig
 from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
 from ball_balance.policy.batch_kalman import BatchBallKalman
-from ball_balance.policy.observation import ObservationBuilder, correction_weight
+from ball_balance.policy.observation import ObservationBuilder, correction_weight, low_gain_share
 
 # the control tick: the PID node's rate (config/pid.yaml, 60 Hz); config/policy.yaml's
 # control_rate_hz must equal it (checked here) and the model records it (rate_hz, checked at run time)
@@ -376,7 +376,7 @@ class PlateBatch:
                  nominal: Optional[Nominal] = None, duration_s: float = 20.0, action_scale_rad: float = 0.1,
                  teacher_wn: float = 4.0, teacher_zeta: float = 0.85, tracker_cfg=None, teacher: str = "pid",
                  pid_overrides=(), correction_fade_m: float = 0.0, teacher_far_m: float = 0.008,
-                 correction_onset_m: float = 0.0):
+                 correction_onset_m: float = 0.0, low_gain_onset: float = 0.0):
         if teacher not in TEACHERS:
             raise ValueError(f"teacher = {teacher!r} must be one of {TEACHERS}")
         self.b, self.ranges, self.teacher = batch, ranges, teacher
@@ -388,6 +388,9 @@ class PlateBatch:
         self.correction_fade_m, self.correction_onset_m = correction_fade_m, correction_onset_m
         self.wn, self.zeta = teacher_wn, teacher_zeta
         self.teacher_far_m = teacher_far_m   # pid_mpc, mpc_far: the near label within it, the MPC's beyond twice it
+        # pid_mpc, mpc_far: the MPC's label near the reference too on a weak plant, and the correction
+        # applied there (observation.low_gain_share of the plant estimate's gain ratio; 0: not)
+        self.low_gain_onset = low_gain_onset
         from ball_balance.benchmark.episode import controller_values
 
         # the PID under the policy: config/policy.yaml over the schema (pid_overrides: (name, value) pairs
@@ -596,8 +599,8 @@ class PlateBatch:
         self.age = np.where(have, age, 0.0)
         if self.teacher in ("pid", "pid_mpc"):
             self.u_teacher = self._pid_teacher()
-        return self.builder.build(self.e, self.ve, -self.a_ref / self.nom.k_g, self.u_pid, self.age,
-                                  self.estimator.k_g / self.nom.k_g)
+        self.gain_ratio = self.estimator.k_g / self.nom.k_g
+        return self.builder.build(self.e, self.ve, -self.a_ref / self.nom.k_g, self.u_pid, self.age, self.gain_ratio)
 
     def _ref(self, ahead_ticks) -> np.ndarray:
         """(b, 3, 2) reference p, v, a at this tick + ahead_ticks (per env array or int)."""
@@ -619,6 +622,8 @@ class PlateBatch:
             return self._mpc_teacher()
         if self.teacher in ("pid_mpc", "mpc_far"):
             far = np.clip(np.abs(self.e) / self.teacher_far_m - 1.0, 0.0, 1.0)
+            if self.low_gain_onset > 0.0:
+                far = np.maximum(far, low_gain_share(self.gain_ratio, self.low_gain_onset)[:, None])
             near_tilt = self.u_teacher if self.teacher == "pid_mpc" else self.u_pid
             return far * self._mpc_on_estimate() + (1.0 - far) * near_tilt
         return self.u_teacher if self.teacher == "pid" else self._pd_teacher()
@@ -729,7 +734,8 @@ class PlateBatch:
         advance one tick."""
         if tilt is None:
             a = np.zeros((self.b, 2)) if action is None else np.clip(action, -1.0, 1.0)
-            a = a * correction_weight(self.e, self.correction_fade_m, self.correction_onset_m)[:, None]
+            a = a * correction_weight(self.e, self.correction_fade_m, self.correction_onset_m, self.gain_ratio,
+                                      self.low_gain_onset)[:, None]
             tilt = self.u_pid + self.action_scale * a
         u = np.clip(tilt, -self.nom.u_max_rad, self.nom.u_max_rad)
         u = np.where(self.engaged[:, None], u, 0.0)

@@ -89,16 +89,24 @@ class ObservationBuilder:
         self.tilts[:, :, 0] = tilt_rad
 
 
-def correction_weight(error_m, fade_error_m: float, onset_error_m: float = 0.0) -> np.ndarray:
+def correction_weight(error_m, fade_error_m: float, onset_error_m: float = 0.0, gain_ratio=1.0,
+                      low_gain_onset: float = 0.0) -> np.ndarray:
     """The share of the policy's correction that applies, from the ball's distance to the
-    reference (error_m (..., 2) [m], error_m[0] of both axes).
+    reference (error_m (..., 2) [m], error_m[0] of both axes) and the plant estimate's gain
+    ratio (scalar or (...,); observation's gain_ratio).
 
     fade_error_m: all of it within that distance, none beyond twice it, linear between (0: no
     fade). Far from the reference the ball is coming back from a push, where a teacher on the
     truth labels what the controller cannot see yet.
     onset_error_m: none within that distance, all of it beyond twice it (0: no onset). A model
     that only corrects the recovery from a push (the mpc_far teacher: no correction near the
-    reference) leaves the PID alone where it is already good, with no imitation error there."""
+    reference) leaves the PID alone where it is already good, with no imitation error there.
+    low_gain_onset: with an onset, all of the correction also near the reference where the
+    gain ratio is below low_gain_onset ** 2, none above low_gain_onset, linear in its log
+    between (0: not at all). On a weak plant (low gravity) the PID, which only ever scales its
+    feedback down, is slow, and the MPC's plan, which scales its tilt with the gain, is far
+    better; a stronger plant or a long delay gives the MPC no such lead once the vision is
+    noisy, so there the PID stays."""
     error_m = np.asarray(error_m, dtype=float)
     weight = np.ones(error_m.shape[:-1])
     if fade_error_m <= 0.0 and onset_error_m <= 0.0:
@@ -107,5 +115,15 @@ def correction_weight(error_m, fade_error_m: float, onset_error_m: float = 0.0) 
     if fade_error_m > 0.0:
         weight = weight * np.clip(2.0 - distance_m / fade_error_m, 0.0, 1.0)
     if onset_error_m > 0.0:
-        weight = weight * np.clip(distance_m / onset_error_m - 1.0, 0.0, 1.0)
+        onset = np.clip(distance_m / onset_error_m - 1.0, 0.0, 1.0)
+        if low_gain_onset > 0.0:
+            onset = np.maximum(onset, low_gain_share(gain_ratio, low_gain_onset))
+        weight = weight * onset
     return weight
+
+
+def low_gain_share(gain_ratio, low_gain_onset: float) -> np.ndarray:
+    """0 for a gain ratio at or above low_gain_onset (< 1), 1 at or below its square, linear in
+    log(gain_ratio) between: how far the plant is below the one the PID was tuned for."""
+    log_ratio = np.log(np.maximum(np.asarray(gain_ratio, dtype=float), 1e-9))
+    return np.clip(log_ratio / np.log(low_gain_onset) - 1.0, 0.0, 1.0)

@@ -4,8 +4,9 @@
 
 `blend` ramps from 0 to 1 over `blend_s` after every (re-)engagement, so switching the policy
 in never jumps the plate. `weight` fades the correction out far from the reference or in only
-away from it, as the model was trained (its metadata's `correction_fade_error_m` and
-`correction_onset_error_m`; observation.correction_weight).
+away from it or on a weak plant, as the model was trained (its metadata's
+`correction_fade_error_m`, `correction_onset_error_m` and `correction_low_gain_onset`;
+observation.correction_weight).
 A non-finite observation or model output never reaches the command: the law holds its last
 tilt and counts it (`held_count`).
 """
@@ -35,6 +36,7 @@ class PolicyTiltLaw:
         # as the model was trained (a model from before the fade has none)
         self.correction_fade_m = float(runner.metadata.training.get("correction_fade_error_m", 0.0))
         self.correction_onset_m = float(runner.metadata.training.get("correction_onset_error_m", 0.0))
+        self.low_gain_onset = float(runner.metadata.training.get("correction_low_gain_onset", 0.0))
         self.scale_feedback = scale_feedback   # adapt_pid_feedback, as the PID law
         self.use_estimate = use_estimate       # the PID takes the plant estimate (as the model was trained)
         self.pid = PlatePid(gains, k_g)
@@ -73,8 +75,9 @@ class PolicyTiltLaw:
         scale_feedback = self.scale_feedback and k_g is not None
         u_pid = np.asarray(adapted_pid_step(self.pid, self.k_g, scale_feedback, pos, vel, ref, dt_s,
                                             self.k_g if k_g is None else k_g, accel_offset_m_s2), dtype=float)
+        gain_ratio = 1.0 if k_g is None else k_g / self.k_g
         obs = self.builder.build((pos - ref.p)[None], (vel - ref.v)[None], (-np.asarray(ref.a) / self.k_g)[None],
-                                 u_pid[None], age_s, 1.0 if k_g is None else k_g / self.k_g)
+                                 u_pid[None], age_s, gain_ratio)
         action = self.runner.infer(obs[0])
         self.last_inference_s = self.runner.last_inference_s
         if action is None or not np.all(np.isfinite(u_pid)):
@@ -84,7 +87,8 @@ class PolicyTiltLaw:
         self.inferences += 1
         action = self.blend * action
         if self.correction_fade_m > 0.0 or self.correction_onset_m > 0.0:   # nothing to compute without either
-            action = correction_weight((pos - ref.p)[None], self.correction_fade_m, self.correction_onset_m)[0] * action
+            action = correction_weight((pos - ref.p)[None], self.correction_fade_m, self.correction_onset_m, gain_ratio,
+                                       self.low_gain_onset)[0] * action
         self.last_correction = action * self.runner.scale
         self.u = self.runner.command(action, base=u_pid)
         self.builder.record_tilt(self.u)

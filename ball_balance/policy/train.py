@@ -11,10 +11,13 @@ weakness against the MPC is the way back from a push, and a label that is a func
 the controller sees can be learned (a teacher on the true state labels what no observation
 explains). The correction applies only beyond --correction-onset-mm from the reference (all
 of it beyond twice it), in training and at run time, so where the PID is good the policy is
-the PID. Other teachers (--teacher): the PID itself on the true state predicted exactly over
-the episode's latency with the true gain and bias (pid: the correction is zero where the
-running PID's estimates are right; the previous models), a stiffer PD law or the MPC on the
-true state, and the PID on the truth near plus the MPC far (pid_mpc).
+the PID. On a weak plant (the plant estimate's gain below --low-gain-onset of the tuned one)
+the MPC's label and the correction apply near the reference too: there the PID, which never
+scales its feedback up, is slow everywhere. Other teachers (--teacher): the PID itself on the
+true state predicted exactly over the episode's latency with the true gain and bias (pid: the
+correction is zero where the running PID's estimates are right; the previous models), a
+stiffer PD law or the MPC on the true state, and the PID on the truth near plus the MPC far
+(pid_mpc).
 
 The student sees only what the running controller sees (the observation of
 ball_balance/policy/observation.py, with the plant estimate's gain, which the MPC's tilt
@@ -232,6 +235,11 @@ def main(argv=None) -> int:
                         "(observation.correction_weight; recorded in the model, the runtime applies the same; 0: "
                         "everywhere). With the mpc_far teacher the label is zero near the reference: the onset "
                         "keeps the network's imitation error out of where the PID is already good")
+    parser.add_argument("--low-gain-onset", type=float, default=0.8,
+                        help="with the onset: the correction (and the MPC's label) near the reference too where the "
+                        "plant estimate's gain is below this ratio of the tuned one, all of it below its square "
+                        "(observation.low_gain_share; recorded in the model, the runtime applies the same; 0: "
+                        "not). On a weak plant the MPC beats the PID everywhere, not only off the reference")
     parser.add_argument("--save-iterations", default="", help="also write every iteration's model into this folder")
     parser.add_argument("--base-pid", nargs="*", default=[], metavar="NAME=VALUE",
                         help="PID parameters over config/policy.yaml's for the training (recorded in the model; "
@@ -258,7 +266,7 @@ def main(argv=None) -> int:
                           (item.split("=", 1) for item in args.base_pid))
     env_args = dict(action_scale_rad=args.action_scale, teacher=args.teacher, pid_overrides=pid_overrides,
                     correction_fade_m=args.correction_fade_mm * 1e-3, teacher_far_m=args.teacher_far_mm * 1e-3,
-                    correction_onset_m=args.correction_onset_mm * 1e-3)
+                    correction_onset_m=args.correction_onset_mm * 1e-3, low_gain_onset=args.low_gain_onset)
     bucket_ranges = buckets(ranges) if args.bucket_batch > 0 else {}
 
     def evaluate_all(act):
@@ -331,6 +339,7 @@ def main(argv=None) -> int:
                     "first_rollout": args.first_rollout, "push_label_frames": args.push_label_frames,
                     "correction_fade_error_m": args.correction_fade_mm * 1e-3,
                     "correction_onset_error_m": args.correction_onset_mm * 1e-3,
+                    "correction_low_gain_onset": args.low_gain_onset,
                     "weight_power": args.weight_power,
                     "weight_floor_rad": args.weight_floor_rad,
                     "seed": args.seed, "commit": commit_id(), "iterations": args.iterations, "batch": args.batch,

@@ -7,7 +7,14 @@ import pytest
 
 from ball_balance.control import config as control_config
 from ball_balance.control.references import RefSample
-from ball_balance.policy.observation import HISTORY, ObservationBuilder, axis_size, correction_weight, flat_names
+from ball_balance.policy.observation import (
+    HISTORY,
+    ObservationBuilder,
+    axis_size,
+    correction_weight,
+    flat_names,
+    low_gain_share,
+)
 from ball_balance.policy.tilt_law import ACTION_KIND, base_pid_mismatch, load_tilt_law
 from controller_manager_py.controllers.policy_model import PolicyModelError, PolicyRunner, read_model
 from controller_manager_py.parameters import validate
@@ -147,6 +154,16 @@ def test_correction_weight_with_an_onset_is_none_near_the_reference_and_whole_be
     np.testing.assert_allclose(correction_weight(errors, 0.03, 0.005), [0.0, 0.5, 1.0, 2.0 - 50.0 / 30.0])
 
 
+def test_correction_weight_on_a_weak_plant_applies_near_the_reference_too():
+    near = np.zeros((4, 2))   # on the reference: no correction from the distance
+    ratios = np.array([1.2, 0.8, np.sqrt(0.8 * 0.64), 0.5])   # above, at the onset, halfway in log, below its square
+    np.testing.assert_allclose(correction_weight(near, 0.0, 0.005, ratios, 0.8), [0.0, 0.0, 0.5, 1.0], atol=1e-12)
+    np.testing.assert_allclose(low_gain_share(ratios, 0.8), [0.0, 0.0, 0.5, 1.0], atol=1e-12)
+    np.testing.assert_allclose(correction_weight(near, 0.0, 0.005, ratios, 0.0), [0.0] * 4)   # not asked for
+    far = np.array([[0.05, 0.0]] * 4)   # the distance's share is already whole
+    np.testing.assert_allclose(correction_weight(far, 0.0, 0.005, ratios, 0.8), [1.0] * 4)
+
+
 def test_the_law_applies_the_models_correction_fade():
     _, md = read_model(SHIPPED)
     law = load_tilt_law(policy_values(policy_blend_s=0.0))
@@ -176,6 +193,21 @@ def test_the_law_applies_the_models_correction_onset():
         corrections[onset_m] = law.last_correction.copy()
     assert np.abs(corrections[0.0]).max() > 0.0
     np.testing.assert_array_equal(corrections[0.005], [0.0, 0.0])
+
+
+def test_the_law_corrects_near_the_reference_on_a_weak_plant():
+    _, md = read_model(SHIPPED)
+    law = load_tilt_law(policy_values(policy_blend_s=0.0))
+    assert law.low_gain_onset == md.training.get("correction_low_gain_onset", 0.0)
+    law.correction_fade_m, law.correction_onset_m, law.low_gain_onset = 0.0, 0.005, 0.8
+    corrections = {}
+    for k_g in (law.k_g, 0.5 * law.k_g):   # 3 mm off (within the onset) on the tuned plant and at half gain
+        law.reset()
+        for _ in range(30):
+            law.step((0.003, -0.001), (0.02, 0.0), _ref(), 1.0 / 60.0, 0.03, k_g)
+        corrections[k_g] = law.last_correction.copy()
+    np.testing.assert_array_equal(corrections[law.k_g], [0.0, 0.0])
+    assert np.abs(corrections[0.5 * law.k_g]).max() > 0.0
 
 
 def test_observation_layout_puts_the_newest_sample_first():
