@@ -13,7 +13,8 @@ import numpy as np
 
 def skew(w: Sequence[float]) -> np.ndarray:
     """[w]x: the matrix with [w]x v = w x v."""
-    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    w0, w1, w2 = (float(c) for c in w)   # plain floats: building from numpy scalars is slower
+    return np.array([[0.0, -w2, w1], [w2, 0.0, -w0], [-w1, w0, 0.0]])
 
 
 def rotvec_to_matrix(w: Sequence[float]) -> np.ndarray:

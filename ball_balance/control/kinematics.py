@@ -57,6 +57,10 @@ class Chain:
             raise KinematicsError(f"chain has movable joints not in joint_names: {extra}")
         self.joint_names = list(joint_names)
         self._index = {j.name: joint_names.index(j.name) for j in self.joints if j.kind != "fixed"}
+        self._axis = {j.name: j.axis for j in self.joints}
+        # axis_angle's unit axis, once: frames() runs several times a control step
+        self._unit_axis = {j.name: np.asarray(j.axis, dtype=float) / np.linalg.norm(j.axis)
+                           for j in self.joints if j.kind != "fixed"}
         by_name = {j.name: j for j in self.joints}
         self.lower = np.array([by_name[n].lower for n in joint_names])
         self.upper = np.array([by_name[n].upper for n in joint_names])
@@ -93,7 +97,7 @@ class Chain:
             R = R @ j.origin_R
             if j.kind != "fixed":
                 joint_R[j.name], joint_p[j.name] = R, p
-                R = R @ axis_angle(j.axis, q[self._index[j.name]])
+                R = R @ rotvec_to_matrix(self._unit_axis[j.name] * q[self._index[j.name]])   # axis_angle
         return joint_R, joint_p, R, p
 
     def fk(self, q: Sequence[float]) -> Tuple[np.ndarray, np.ndarray]:
@@ -110,12 +114,17 @@ class Chain:
     def geometric_jacobian(self, q: Sequence[float], names: Sequence[str]) -> np.ndarray:
         """J (6 x len(names)) = [J_r; J_p]: tip angular and linear velocity (world) per joint rate,
         J_p column = axis_i x (p_tip - p_joint_i)."""
-        joint_R, joint_p, _, p_tip = self.frames(q)
-        by_name = {j.name: j for j in self.joints}
-        axes = [joint_R[n] @ by_name[n].axis for n in names]
-        J_r = np.stack(axes, axis=1)
-        J_p = np.stack([np.cross(a, p_tip - joint_p[n]) for a, n in zip(axes, names, strict=True)], axis=1)
-        return np.vstack([J_r, J_p])
+        return self.pose_and_jacobian(q, names)[2]
+
+    def pose_and_jacobian(self, q: Sequence[float], names: Sequence[str]) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(R_WP, p_WP, J): fk(q) and geometric_jacobian(q, names) from one pass down the chain
+        (the IK needs both at every iteration; the pass is most of their cost)."""
+        joint_R, joint_p, R_tip, p_tip = self.frames(q)
+        axes = np.array([joint_R[n] @ self._axis[n] for n in names])                 # (n, 3)
+        levers = p_tip - np.array([joint_p[n] for n in names])                        # (n, 3)
+        J = np.empty((6, len(names)))   # row-major, as the IK's products expect
+        J[:3], J[3:] = axes.T, np.cross(axes, levers).T
+        return R_tip, p_tip, J
 
 
 @dataclass(frozen=True)
@@ -197,11 +206,10 @@ class PlateKinematics:
     def _ik_pivot(self, q: np.ndarray, R_des: np.ndarray, iterations: int) -> np.ndarray:
         names = self.chain.joint_names
         for _ in range(iterations):
-            R, p = self.chain.fk(q)
+            R, p, J = self.chain.pose_and_jacobian(q, names)
             e = np.concatenate([matrix_to_rotvec(R_des @ R.T), self.p_WP_home - p])
             if np.linalg.norm(e) < 1e-10:
                 break
-            J = self.chain.geometric_jacobian(q, names)
             q = q + J.T @ np.linalg.solve(J @ J.T + self.damping * np.eye(6), e)
         return q
 

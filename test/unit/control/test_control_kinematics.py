@@ -121,6 +121,16 @@ def test_geometric_jacobian_linear_part_matches_finite_differences(chain, wrist)
         np.testing.assert_allclose(J[3:, col], (chain.fk(q + dq)[1] - chain.fk(q - dq)[1]) / (2 * h), atol=1e-6)
 
 
+@pytest.mark.parametrize("chain, wrist", _chains())
+def test_pose_and_jacobian_in_one_pass_equal_fk_and_the_rotational_jacobian(chain, wrist):
+    q = np.random.default_rng(6).uniform(-1.0, 1.0, len(chain.joint_names))
+    R, p, J = chain.pose_and_jacobian(q, chain.joint_names)
+    R_fk, p_fk = chain.fk(q)
+    np.testing.assert_array_equal(R, R_fk)
+    np.testing.assert_array_equal(p, p_fk)
+    np.testing.assert_array_equal(J[:3], chain.rotational_jacobian(q, chain.joint_names))
+
+
 @pytest.mark.skipif(not URDF.exists(), reason="robot description not in the tree yet")
 def test_pivot_mode_tilts_the_plate_about_its_own_centre():
     kin = PlateKinematics(Chain.from_urdf(URDF.read_text(), UR_JOINTS), LEVEL_HOME, mode="pivot")
