@@ -70,6 +70,7 @@ class TiltContext:
     k_g: float                      # plant gain in use: x'' = -k_g u + accel_offset [m/s^2 per rad]
     accel_offset_m_s2: np.ndarray   # (2,) constant disturbance acceleration in use
     obs: Optional[BallObservation] = None   # the raw observation behind pos/vel
+    actuation_delay_s: float = 0.0  # command -> plate delay in use (the online estimate or the configured one)
 
 
 class TiltLaw(Protocol):
@@ -329,7 +330,7 @@ class ControlPipeline:
         ref = self._tracked.sample(t_ref)
         ctx = TiltContext(now_s=now_s, t_ref_s=t_ref, pos_m=pos, vel_m_s=vel, ref=ref, reference=self._tracked,
                           u_prev=self.u.copy(), dt_s=cfg.control_period_s, k_g=k_g,
-                          accel_offset_m_s2=offset, obs=obs)
+                          accel_offset_m_s2=offset, obs=obs, actuation_delay_s=delay)
         u = np.asarray(self.law.tilt(ctx), dtype=float)
         if np.all(np.isfinite(u)):
             self.u = u

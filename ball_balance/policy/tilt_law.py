@@ -1,12 +1,13 @@
 """The learned tilt law: the PID plus the policy's bounded correction, one control tick at a time.
 
-    u = clamp(u_pid + blend(t) * weight(error) * scale * policy(observation), low, high)
+    u = clamp(u_pid + blend(t) * weight(error) * delay_share(delay) * scale * policy(observation), low, high)
 
 `blend` ramps from 0 to 1 over `blend_s` after every (re-)engagement, so switching the policy
 in never jumps the plate. `weight` fades the correction out far from the reference or in only
 away from it or on a weak plant, as the model was trained (its metadata's
 `correction_fade_error_m`, `correction_onset_error_m` and `correction_low_gain_onset`;
-observation.correction_weight).
+observation.correction_weight). `delay_share` keeps the policy out where the command-to-plate
+delay is longer than `max_delay_s` (policy_max_delay_s): an operating limit, not part of the model.
 A non-finite observation or model output never reaches the command: the law holds its last
 tilt and counts it (`held_count`).
 """
@@ -25,14 +26,23 @@ from ball_balance.policy.params import model_path
 from controller_manager_py.controllers.policy_model import PolicyModelError, PolicyRunner
 
 ACTION_KIND = "residual_tilt"
+DELAY_FADE_S = 0.02   # the correction fades out over this much delay beyond max_delay_s
+
+
+def delay_share(delay_s: float, max_delay_s: float) -> float:
+    """1 up to max_delay_s of command-to-plate delay, 0 from max_delay_s + DELAY_FADE_S, linear
+    between (max_delay_s 0: always 1)."""
+    if max_delay_s <= 0.0:
+        return 1.0
+    return min(1.0, max(0.0, (max_delay_s + DELAY_FADE_S - delay_s) / DELAY_FADE_S))
 
 
 class PolicyTiltLaw:
     """A pipeline tilt law (ball_balance.control.pipeline.TiltLaw): `reset()`, `tilt(ctx)`."""
 
     def __init__(self, runner: PolicyRunner, gains: PidGains, k_g: float, blend_s: float = 1.0,
-                 scale_feedback: bool = False, use_estimate: bool = True):
-        self.runner, self.k_g, self.blend_s = runner, k_g, blend_s
+                 scale_feedback: bool = False, use_estimate: bool = True, max_delay_s: float = 0.0):
+        self.runner, self.k_g, self.blend_s, self.max_delay_s = runner, k_g, blend_s, max_delay_s
         # as the model was trained (a model from before the fade has none)
         self.correction_fade_m = float(runner.metadata.training.get("correction_fade_error_m", 0.0))
         self.correction_onset_m = float(runner.metadata.training.get("correction_onset_error_m", 0.0))
@@ -63,14 +73,16 @@ class PolicyTiltLaw:
         """One tick of the pipeline (TiltContext): the PID's tilt plus the policy's correction."""
         age = ctx.obs.age_s if ctx.obs is not None else 0.0
         if not self.use_estimate:
-            return self.step(ctx.pos_m, ctx.vel_m_s, ctx.ref, ctx.dt_s, age)
-        return self.step(ctx.pos_m, ctx.vel_m_s, ctx.ref, ctx.dt_s, age, ctx.k_g, ctx.accel_offset_m_s2)
+            return self.step(ctx.pos_m, ctx.vel_m_s, ctx.ref, ctx.dt_s, age, delay_s=ctx.actuation_delay_s)
+        return self.step(ctx.pos_m, ctx.vel_m_s, ctx.ref, ctx.dt_s, age, ctx.k_g, ctx.accel_offset_m_s2,
+                         ctx.actuation_delay_s)
 
     def step(self, pos_m, vel_m_s, ref, dt_s: float, age_s: float = 0.0, k_g: Optional[float] = None,
-             accel_offset_m_s2=(0.0, 0.0)):
+             accel_offset_m_s2=(0.0, 0.0), delay_s: float = 0.0):
         """(u_x, u_y) [rad] for the (latency-predicted) ball state and the reference sample.
         k_g, accel_offset_m_s2: the pipeline's plant estimate, which the PID uses as the PID law
-        does (None: the configured k_g, no disturbance)."""
+        does (None: the configured k_g, no disturbance). delay_s: the command-to-plate delay in
+        use (delay_share)."""
         pos, vel = np.asarray(pos_m, dtype=float), np.asarray(vel_m_s, dtype=float)
         scale_feedback = self.scale_feedback and k_g is not None
         u_pid = np.asarray(adapted_pid_step(self.pid, self.k_g, scale_feedback, pos, vel, ref, dt_s,
@@ -85,7 +97,7 @@ class PolicyTiltLaw:
             self.builder.record_tilt(self.u)
             return float(self.u[0]), float(self.u[1])
         self.inferences += 1
-        action = self.blend * action
+        action = self.blend * delay_share(delay_s, self.max_delay_s) * action
         if self.correction_fade_m > 0.0 or self.correction_onset_m > 0.0:   # nothing to compute without either
             action = correction_weight((pos - ref.p)[None], self.correction_fade_m, self.correction_onset_m, gain_ratio,
                                        self.low_gain_onset)[0] * action
@@ -122,8 +134,8 @@ def load_tilt_law(values: Mapping) -> PolicyTiltLaw:
     gains = control_config.pid_gains(values)
     if "i_max_vel_error_m_s" not in base_pid:   # trained before the integral's speed gate: without it
         gains = dataclasses.replace(gains, i_max_vel_error_m_s=0.0)
-    return PolicyTiltLaw(runner, gains, control_config.k_g(values),
-                         values["policy_blend_s"], bool(values.get("adapt_pid_feedback", False)), use_estimate)
+    return PolicyTiltLaw(runner, gains, control_config.k_g(values), values["policy_blend_s"],
+                         bool(values.get("adapt_pid_feedback", False)), use_estimate, values["policy_max_delay_s"])
 
 
 def make_tilt_law(cfg) -> PolicyTiltLaw:

@@ -15,7 +15,7 @@ from ball_balance.policy.observation import (
     flat_names,
     low_gain_share,
 )
-from ball_balance.policy.tilt_law import ACTION_KIND, base_pid_mismatch, load_tilt_law
+from ball_balance.policy.tilt_law import ACTION_KIND, base_pid_mismatch, delay_share, load_tilt_law
 from controller_manager_py.controllers.policy_model import PolicyModelError, PolicyRunner, read_model
 from controller_manager_py.parameters import validate
 
@@ -208,6 +208,25 @@ def test_the_law_corrects_near_the_reference_on_a_weak_plant():
         corrections[k_g] = law.last_correction.copy()
     np.testing.assert_array_equal(corrections[law.k_g], [0.0, 0.0])
     assert np.abs(corrections[0.5 * law.k_g]).max() > 0.0
+
+
+def test_delay_share_is_whole_up_to_the_limit_and_none_beyond_the_fade():
+    assert [delay_share(d, 0.17) for d in (0.0, 0.17, 0.18, 0.19, 0.25)] == pytest.approx([1.0, 1.0, 0.5, 0.0, 0.0])
+    assert delay_share(5.0, 0.0) == 1.0   # no limit
+
+
+def test_the_law_leaves_a_long_delay_to_the_pid():
+    law = load_tilt_law(policy_values(policy_blend_s=0.0))
+    assert law.max_delay_s == policy_values()["policy_max_delay_s"] > 0.0
+    law.correction_fade_m = 0.0
+    corrections = {}
+    for delay_s in (0.05, 0.25):
+        law.reset()
+        for _ in range(30):   # 30 mm off, where the correction applies
+            law.step((0.03, -0.01), (0.2, 0.0), _ref(), 1.0 / 60.0, 0.03, delay_s=delay_s)
+        corrections[delay_s] = law.last_correction.copy()
+    assert np.abs(corrections[0.05]).max() > 0.0
+    np.testing.assert_array_equal(corrections[0.25], [0.0, 0.0])
 
 
 def test_observation_layout_puts_the_newest_sample_first():
