@@ -108,8 +108,7 @@ class Chain:
     def rotational_jacobian(self, q: Sequence[float], names: Sequence[str]) -> np.ndarray:
         """J_r (3 x len(names)): world angular velocity of the tip per unit rate of each joint."""
         joint_R, _, _, _ = self.frames(q)
-        by_name = {j.name: j for j in self.joints}
-        return np.stack([joint_R[n] @ by_name[n].axis for n in names], axis=1)
+        return np.stack([joint_R[n] @ self._axis[n] for n in names], axis=1)
 
     def geometric_jacobian(self, q: Sequence[float], names: Sequence[str]) -> np.ndarray:
         """J (6 x len(names)) = [J_r; J_p]: tip angular and linear velocity (world) per joint rate,
