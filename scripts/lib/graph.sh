@@ -32,7 +32,8 @@ wait_for_endpoint() {  # wait_for_endpoint TOPIC Publisher|Subscription: up to 1
 resume_when() {
   local spec
   for spec in "$@"; do wait_for_endpoint "${spec%=*}" "${spec#*=}" || return 3; done
-  ros2py service call /sim/set_pause std_srvs/srv/SetBool "{data: false}" || return 3
+  # a manager that dies between the topics and the call would leave it waiting forever
+  ros2py service call --timeout 30 /sim/set_pause std_srvs/srv/SetBool "{data: false}" || return 3
   echo "$(basename "$0"): simulation resumed (the graph is up)" >&3
   exec sleep infinity
 }

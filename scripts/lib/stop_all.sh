@@ -5,18 +5,37 @@
 # it defines one. A second Ctrl-C while it stops does not cut the stop short (the nodes
 # ignore further signals while they shut down, ball_balance/ros/node_main.py): it is
 # answered with one line, and whatever has not stopped 6 s after the first is killed.
+#
+# What the started processes have started in turn (a helper's `ros2py service call`, the
+# manager's camera renderer) is stopped the same way once its parent has ended: those
+# children are noted before the stop. Otherwise a child whose parent died on SIGTERM in the
+# middle of a command (a shell function in the background) would outlive the script, waiting
+# on a service that is gone.
 PIDS=()
 STOPPING=0
+descendants() {  # descendants PID...: every process below them
+  local pid child
+  for pid in "$@"; do
+    for child in $(pgrep -P "$pid" 2>/dev/null); do echo "$child"; descendants "$child"; done
+  done
+}
+terminate() {  # terminate PID...: SIGTERM to each, up to 6 s for each to end, then SIGKILL
+  local pid
+  for pid in "$@"; do kill -TERM "$pid" 2>/dev/null || true; done
+  for pid in "$@"; do
+    for _ in $(seq 60); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
+    kill -KILL "$pid" 2>/dev/null || true
+  done
+}
 stop_all() {
   trap - EXIT
   trap 'echo "$(basename "$0"): already stopping (a process still running after 6 s is killed)" >&2' INT TERM
   ((STOPPING)) && return
   STOPPING=1
-  local pid
-  for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
-  for pid in "${PIDS[@]}"; do
-    for _ in $(seq 60); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
-    kill -KILL "$pid" 2>/dev/null || true
-  done
+  local below
+  below="$(descendants "${PIDS[@]}")"
+  terminate "${PIDS[@]}"
+  # shellcheck disable=SC2086  # one pid per word
+  terminate $below
   if declare -F on_stopped >/dev/null; then on_stopped; fi
 }

@@ -22,10 +22,17 @@ def session_pids(process, pattern: str):
     return [int(p) for p in found.stdout.split()]
 
 
-def wait_for(condition, timeout: float, what: str) -> None:
+def session_table(process) -> str:
+    """Every process still in the graph's session, with its parent and state (for a failure message)."""
+    table = subprocess.run(["ps", "-s", str(process.popen.pid), "-o", "pid,ppid,stat,etime,args"],
+                           capture_output=True, text=True)
+    return table.stdout
+
+
+def wait_for(condition, timeout: float, what: str, describe=lambda: "") -> None:
     deadline = time.monotonic() + timeout
     while not condition():
-        assert time.monotonic() < deadline, f"timed out after {timeout:.0f} s waiting for {what}"
+        assert time.monotonic() < deadline, f"timed out after {timeout:.0f} s waiting for {what}\n{describe()}"
         time.sleep(0.2)
 
 
@@ -41,10 +48,11 @@ def test_sim_balance_with_a_duration_ends_when_the_controller_manager_dies(launc
     os.kill(manager, signal.SIGKILL)
     assert graph.wait(timeout=60) == 3, graph.output()
     assert "sim_balance.sh: sim exited; stopping the graph" in graph.output()
-    # the killed manager's camera renderer (a child of the manager, not of the script) sees its
-    # pipe close and shuts its DDS participant down on its own: on a loaded machine that can
-    # outlast the script by a moment, so its end is awaited with a deadline
-    wait_for(lambda: session_pids(graph, "ball_balance") == [], 20, "the graph's processes to end")
+    # a killed manager's camera renderer (with the camera on) is orphaned before the script can
+    # note it, and ends on its own once its pipe closes: on a loaded machine that can outlast the
+    # script by a moment, so the end of the session's processes is awaited with a deadline
+    wait_for(lambda: session_pids(graph, "ball_balance") == [], 20, "the graph's processes to end",
+             lambda: session_table(graph))
 
 
 def test_a_second_ctrl_c_stops_the_graph_without_a_traceback(launcher):
@@ -57,3 +65,27 @@ def test_a_second_ctrl_c_stops_the_graph_without_a_traceback(launcher):
     assert session_pids(graph, "ball_balance") == []
     logs = graph.output() + graph_logs(graph.output())
     assert "Traceback" not in logs, logs[-3000:]
+
+
+def test_stop_all_also_ends_what_a_started_process_started(tmp_path):
+    # a helper shell function in the background dies on SIGTERM in the middle of a command:
+    # that command (here a sleeper, in the graph a `ros2py service call`) must not outlive the script
+    script = tmp_path / "graph.sh"
+    script.write_text(f"""set -euo pipefail
+source "{ROOT}/scripts/lib/stop_all.sh"
+trap stop_all INT TERM EXIT
+helper() {{ python -c "import time; time.sleep(300)" helper-child-of-{tmp_path.name}; }}
+helper &
+PIDS+=($!)
+sleep 300 &
+PIDS+=($!)
+sleep 1
+exit 3
+""")
+    started = time.monotonic()
+    graph = subprocess.Popen(["bash", str(script)], start_new_session=True)
+    assert graph.wait(timeout=60) == 3
+    assert time.monotonic() - started < 20   # each process ended on SIGTERM; none waited out its 6 s
+    survivors = subprocess.run(["pgrep", "-s", str(graph.pid), "-f", f"helper-child-of-{tmp_path.name}"],
+                               capture_output=True, text=True).stdout.split()
+    assert survivors == []
