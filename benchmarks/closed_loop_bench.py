@@ -3,7 +3,10 @@
 
 Lock-stepped (simulated time), so the numbers do not depend on machine load. Prints the
 table (headline: RMSE after 5 s, settling time, drops, push recovery) and writes
-<out>/closed_loop.csv and <out>/closed_loop.png. With --protocol both, every cell is also
+<out>/closed_loop.csv, <out>/closed_loop_episodes.csv (one row per episode) and
+<out>/closed_loop.png. With the PID among the controllers (--baseline), every other one is
+also compared with it seed by seed: the mean difference, its 95 % interval and a verdict
+(below, above, or a tie the seeds decide). With --protocol both, every cell is also
 run with the reference system's own protocol (released 0-2 cm off centre, 20 s, RMSE at
 30 Hz from the release before a drop) and printed beside its published figures.
 
@@ -26,7 +29,18 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from ball_balance.benchmark.episode import REFERENCES, EpisodeSpec, reference_protocol, run_episode  # noqa: E402
-from ball_balance.benchmark.report import aggregate, format_table, plot, read_csv, sort_rows, write_csv  # noqa: E402
+from ball_balance.benchmark.report import (  # noqa: E402
+    EPISODE_COLUMNS,
+    aggregate,
+    episode_rows,
+    format_paired_table,
+    format_table,
+    paired_comparison,
+    plot,
+    read_csv,
+    sort_rows,
+    write_csv,
+)
 from ball_balance.sim.config import DOMAIN_ALIASES, DOMAINS  # noqa: E402
 
 # domain groups for --domains
@@ -90,6 +104,23 @@ def run_live(spec: EpisodeSpec, out: Path):
     return EpisodeResult(spec, metrics)
 
 
+EPISODE_FILE = "closed_loop_episodes.csv"
+
+
+def report(rows, episodes, baseline: str, out: Path) -> None:
+    """Print the table (and the paired comparison with the baseline), write the CSVs and the plot."""
+    print(format_table(rows))
+    paired = paired_comparison(episodes, baseline) if any(e["controller"] == baseline for e in episodes) else []
+    if paired:
+        print()
+        print(format_paired_table(paired))
+    write_csv(rows, out / "closed_loop.csv")
+    if episodes:
+        write_csv(episodes, out / EPISODE_FILE, EPISODE_COLUMNS)
+    plot(rows, out / "closed_loop.png")
+    print(f"\nwrote {out / 'closed_loop.csv'}, {out / EPISODE_FILE} and {out / 'closed_loop.png'}")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--controllers", nargs="+", default=["pid,mpc"],
@@ -110,6 +141,8 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default=str(ROOT / "artifacts" / "bench"), help="output folder")
     parser.add_argument("--live", action="store_true",
                         help="run the live multi-process graph (scripts/sim_balance.sh) instead: wall-clock, slow")
+    parser.add_argument("--baseline", default="pid",
+                        help="the controller the others are compared with on the same seeds (default: pid)")
     parser.add_argument("--combine", nargs="+", metavar="DIR",
                         help="print one table from the closed_loop.csv of earlier runs (e.g. run in parallel) "
                              "and write it to --out; runs nothing")
@@ -117,10 +150,9 @@ def main(argv=None) -> int:
     out = Path(args.out)
     if args.combine:
         rows = sort_rows([row for folder in args.combine for row in read_csv(Path(folder) / "closed_loop.csv")])
-        print(format_table(rows))
-        write_csv(rows, out / "closed_loop.csv")
-        plot(rows, out / "closed_loop.png")
-        print(f"\nwrote {out / 'closed_loop.csv'} and {out / 'closed_loop.png'}")
+        episodes = [row for folder in args.combine if (Path(folder) / EPISODE_FILE).exists()
+                    for row in read_csv(Path(folder) / EPISODE_FILE)]
+        report(rows, episodes, args.baseline, out)
         return 0
     controllers = names(" ".join(args.controllers), known_controllers(), "controller")
     domains = names(" ".join(args.domains), set(DOMAINS) | set(DOMAIN_ALIASES), "domain", DOMAIN_GROUPS)
@@ -144,14 +176,9 @@ def main(argv=None) -> int:
         print(f"  [{done}/{total}] {controller} {protocol} {reference} {domain}: "
               f"drops {sum(r.metrics['drop'] for r in results[-args.episodes:]):.0f}, "
               f"{time.monotonic() - t_start:.0f} s elapsed", flush=True)
-    rows = aggregate(results)
     print()
-    print(format_table(rows))
-    write_csv(rows, out / "closed_loop.csv")
-    plot(rows, out / "closed_loop.png")
-    print(f"\nwrote {out / 'closed_loop.csv'} and {out / 'closed_loop.png'}")
+    report(aggregate(results), episode_rows(results), args.baseline, out)
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main())

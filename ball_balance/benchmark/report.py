@@ -1,4 +1,5 @@
-"""Aggregate episodes into a table (stdout), a CSV and a bar plot."""
+"""Aggregate episodes into a table (stdout), a CSV and a bar plot; one CSV row per episode, and
+each controller against a baseline over the same seeds (paired differences)."""
 from __future__ import annotations
 
 import csv
@@ -18,6 +19,87 @@ COLUMNS = ("controller", "protocol", "reference", "domain", "episodes", "drop_ra
            "push_recover_s", "push_recover_max_s", "pushes", "pushes_late", "engaged_pct", "rmse_mm",
            "rmse_release_mm", "peak_tilt_deg", "smoothness_rad_s", "latency_ms", "tick_p99_us", "qp_p50_us",
            "qp_p99_us", "qp_p99_worst_us", "qp_fallbacks")
+
+# one row per episode (closed_loop_episodes.csv): what the paired comparison needs, and the
+# figures the cell rows summarise (their worst case)
+EPISODE_COLUMNS = ("controller", "protocol", "reference", "domain", "seed", "drop", "rmse_steady_mm", "settle_s",
+                   "push_recover_max_s", "pushes", "pushes_late", "tick_p99_us", "qp_p99_us")
+CELL = ("protocol", "reference", "domain")
+
+
+def episode_rows(results) -> List[Dict[str, float]]:
+    """One row per episode (EPISODE_COLUMNS; a figure the episode does not have is nan)."""
+    rows = []
+    for r in results:
+        m = r.metrics
+        rows.append({
+            "controller": r.spec.controller, "protocol": getattr(r.spec, "protocol", "ours"),
+            "reference": r.spec.reference, "domain": r.spec.domain, "seed": int(r.spec.seed),
+            "drop": float(m["drop"]), "rmse_steady_mm": 1e3 * m.get("rmse_steady_m", math.nan),
+            **{key: float(m.get(key, math.nan)) for key in EPISODE_COLUMNS[7:]}})
+    return rows
+
+
+def paired_comparison(episodes, baseline: str = "pid", metric: str = "rmse_steady_mm",
+                      confidence: float = 0.95) -> List[Dict[str, float]]:
+    """Each controller against `baseline` in each cell, over the seeds both ran and both kept
+    the ball: the mean of the per-seed differences (controller - baseline) of `metric`, its
+    two-sided `confidence` interval (Student's t over the pairs), and how many seeds went
+    each way. A seed is the same episode for both controllers (domain draws, pushes, noise),
+    so the pairs cancel what the seed decides and a difference within the interval's reach of
+    zero is a tie, whatever its sign."""
+    from scipy import stats
+
+    by_cell = defaultdict(dict)
+    for e in episodes:
+        by_cell[tuple(e[k] for k in CELL)][(e["controller"], int(e["seed"]))] = e
+    rows = []
+    for cell, runs in by_cell.items():
+        for controller in sorted({c for c, _ in runs} - {baseline}):
+            pairs = [(runs[(controller, seed)], base) for (c, seed), base in runs.items()
+                     if c == baseline and (controller, seed) in runs]
+            kept = [(a[metric], b[metric]) for a, b in pairs if not (a["drop"] or b["drop"])]
+            diffs = np.array([a - b for a, b in kept], dtype=float)
+            n = len(diffs)
+            mean = float(np.mean(diffs)) if n else math.nan
+            half = (float(stats.t.ppf(0.5 + confidence / 2, n - 1) * np.std(diffs, ddof=1) / math.sqrt(n))
+                    if n > 1 else math.nan)
+            rows.append({**dict(zip(CELL, cell, strict=True)), "controller": controller, "baseline": baseline,
+                         "pairs": n, "drops": sum(a["drop"] for a, _ in pairs),
+                         "baseline_drops": sum(b["drop"] for _, b in pairs),
+                         "mean_diff": mean, "ci_half": half,
+                         "lower": int(np.sum(diffs < 0)), "higher": int(np.sum(diffs > 0)),
+                         "baseline_mean": float(np.mean([b for _, b in kept])) if n else math.nan})
+    return sorted(rows, key=lambda r: (r["protocol"] != "ours", r["reference"], r["domain"], r["controller"]))
+
+
+def verdict(row) -> str:
+    """'below' / 'above' the baseline when the interval excludes zero, 'equal' when every seed
+    gave the same figure, else 'tie'."""
+    if row["pairs"] and row["lower"] == row["higher"] == 0:
+        return "equal"
+    if not math.isfinite(row["ci_half"]):
+        return "-"
+    if row["mean_diff"] + row["ci_half"] < 0:
+        return "below"
+    return "above" if row["mean_diff"] - row["ci_half"] > 0 else "tie"
+
+
+def format_paired_table(rows, metric_label: str = "RMSE>5s") -> str:
+    """The paired comparison, one line per controller and cell."""
+    if not rows:
+        return ""
+    lines = [f"against {rows[0]['baseline']} on the same seeds ({metric_label}: controller - "
+             f"{rows[0]['baseline']}, mean and 95 % interval over the seeds both kept the ball)",
+             f"{'controller':10} {'reference':12} {'domain':13} {'pairs':>5} {'drops':>7} {'base mm':>8} "
+             f"{'diff mm':>9} {'+/- mm':>8} {'diff %':>7} {'lower':>5} {'higher':>6}  verdict"]
+    for r in rows:
+        pct = 100.0 * r["mean_diff"] / r["baseline_mean"] if r["baseline_mean"] else math.nan
+        lines.append(f"{r['controller']:10} {r['reference']:12} {r['domain']:13} {r['pairs']:>5} "
+                     f"{r['drops']:>3.0f}/{r['baseline_drops']:<3.0f} {r['baseline_mean']:>8.4f} "
+                     f"{r['mean_diff']:>+9.4f} {r['ci_half']:>8.4f} {pct:>+7.2f} {r['lower']:>5} {r['higher']:>6}  "
+                     f"{verdict(r)}")
+    return "\n".join(lines)
 
 
 def aggregate(results) -> List[Dict[str, float]]:
@@ -131,23 +213,25 @@ def _num(v) -> str:
     return "-" if not math.isfinite(v) else f"{v:.0f}"
 
 
-def write_csv(rows, path: Path) -> None:
+def write_csv(rows, path: Path, columns=COLUMNS) -> None:
+    """Cell rows (COLUMNS), or episode rows with columns=EPISODE_COLUMNS."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=COLUMNS)
+        writer = csv.DictWriter(f, fieldnames=columns)
         writer.writeheader()
         for r in rows:
             writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
 
 
 def read_csv(path: Path) -> List[Dict[str, float]]:
-    """Rows written by write_csv (numbers back as floats, episodes as int)."""
-    text = ("controller", "protocol", "reference", "domain")
+    """Rows written by write_csv (numbers back as floats, the episode count and seed as int)."""
     with Path(path).open(newline="") as f:
         rows = []
         for raw in csv.DictReader(f):
-            row = {k: (v if k in text else float(v)) for k, v in raw.items()}
-            row["episodes"] = int(row["episodes"])
+            row = {k: (v if k in ("controller",) + CELL else float(v)) for k, v in raw.items()}
+            for key in ("episodes", "seed"):
+                if key in row:
+                    row[key] = int(row[key])
             rows.append(row)
     return rows
 
