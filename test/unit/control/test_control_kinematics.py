@@ -10,8 +10,10 @@ from ball_balance.control.kinematics import (
     KinematicsError,
     PlateKinematics,
     ShaperConfig,
+    axis_rotation,
     matrix_to_rotvec,
     rotvec_to_matrix,
+    skew,
 )
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -63,6 +65,20 @@ def test_rotational_jacobian_matches_finite_differences_of_fk(chain, wrist):
 def test_rotvec_round_trip():
     w = np.array([0.3, -0.2, 0.5])
     np.testing.assert_allclose(matrix_to_rotvec(rotvec_to_matrix(w)), w, atol=1e-12)
+
+
+def test_axis_rotation_is_rodrigues_and_to_the_bit_about_a_coordinate_axis():
+    # the chain's joints use it in place of rotvec_to_matrix: on the UR chain (every axis a
+    # coordinate axis) the IK's commands stay the same to the bit
+    angles = [0.0, 1e-14, -1e-14, 0.3, -0.3, 1.7, -3.1, 2 * math.pi + 0.2]
+    for axis in np.eye(3):
+        K = skew(axis)
+        for a in angles:
+            assert np.array_equal(axis_rotation(K, K @ K, a), rotvec_to_matrix(axis * a)), (axis, a)
+    axis = np.array([0.3, -0.4, 0.5]) / np.linalg.norm([0.3, -0.4, 0.5])
+    K = skew(axis)
+    for a in angles:
+        np.testing.assert_allclose(axis_rotation(K, K @ K, a), rotvec_to_matrix(axis * a), atol=1e-15)
 
 
 def test_missing_joint_and_broken_chain_are_named():
