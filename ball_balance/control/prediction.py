@@ -8,6 +8,7 @@ the constant disturbance d: nominal, or the online estimate of control/estimatio
 """
 from __future__ import annotations
 
+from bisect import bisect_left, bisect_right
 from collections import deque
 from typing import Callable, Deque, Tuple
 
@@ -15,29 +16,38 @@ import numpy as np
 
 
 class TiltHistory:
-    """Commanded tilts (u_x, u_y) [rad] with the controller time [s] they were issued at."""
+    """Commanded tilts (u_x, u_y) [rad] with the controller time [s] they were issued at.
+
+    Looked up by bisection (a prediction asks for several instants every tick, and a scan
+    of a few hundred entries each was most of its cost). The times only go forward: a time
+    before the last one (a clock reset) starts the history again."""
 
     def __init__(self, max_len: int = 256):
         self._entries: Deque[Tuple[float, float, float]] = deque(maxlen=max_len)
+        self._times: Deque[float] = deque(maxlen=max_len)
 
     def clear(self) -> None:
         self._entries.clear()
+        self._times.clear()
 
     def record(self, t_s: float, u_x: float, u_y: float) -> None:
+        if self._times and t_s < self._times[-1]:
+            self.clear()
         self._entries.append((t_s, u_x, u_y))
+        self._times.append(t_s)
 
     def at(self, t_s: float) -> Tuple[float, float]:
         """The tilt in force at time t_s (latest command issued at or before t_s; 0 before any)."""
-        u = (0.0, 0.0)
-        for t_i, ux, uy in self._entries:
-            if t_i > t_s:
-                break
-            u = (ux, uy)
-        return u
+        i = bisect_right(self._times, t_s)
+        if i == 0:
+            return (0.0, 0.0)
+        _, u_x, u_y = self._entries[i - 1]
+        return (u_x, u_y)
 
     def breakpoints(self, t0_s: float, t1_s: float):
         """Times of command changes strictly inside (t0_s, t1_s)."""
-        return [t_i for t_i, _, _ in self._entries if t0_s < t_i < t1_s]
+        first, end = bisect_right(self._times, t0_s), bisect_left(self._times, t1_s)
+        return [self._times[i] for i in range(first, end)]
 
 
 def predict(pos_m: np.ndarray, vel_m_s: np.ndarray, t_from_s: float, t_to_s: float,

@@ -50,6 +50,37 @@ def _tracking_rmse(controller, compensate, delay_s=0.1, dt=0.02, seconds=12.0):
     return float(np.sqrt(np.mean(np.square(errors))))
 
 
+def test_tilt_history_lookups_are_the_scan_they_replace():
+    rng = np.random.default_rng(3)
+    history = TiltHistory(max_len=64)
+    times = np.cumsum(rng.choice([0.0, 0.01, 0.02], 100))   # repeated instants too
+    for t in times:
+        history.record(float(t), *rng.normal(size=2))
+    entries = list(history._entries)   # the last 64
+
+    def scan_at(t):
+        u = (0.0, 0.0)
+        for t_i, ux, uy in entries:
+            if t_i > t:
+                break
+            u = (ux, uy)
+        return u
+
+    for t in np.concatenate([times, times + 0.005, times - 0.005, [-1.0, 99.0]]):
+        assert history.at(float(t)) == scan_at(float(t))
+        t1 = float(t) + 0.05
+        assert history.breakpoints(float(t), t1) == [t_i for t_i, _, _ in entries if float(t) < t_i < t1]
+
+
+def test_tilt_history_starts_again_when_the_clock_goes_back():
+    history = TiltHistory()
+    history.record(10.0, 0.1, 0.2)
+    history.record(10.1, 0.3, 0.4)
+    history.record(0.5, -0.1, 0.0)          # e.g. a simulation restarted under /clock
+    assert history.at(0.6) == (-0.1, 0.0)
+    assert history.at(10.05) == (-0.1, 0.0) and history.at(0.4) == (0.0, 0.0)
+
+
 @pytest.mark.parametrize("controller", ["pid", "mpc"])
 def test_latency_compensation_improves_a_delayed_plant(controller):
     global PID, MPC
