@@ -79,7 +79,7 @@ helper &
 PIDS+=($!)
 sleep 300 &
 PIDS+=($!)
-sleep 1
+for _ in $(seq 100); do pgrep -f helper-child-of-{tmp_path.name} >/dev/null && break; sleep 0.1; done
 exit 3
 """)
     started = time.monotonic()
