@@ -27,15 +27,15 @@ def rotvec_to_matrix(w: Sequence[float]) -> np.ndarray:
     return np.eye(3) + math.sin(theta) * K + (1.0 - math.cos(theta)) * (K @ K)
 
 
+_EYE = np.eye(3)   # read only (axis_rotation's sums make new arrays)
+
+
 def axis_rotation(axis_skew: np.ndarray, axis_skew_sq: np.ndarray, angle_rad: float) -> np.ndarray:
     """Rotation by angle_rad about a unit axis given as K = [axis]x and K @ K (Rodrigues,
     I + sin(a) K + (1 - cos(a)) K^2): a joint computes both once, and this is then a fifth
     of rotvec_to_matrix's cost. For an axis along a coordinate axis (as every UR joint's) the
     result is rotvec_to_matrix(axis * angle_rad) to the bit."""
     return _EYE + math.sin(angle_rad) * axis_skew + (1.0 - math.cos(angle_rad)) * axis_skew_sq
-
-
-_EYE = np.eye(3)   # read only (the sums above make new arrays)
 
 
 def matrix_to_rotvec(R: np.ndarray) -> np.ndarray:

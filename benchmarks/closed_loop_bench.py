@@ -180,5 +180,6 @@ def main(argv=None) -> int:
     report(aggregate(results), episode_rows(results), args.baseline, out)
     return 0
 
+
 if __name__ == "__main__":
     sys.exit(main())

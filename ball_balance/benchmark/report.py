@@ -22,8 +22,9 @@ COLUMNS = ("controller", "protocol", "reference", "domain", "episodes", "drop_ra
 
 # one row per episode (closed_loop_episodes.csv): what the paired comparison needs, and the
 # figures the cell rows summarise (their worst case)
-EPISODE_COLUMNS = ("controller", "protocol", "reference", "domain", "seed", "drop", "rmse_steady_mm", "settle_s",
-                   "push_recover_max_s", "pushes", "pushes_late", "tick_p99_us", "qp_p99_us")
+EPISODE_FIGURES = ("settle_s", "push_recover_max_s", "pushes", "pushes_late", "tick_p99_us", "qp_p99_us")
+EPISODE_COLUMNS = ("controller", "protocol", "reference", "domain", "seed", "drop", "rmse_steady_mm",
+                   *EPISODE_FIGURES)
 CELL = ("protocol", "reference", "domain")
 
 
@@ -36,7 +37,7 @@ def episode_rows(results) -> List[Dict[str, float]]:
             "controller": r.spec.controller, "protocol": getattr(r.spec, "protocol", "ours"),
             "reference": r.spec.reference, "domain": r.spec.domain, "seed": int(r.spec.seed),
             "drop": float(m["drop"]), "rmse_steady_mm": 1e3 * m.get("rmse_steady_m", math.nan),
-            **{key: float(m.get(key, math.nan)) for key in EPISODE_COLUMNS[7:]}})
+            **{key: float(m.get(key, math.nan)) for key in EPISODE_FIGURES}})
     return rows
 
 
@@ -65,7 +66,7 @@ def paired_comparison(episodes, baseline: str = "pid", metric: str = "rmse_stead
             half = (float(stats.t.ppf(0.5 + confidence / 2, n - 1) * np.std(diffs, ddof=1) / math.sqrt(n))
                     if n > 1 else math.nan)
             rows.append({**dict(zip(CELL, cell, strict=True)), "controller": controller, "baseline": baseline,
-                         "pairs": n, "drops": sum(a["drop"] for a, _ in pairs),
+                         "confidence": confidence, "pairs": n, "drops": sum(a["drop"] for a, _ in pairs),
                          "baseline_drops": sum(b["drop"] for _, b in pairs),
                          "mean_diff": mean, "ci_half": half,
                          "lower": int(np.sum(diffs < 0)), "higher": int(np.sum(diffs > 0)),
@@ -90,7 +91,8 @@ def format_paired_table(rows, metric_label: str = "RMSE>5s") -> str:
     if not rows:
         return ""
     lines = [f"against {rows[0]['baseline']} on the same seeds ({metric_label}: controller - "
-             f"{rows[0]['baseline']}, mean and 95 % interval over the seeds both kept the ball)",
+             f"{rows[0]['baseline']}, mean and {100 * rows[0]['confidence']:g} % interval over the seeds both kept "
+             f"the ball)",
              f"{'controller':10} {'reference':12} {'domain':13} {'pairs':>5} {'drops':>7} {'base mm':>8} "
              f"{'diff mm':>9} {'+/- mm':>8} {'diff %':>7} {'lower':>5} {'higher':>6}  verdict"]
     for r in rows:

@@ -23,26 +23,23 @@ class TiltHistory:
     before the last one (a clock reset) starts the history again."""
 
     def __init__(self, max_len: int = 256):
-        self._entries: Deque[Tuple[float, float, float]] = deque(maxlen=max_len)
         self._times: Deque[float] = deque(maxlen=max_len)
+        self._tilts: Deque[Tuple[float, float]] = deque(maxlen=max_len)   # (u_x, u_y) issued at _times
 
     def clear(self) -> None:
-        self._entries.clear()
         self._times.clear()
+        self._tilts.clear()
 
     def record(self, t_s: float, u_x: float, u_y: float) -> None:
         if self._times and t_s < self._times[-1]:
             self.clear()
-        self._entries.append((t_s, u_x, u_y))
         self._times.append(t_s)
+        self._tilts.append((u_x, u_y))
 
     def at(self, t_s: float) -> Tuple[float, float]:
         """The tilt in force at time t_s (latest command issued at or before t_s; 0 before any)."""
         i = bisect_right(self._times, t_s)
-        if i == 0:
-            return (0.0, 0.0)
-        _, u_x, u_y = self._entries[i - 1]
-        return (u_x, u_y)
+        return self._tilts[i - 1] if i else (0.0, 0.0)
 
     def breakpoints(self, t0_s: float, t1_s: float):
         """Times of command changes strictly inside (t0_s, t1_s)."""

@@ -54,9 +54,12 @@ def test_tilt_history_lookups_are_the_scan_they_replace():
     rng = np.random.default_rng(3)
     history = TiltHistory(max_len=64)
     times = np.cumsum(rng.choice([0.0, 0.01, 0.02], 100))   # repeated instants too
+    recorded = []
     for t in times:
-        history.record(float(t), *rng.normal(size=2))
-    entries = list(history._entries)   # the last 64
+        u_x, u_y = rng.normal(size=2)
+        history.record(float(t), float(u_x), float(u_y))
+        recorded.append((float(t), float(u_x), float(u_y)))
+    entries = recorded[-64:]   # what a 64-long history keeps
 
     def scan_at(t):
         u = (0.0, 0.0)
