@@ -83,28 +83,31 @@ PLAIN = {"thread_priority": 0, "executor_thread_priority": 0, "gil_switch_interv
 CAUSES = [
     ("plain Python thread (no RT knob)", PLAIN, True),
     ("+ SCHED_FIFO loop 50 / executor 40", {**PLAIN, "thread_priority": 50, "executor_thread_priority": 40}, True),
-    ("+ switch interval 20 us", {**PLAIN, "thread_priority": 50, "executor_thread_priority": 40,
-                                 "gil_switch_interval": 2e-5}, True),
+    ("+ switch interval 100 us", {**PLAIN, "thread_priority": 50, "executor_thread_priority": 40,
+                                  "gil_switch_interval": 1e-4}, True),
     ("+ gc in the loop's slack", {**PLAIN, "thread_priority": 50, "executor_thread_priority": 40,
-                                  "gil_switch_interval": 2e-5, "gc_mode": "idle"}, True),
+                                  "gil_switch_interval": 1e-4, "gc_mode": "idle"}, True),
     ("+ interpreter held through the cycle", {**PLAIN, "thread_priority": 50, "executor_thread_priority": 40,
-                                              "gil_switch_interval": 2e-5, "gc_mode": "idle",
+                                              "gil_switch_interval": 1e-4, "gc_mode": "idle",
                                               "hold_interpreter": True}, True),
-    ("+ spin tail 100 us", {"executor_on_loop_cpu": False}, True),
-    ("+ executor on the loop's CPU (defaults)", {}, True),
+    ("+ spin tail 100 us", {"executor_on_loop_cpu": False, "wake_tail": 0.0}, True),
+    ("+ executor on the loop's CPU", {"wake_tail": 0.0}, True),
+    ("+ held sleep 200 us before the spin (defaults)", {}, True),
+    ("defaults, switch interval 20 us", {"gil_switch_interval": 2e-5}, True),
     ("defaults, interpreter not held in the cycle", {"hold_interpreter": False}, True),
     ("defaults, executor normal priority", {"executor_thread_priority": 0}, True),
     ("defaults, gc automatic", {"gc_mode": "automatic"}, True),
     ("defaults, no spin", {"spin_tail": 0.0}, True),
-    ("defaults, held sleep 150 us + spin 50 us", {"wake_tail": 1.5e-4, "spin_tail": 5e-5}, True),
     ("defaults, statistics not subscribed", {}, False),
 ]
 
 TAILS = [
     ("no tail", {"wake_tail": 0.0, "spin_tail": 0.0}),
-    ("held sleep 150 us + spin 50 us", {"wake_tail": 1.5e-4, "spin_tail": 5e-5}),
-    ("spin 100 us (defaults)", {}),
-    ("spin 200 us", {"spin_tail": 2e-4}),
+    ("spin 100 us", {"wake_tail": 0.0}),
+    ("spin 200 us", {"wake_tail": 0.0, "spin_tail": 2e-4}),
+    ("held 200 + spin 100 us (defaults)", {}),
+    ("held 200 + spin 100 us, switch 20 us", {"gil_switch_interval": 2e-5}),
+    ("spin 100 us, switch 20 us (former defaults)", {"wake_tail": 0.0, "gil_switch_interval": 2e-5}),
 ]
 
 

@@ -13,6 +13,8 @@ busy. Cases:
   same, worker on any CPU       step_thread_on_loop_cpu: false
   same, worker normal priority  step_thread_priority: 0
   same, async_step: false       the step inline in the loop's update()
+  same, former loop defaults    the manager's switch interval 20 us and no held sleep before the
+                                spin (gil_switch_interval, wake_tail: manager/loop.py says why not)
 
 The table is controller_manager_bench.py's (the node's cycle log, cycles that started in the
 window): periodicity std (Hz, ros2_control WARN above 5 Hz), execution time mean/std (us,
@@ -43,20 +45,23 @@ from controller_manager_bench import HEADER, Busy, Driver, row, run_manager, tim
 from ball_balance.robot import HOME_POSITIONS_RAD, JOINT_NAMES, robot_description  # noqa: E402
 
 POLICY = "ball_balance_controller"
+# label, controller, its parameter overrides, the manager's
 CASES = [
-    ("forward_position_controller (node path)", "forward_position_controller", {}),
-    ("ball_balance_controller, async_step", POLICY, {}),
-    ("same, worker on any CPU", POLICY, {"step_thread_on_loop_cpu": False}),
-    ("same, worker at normal priority", POLICY, {"step_thread_priority": 0}),
-    ("ball_balance_controller, step inline", POLICY, {"async_step": False}),
+    ("forward_position_controller (node path)", "forward_position_controller", {}, {}),
+    ("ball_balance_controller, async_step", POLICY, {}, {}),
+    ("same, worker on any CPU", POLICY, {"step_thread_on_loop_cpu": False}, {}),
+    ("same, worker at normal priority", POLICY, {"step_thread_priority": 0}, {}),
+    ("ball_balance_controller, step inline", POLICY, {"async_step": False}, {}),
+    ("same as async_step, former loop defaults", POLICY, {}, {"gil_switch_interval": 2e-5, "wake_tail": 0.0}),
 ]
 
 
-def params_file(controller: str, overrides: dict) -> dict:
+def params_file(controller: str, overrides: dict, manager_overrides: dict) -> dict:
     policy = yaml.safe_load((ROOT / "config" / "ur_controllers_policy.yaml").read_text())[POLICY]
     policy["ros__parameters"].update(overrides)
     return {
         "controller_manager": {"ros__parameters": {
+            **manager_overrides,
             "update_rate": 500, "diagnostics.period": 1.0,
             "joint_state_broadcaster": {"type": "joint_state_broadcaster/JointStateBroadcaster"},
             "forward_position_controller": {"type": "position_controllers/JointGroupPositionController"},
@@ -110,10 +115,10 @@ def drive(driver: Driver, controller: str, seconds: float) -> tuple:
     return (start, time.monotonic()), dict(seen)
 
 
-def run_case(controller: str, overrides: dict, seconds: float) -> tuple:
+def run_case(controller: str, overrides: dict, manager_overrides: dict, seconds: float) -> tuple:
     urdf = Path(tempfile.mkdtemp(prefix="policy_cm_bench_")) / "robot.urdf"
     urdf.write_text(robot_description("mock"))
-    data, window, seen = run_manager(yaml.safe_dump(params_file(controller, overrides)),
+    data, window, seen = run_manager(yaml.safe_dump(params_file(controller, overrides, manager_overrides)),
                                      {"robot_description_file": str(urdf)},
                                      lambda driver: drive(driver, controller, seconds))
     return timing(data, *window), seen
@@ -135,8 +140,8 @@ def main() -> None:
           f"{args.busy} busy process(es)")
     print(f"{HEADER} | policy: mode, missed steps, step us")
     with Busy(args.busy):
-        for label, controller, overrides in chosen * args.repeat:
-            result, seen = run_case(controller, overrides, args.seconds)
+        for label, controller, overrides, manager_overrides in chosen * args.repeat:
+            result, seen = run_case(controller, overrides, manager_overrides, args.seconds)
             policy = ""
             if controller == POLICY:
                 mode = MODES.get(seen.get("mode"), seen.get("mode"))

@@ -10,7 +10,7 @@ manager's loop thread, which the node pins to one CPU with `executor_on_loop_cpu
 SCHED_FIFO priority below the loop's, the worker then runs only while the loop sleeps, as the
 executor thread does: it cannot ask for Python's interpreter lock while the loop holds it.
 On another CPU it can, and does (a 2 ms step of Python is a long run of bytecode): the loop,
-made to give the lock back 20 us after taking it, then waits for it for as long as its own
+made to give the lock back a switch interval after taking it, then waits for it for as long as its own
 raised switch interval (hold_interpreter, a period), and that cycle starts late.
 """
 from __future__ import annotations

@@ -18,7 +18,7 @@ benchmarks/controller_manager_bench.py):
     has waited for it longer than the switch interval, whatever the threads' priorities, and
     a waiting thread's timeout is the interval in force when it began to wait. The executor
     thread, pushed off the lock when the loop wakes, asks for it again at once with the short
-    interval: 20 us later it takes the lock from the spinning or cycling loop and keeps it
+    interval: one interval later it takes the lock from the spinning or cycling loop and keeps it
     until it blocks (measured at 1 kHz: cycles starting 300-900 us late although the loop had
     woken on time). With `hold_interpreter` the loop raises the switch interval from its
     wake-up until it sleeps, which delays waits that begin meanwhile but not one already
@@ -26,16 +26,23 @@ benchmarks/controller_manager_bench.py):
     the executor thread to the loop thread's CPU at a lower SCHED_FIFO priority
     (`executor_on_loop_cpu`), so the kernel runs it only while the loop sleeps, and a thread
     that does not run cannot ask for the lock.
-  - The interpreter lock, at wake-up. After its sleep the loop needs the lock back; if the
-    executor thread holds it (a service, a subscription callback, a message conversion in C)
-    the loop waits, as long as that thread's burst of Python (a callback: up to ~0.2 ms) or,
-    for longer work, the switch interval (set by the node). The lock is taken back before the
-    deadline: the tails below are spent holding it (with `hold_interpreter`).
+  - The interpreter lock, at wake-up. After its sleep the loop needs the lock back; if
+    another thread holds it (the executor in a callback or a message conversion in C, an
+    async controller's worker) the loop waits, as long as that thread's burst of Python or,
+    for longer work, the switch interval. Python's wait polls: the waiter sleeps the switch
+    interval, asks the holder to drop the lock, and sleeps the interval again until it is
+    free. A holder on the loop's own CPU at a lower priority runs only inside those sleeps,
+    and in a virtual machine a 20 us sleep costs about as much CPU as it lasts, so the holder
+    crawls and the loop waited milliseconds (2-22 ms, with the policy controller's worker
+    stepping on the loop's CPU) for a lock given up after microseconds of the holder's own
+    time. The node's interval is long enough for the holder to run (100 us), and the loop
+    takes the lock back before the deadline: the tails below are spent holding it.
   - The kernel's wake-up latency (tens of us, hundreds in a loaded virtual machine).
     `spin_tail` (s): the last part of the wait is a busy loop on the clock (one core busy for
     that long per cycle). `wake_tail` (s): before that, a second sleep *holding* the lock
-    (clock_nanosleep through ctypes.PyDLL); measured here its short wake-up is late more
-    often than a busy wait, so the node leaves it off.
+    (clock_nanosleep through ctypes.PyDLL): a wait for the lock after the first sleep comes
+    out of this sleep's time, ahead of the deadline, and this sleep's own late wake-up is
+    absorbed by the spin.
   - Garbage collection. A collection runs in whichever thread allocates, holding the lock;
     a full one over the ~10^5 objects of an rclpy process takes milliseconds. With
     `gc_mode="idle"` the objects alive at start are frozen (gc.freeze), automatic collection

@@ -87,13 +87,15 @@ SCHEMA = (
           "started before it, the middleware's receive threads among them (0 = normal): a preempted thread "
           "holding Python's interpreter lock would stall the loop, and a starved receive thread delays "
           "commands", min=0, max=99),
-    Param("gil_switch_interval", 2e-5, "Python's thread switch interval: how long the loop waits for the "
-          "interpreter after waking before it asks for it", unit="s", min=1e-6, max=0.01),
+    Param("gil_switch_interval", 1e-4, "Python's thread switch interval: how long a thread waiting for the "
+          "interpreter sleeps before it asks the holder to give it up, and again between such requests (shorter: "
+          "the loop's polling can starve a holder on its own CPU, see manager/loop.py)", unit="s",
+          min=1e-6, max=0.01),
     Param("hold_interpreter", True, "the loop keeps Python's interpreter lock from its wake-up until it "
           "sleeps (the switch interval is raised meanwhile), so no other thread interrupts a cycle"),
-    Param("wake_tail", 0.0, "before the spin tail, this part of the wait is slept holding the interpreter (a "
-          "second, short sleep: in a virtual machine its wake-up is often later than a busy wait's), so "
-          "no other thread is running Python when the cycle is due (0: off)", unit="s", min=0.0, max=0.01),
+    Param("wake_tail", 2e-4, "before the spin tail, this part of the wait is slept holding the interpreter: "
+          "the loop takes the lock back this long before the deadline, so waiting for a thread that holds it "
+          "does not delay the cycle (0: off)", unit="s", min=0.0, max=0.01),
     Param("spin_tail", 1e-4, "the last part before a deadline is a busy wait holding the interpreter (beats the "
           "kernel's wake-up "
           "latency; costs that much CPU per cycle)", unit="s", min=0.0, max=0.01),
