@@ -21,6 +21,12 @@ from the cycles that started inside the measuring window:
   rel/held p99      99th percentile of how late the lock-releasing sleep returned (kernel
                     wake-up + waiting for the interpreter lock) and the lock-holding sleep
                     (kernel wake-up alone), us
+  >1ms late         cycles that started over 1 ms after their deadline; with `--witness`, in
+    (machine)       brackets how many of them the machine shared: a witness thread in C
+                    (benchmarks/native/wakeup_baseline.c, SCHED_FIFO 10 above the loop, on its
+                    CPU, waking every ms) woke over 0.5 ms late between that cycle's deadline
+                    and its start, so the CPU was taken from both by the kernel or the
+                    hypervisor; the rest is the manager's own (its process, its interpreter)
 
 The acceptance table ends with the machine's own limit at 1 kHz: the same wait without Python
 (benchmarks/native/wakeup_baseline.c, compiled with the system's C compiler: SCHED_FIFO at the
@@ -37,7 +43,7 @@ Tables:
                load and 1 kHz without, interleaved over `--rounds`
   cost         the statistics' own cost, in-process
 
-    source env.sh && python benchmarks/controller_manager_bench.py [--table causes] [--seconds 5] [--busy 1]
+    source env.sh && python benchmarks/controller_manager_bench.py [--table causes] [--seconds 5] [--busy 1] [--witness]
 """
 from __future__ import annotations
 
@@ -164,9 +170,10 @@ def drive(driver: Driver, list_calls: bool, subscribe: bool, seconds: float) -> 
     return start, time.monotonic()
 
 
-def run_manager(params_yaml: str, overrides: dict, drive_with) -> tuple:
+def run_manager(params_yaml: str, overrides: dict, drive_with, witness: bool = False) -> tuple:
     """Start ros2_control_node with params_yaml (+ `-p` overrides) and a cycle log, call
-    drive_with(driver) -> (window, result), stop the node; (cycle log data, window, result)."""
+    drive_with(driver) -> (window, result), stop the node; (cycle log data, window, result).
+    witness: a MachineWitness runs beside the node; its log joins the data."""
     lease = DomainLease()
     tmp = Path(tempfile.mkdtemp(prefix="cm_bench_"))
     (tmp / "params.yaml").write_text(params_yaml)
@@ -175,6 +182,9 @@ def run_manager(params_yaml: str, overrides: dict, drive_with) -> tuple:
     for key, value in {**overrides, "cycle_log_file": str(cycle_log)}.items():
         arguments += ["-p", f"{key}:={value}"]
     log = open(tmp / "node.log", "wb")
+    machine = MachineWitness() if witness else None
+    if machine is not None:
+        machine.start()
     process = subprocess.Popen([executable("ros2_control_node"), "--ros-args", "--params-file",
                                 str(tmp / "params.yaml"), *arguments],
                                stdout=log, stderr=subprocess.STDOUT, env=ros_env(lease.domain_id),
@@ -187,16 +197,22 @@ def run_manager(params_yaml: str, overrides: dict, drive_with) -> tuple:
         stop_groups([process], grace_s=20.0)  # a clean stop (Ctrl-C) writes the cycle log
         log.close()
         lease.release()
+        if machine is not None:
+            machine.stop()
     if not cycle_log.exists():
         raise RuntimeError(f"no cycle log (node log: {tmp / 'node.log'})")
-    return np.load(cycle_log), window, result
+    data = dict(np.load(cycle_log))
+    if machine is not None:
+        data.update(machine.log())
+    return data, window, result
 
 
-def run_case(rate: int, params: dict, subscribe: bool, seconds: float, list_calls: bool = True) -> dict:
+def run_case(rate: int, params: dict, subscribe: bool, seconds: float, list_calls: bool = True,
+             witness: bool = False) -> dict:
     data, window, _ = run_manager(
         PARAMS.format(rate=rate, first=JOINTS[:3], second=JOINTS[3:]),
         {**params, "robot_description_file": str(ROOT / "config" / "mock_ur.urdf")},
-        lambda driver: (drive(driver, list_calls, subscribe, seconds), None))
+        lambda driver: (drive(driver, list_calls, subscribe, seconds), None), witness)
     return timing(data, *window)
 
 
@@ -217,7 +233,13 @@ def timing(data, t0: float, t1: float) -> dict:
     tail, spin = float(data["wake_tail"]) + float(data["spin_tail"]), float(data["spin_tail"])
     woke_late = (woke[waited] - (d[1:][waited] - tail)) * 1e6
     ready_late = (ready[waited] - (d[1:][waited] - spin)) * 1e6
-    return dict(woke_p99=np.percentile(woke_late, 99) if len(woke_late) else math.nan,
+    # cycles that started over LATE_S late, and how many of them the machine witness shared
+    late_starts = np.flatnonzero(late > LATE_S * 1e6)
+    shared = None
+    if "witness_deadline" in data:
+        shared = sum(witness_was_late(data, d[i], s[i]) for i in late_starts)
+    return dict(late_count=len(late_starts), late_shared=shared,
+                woke_p99=np.percentile(woke_late, 99) if len(woke_late) else math.nan,
                 ready_p99=np.percentile(ready_late, 99) if len(ready_late) else math.nan,
                 cycles=len(s), achieved=len(s) / (t1 - t0), mean_error=abs(hz.mean() - 1.0 / period),
                 period_std=hz.std(), exec_mean=execution.mean(), exec_std=execution.std(),
@@ -226,9 +248,14 @@ def timing(data, t0: float, t1: float) -> dict:
                 late_p50=np.percentile(late, 50), late_p99=np.percentile(late, 99))
 
 
+LATE_S = 1e-3                   # a cycle starting this late is counted (half a period at 1 kHz)
+WITNESS_PERIOD_S = 1e-3
+WITNESS_LATE_S = 0.5e-3
+WITNESS_PRIORITY_ABOVE_LOOP = 10
+
 HEADER = (f"{'case':<42} {'rate':>5} {'achvd Hz':>8} {'per std Hz':>10} {'exec us':>8} {'exec std':>8} "
           f"{'max per ms':>10} {'>1.5x':>5} {'>2x':>4} {'p99 ms':>7} {'late p50':>8} {'late p99':>8} "
-          f"{'targets':>7} {'rel p99':>7} {'held p99':>8}")
+          f"{'targets':>7} {'rel p99':>7} {'held p99':>8} {'>1ms late (machine)':>19}")
 
 
 def row(label: str, rate: int, r: dict) -> str:
@@ -237,35 +264,98 @@ def row(label: str, rate: int, r: dict) -> str:
     return (f"{label:<42} {rate:>5} {r['achieved']:>8.1f} {r['period_std']:>10.2f} {r['exec_mean']:>8.1f} "
             f"{r['exec_std']:>8.1f} {r['max_period']:>10.2f} {r['over_1_5']:>5} {r['over_2']:>4} "
             f"{r['p99_period']:>7.3f} {r['late_p50']:>8.0f} {r['late_p99']:>8.0f} {'yes' if met else 'no':>7} "
-            f"{r['woke_p99']:>7.0f} {r['ready_p99']:>8.0f}")
+            f"{r['woke_p99']:>7.0f} {r['ready_p99']:>8.0f} {late_starts(r):>19}")
+
+
+def late_starts(r: dict) -> str:
+    """'n' cycles over LATE_S late, or 'n (m)' with m of them shared by the machine witness."""
+    return str(r["late_count"]) if r["late_shared"] is None else f"{r['late_count']} ({r['late_shared']})"
+
+
+def build_wakeup_baseline() -> Path:
+    """benchmarks/native/wakeup_baseline.c built with the system's C compiler (cc) into a
+    temporary directory; RuntimeError (why not) when it cannot be."""
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    if compiler is None:
+        raise RuntimeError("no C compiler (cc) to build benchmarks/native/wakeup_baseline.c")
+    binary = Path(tempfile.mkdtemp(prefix="wakeup_baseline_")) / "wakeup_baseline"
+    source = ROOT / "benchmarks" / "native" / "wakeup_baseline.c"
+    build = subprocess.run([compiler, "-O2", "-o", str(binary), str(source)], capture_output=True, text=True)
+    if build.returncode != 0:
+        raise RuntimeError(f"cannot build wakeup_baseline.c: {build.stderr.strip()[:200]}")
+    return binary
+
+
+def read_wakeup_log(path: Path) -> tuple:
+    """(deadline, start, woke) arrays of wakeup_baseline's OUT_FILE."""
+    return tuple(np.fromfile(path, dtype=np.float64).reshape(3, -1))
+
+
+def loop_defaults() -> tuple:
+    """The loop thread's default SCHED_FIFO priority, CPU and spin tail (s), from the node's schema."""
+    from controller_manager_py.ros.node import SCHEMA, shared_loop_cpu
+
+    defaults = {p.name: p.default for p in SCHEMA}
+    cpu = shared_loop_cpu([c for c in defaults["cpu_affinity"] if c >= 0])
+    return defaults["thread_priority"], cpu, defaults["spin_tail"]
 
 
 def kernel_baseline(rate: int, seconds: float) -> dict:
     """The manager's wait at `rate` in C (benchmarks/native/wakeup_baseline.c) with the loop's
     defaults (priority, CPU, spin tail): the table's figures, or {"error": why not}."""
-    from controller_manager_py.ros.node import SCHEMA, shared_loop_cpu
-
-    defaults = {p.name: p.default for p in SCHEMA}
-    compiler = shutil.which("cc") or shutil.which("gcc")
-    if compiler is None:
-        return {"error": "no C compiler (cc) to build benchmarks/native/wakeup_baseline.c"}
-    tmp = Path(tempfile.mkdtemp(prefix="wakeup_baseline_"))
-    binary, out = tmp / "wakeup_baseline", tmp / "cycles.bin"
-    source = ROOT / "benchmarks" / "native" / "wakeup_baseline.c"
-    build = subprocess.run([compiler, "-O2", "-o", str(binary), str(source)], capture_output=True, text=True)
-    if build.returncode != 0:
-        return {"error": f"cannot build wakeup_baseline.c: {build.stderr.strip()[:200]}"}
-    cpu = shared_loop_cpu([c for c in defaults["cpu_affinity"] if c >= 0])
-    spin_us = defaults["spin_tail"] * 1e6
-    run = subprocess.run([str(binary), str(defaults["thread_priority"]), str(1e6 / rate), str(seconds), str(cpu),
-                          str(spin_us), str(out)], capture_output=True, text=True)
+    try:
+        binary = build_wakeup_baseline()
+    except RuntimeError as error:
+        return {"error": str(error)}
+    priority, cpu, spin_s = loop_defaults()
+    out = binary.parent / "cycles.bin"
+    run = subprocess.run([str(binary), str(priority), str(1e6 / rate), str(seconds), str(cpu),
+                          str(spin_s * 1e6), str(out)], capture_output=True, text=True)
     if run.returncode != 0:
         return {"error": f"wakeup_baseline failed ({run.returncode}): {run.stderr.strip()[:200]}"}
-    deadline, start, woke = np.fromfile(out, dtype=np.float64).reshape(3, -1)
-    shutil.rmtree(tmp, ignore_errors=True)
+    deadline, start, woke = read_wakeup_log(out)
+    shutil.rmtree(binary.parent, ignore_errors=True)
     data = {"start": start, "end": start, "deadline": deadline, "woke": woke, "ready": woke,
-            "period": 1.0 / rate, "wake_tail": 0.0, "spin_tail": spin_us * 1e-6}
+            "period": 1.0 / rate, "wake_tail": 0.0, "spin_tail": spin_s}
     return timing(data, start[0], start[-1])
+
+
+class MachineWitness:
+    """A witness of the machine beside a case: wakeup_baseline.c on the loop's CPU at a
+    SCHED_FIFO priority above the loop's, waking every millisecond with no spin. A late cycle
+    of the manager during which the witness was late too (WITNESS_LATE_S) lost its CPU to
+    something above both, the kernel or the hypervisor, not to the manager's process. It costs
+    the loop a few microseconds per millisecond."""
+
+    def __init__(self):
+        self.binary = build_wakeup_baseline()
+        self.out = self.binary.parent / "witness.bin"
+        self.process = None
+
+    def start(self) -> None:
+        priority, cpu, _ = loop_defaults()
+        self.process = subprocess.Popen([str(self.binary), str(priority + WITNESS_PRIORITY_ABOVE_LOOP),
+                                         str(WITNESS_PERIOD_S * 1e6), "3600", str(cpu), "0", str(self.out)],
+                                        stderr=subprocess.PIPE, text=True)
+
+    def stop(self) -> None:
+        self.process.terminate()        # it writes the cycles so far
+        _, error = self.process.communicate(timeout=10)
+        if self.process.returncode != 0:
+            raise RuntimeError(f"the machine witness failed ({self.process.returncode}): {error.strip()[:200]}")
+
+    def log(self) -> dict:
+        deadline, _, woke = read_wakeup_log(self.out)
+        shutil.rmtree(self.binary.parent, ignore_errors=True)
+        return {"witness_deadline": deadline, "witness_woke": woke}
+
+
+def witness_was_late(data: dict, deadline: float, start: float) -> bool:
+    """Whether the witness woke over WITNESS_LATE_S late at some time between a cycle's
+    deadline and its start."""
+    w_deadline, w_woke = data["witness_deadline"], data["witness_woke"]
+    late = w_woke - w_deadline > WITNESS_LATE_S
+    return bool(np.any(late & (w_deadline < start) & (w_woke > deadline)))
 
 
 class Busy:
@@ -417,14 +507,19 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=5.0, help="measuring window per case")
     parser.add_argument("--busy", type=int, default=1, help="busy processes beside the loaded cases")
     parser.add_argument("--rounds", type=int, default=1, help="causes: times each case is run (interleaved)")
+    parser.add_argument("--witness", action="store_true", help="a machine witness beside each case: which late "
+                        "cycles the kernel or the hypervisor caused (see the module docstring)")
     args = parser.parse_args()
+
+    def case(rate: int, params: dict, subscribe: bool) -> dict:
+        return run_case(rate, params, subscribe, args.seconds, witness=args.witness)
     print(f"load average at start: {os.getloadavg()[0]:.2f}; {os.cpu_count()} CPUs; window {args.seconds:g} s")
     if args.table in ("acceptance", "all"):
         print(f"\nacceptance (list_controllers every 100 ms, statistics subscribed)\n{HEADER}")
         with Busy(args.busy):
-            print(row(f"defaults, {args.busy} busy process(es)", 500, run_case(500, {}, True, args.seconds)),
+            print(row(f"defaults, {args.busy} busy process(es)", 500, case(500, {}, True)),
                   flush=True)
-        print(row("defaults, no busy process", 1000, run_case(1000, {}, True, args.seconds)), flush=True)
+        print(row("defaults, no busy process", 1000, case(1000, {}, True)), flush=True)
         baseline = kernel_baseline(1000, args.seconds)
         label = "machine limit: the same wait in C"
         print(f"{label:<42} {baseline['error']}" if "error" in baseline else row(label, 1000, baseline), flush=True)
@@ -433,15 +528,15 @@ def main() -> None:
         with Busy(args.busy):
             for _ in range(args.rounds):
                 for label, params, subscribe in CAUSES:
-                    print(row(label, 500, run_case(500, params, subscribe, args.seconds)), flush=True)
+                    print(row(label, 500, case(500, params, subscribe)), flush=True)
     if args.table in ("tails", "all"):
         print(f"\ntails (list_controllers every 100 ms, statistics subscribed)\n{HEADER}")
         for _ in range(args.rounds):
             for label, params in TAILS:
                 with Busy(args.busy):
-                    print(row(f"{label}, {args.busy} busy", 500, run_case(500, params, True, args.seconds)),
+                    print(row(f"{label}, {args.busy} busy", 500, case(500, params, True)),
                           flush=True)
-                print(row(f"{label}, no busy", 1000, run_case(1000, params, True, args.seconds)), flush=True)
+                print(row(f"{label}, no busy", 1000, case(1000, params, True)), flush=True)
     if args.table in ("cost", "all"):
         print(f"\n{'statistics cost (in-process)':<72} {'us':>8}")
         for label, us in statistics_cost():

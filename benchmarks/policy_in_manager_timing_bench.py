@@ -20,9 +20,10 @@ The table is controller_manager_bench.py's (the node's cycle log, cycles that st
 window): periodicity std (Hz, ros2_control WARN above 5 Hz), execution time mean/std (us,
 WARN above a std of 100 us), the longest period and the periods over 1.5x / 2x nominal;
 beside it what the policy controller reported on ~/introspection_data at the end (mode,
-missed steps, step time).
+missed steps, step time); with `--witness`, which late cycles the machine shared.
 
-    source env.sh && python benchmarks/policy_in_manager_timing_bench.py [--seconds 8] [--busy 1] [--cases 0,1]
+    source env.sh && python benchmarks/policy_in_manager_timing_bench.py [--seconds 8] [--busy 1] [--cases 0,1] \
+        [--witness]
 """
 from __future__ import annotations
 
@@ -115,12 +116,12 @@ def drive(driver: Driver, controller: str, seconds: float) -> tuple:
     return (start, time.monotonic()), dict(seen)
 
 
-def run_case(controller: str, overrides: dict, manager_overrides: dict, seconds: float) -> tuple:
+def run_case(controller: str, overrides: dict, manager_overrides: dict, seconds: float, witness: bool) -> tuple:
     urdf = Path(tempfile.mkdtemp(prefix="policy_cm_bench_")) / "robot.urdf"
     urdf.write_text(robot_description("mock"))
     data, window, seen = run_manager(yaml.safe_dump(params_file(controller, overrides, manager_overrides)),
                                      {"robot_description_file": str(urdf)},
-                                     lambda driver: drive(driver, controller, seconds))
+                                     lambda driver: drive(driver, controller, seconds), witness)
     return timing(data, *window), seen
 
 
@@ -134,6 +135,8 @@ def main() -> None:
     parser.add_argument("--cases", default="", help="comma-separated case numbers (0-based, table order); "
                         "default all")
     parser.add_argument("--repeat", type=int, default=1, help="run the chosen cases this many times, interleaved")
+    parser.add_argument("--witness", action="store_true", help="a machine witness beside each case (as "
+                        "controller_manager_bench.py's): which late cycles the kernel or the hypervisor caused")
     args = parser.parse_args()
     chosen = [CASES[int(i)] for i in args.cases.split(",")] if args.cases else CASES
     print(f"load average at start: {os.getloadavg()[0]:.2f}; {os.cpu_count()} CPUs; window {args.seconds:g} s; "
@@ -141,7 +144,7 @@ def main() -> None:
     print(f"{HEADER} | policy: mode, missed steps, step us")
     with Busy(args.busy):
         for label, controller, overrides, manager_overrides in chosen * args.repeat:
-            result, seen = run_case(controller, overrides, manager_overrides, args.seconds)
+            result, seen = run_case(controller, overrides, manager_overrides, args.seconds, args.witness)
             policy = ""
             if controller == POLICY:
                 mode = MODES.get(seen.get("mode"), seen.get("mode"))
