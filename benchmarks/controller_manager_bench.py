@@ -175,6 +175,7 @@ def run_manager(params_yaml: str, overrides: dict, drive_with, witness: bool = F
     """Start ros2_control_node with params_yaml (+ `-p` overrides) and a cycle log, call
     drive_with(driver) -> (window, result), stop the node; (cycle log data, window, result).
     witness: a MachineWitness runs beside the node; its log joins the data."""
+    machine = MachineWitness() if witness else None     # (built first: a failed build leaks nothing)
     lease = DomainLease()
     tmp = Path(tempfile.mkdtemp(prefix="cm_bench_"))
     (tmp / "params.yaml").write_text(params_yaml)
@@ -183,7 +184,6 @@ def run_manager(params_yaml: str, overrides: dict, drive_with, witness: bool = F
     for key, value in {**overrides, "cycle_log_file": str(cycle_log)}.items():
         arguments += ["-p", f"{key}:={value}"]
     log = open(tmp / "node.log", "wb")
-    machine = MachineWitness() if witness else None
     if machine is not None:
         machine.start()
     process = subprocess.Popen([executable("ros2_control_node"), "--ros-args", "--params-file",
@@ -326,7 +326,8 @@ class MachineWitness:
     SCHED_FIFO priority above the loop's, waking every millisecond with no spin. A late cycle
     of the manager during which the witness was late too (WITNESS_LATE_S) lost its CPU to
     something above both, the kernel or the hypervisor, not to the manager's process. It costs
-    the loop a few microseconds per millisecond."""
+    the loop a few microseconds per millisecond. It sits on the loop's default CPU: for a case
+    that moves or unpins the loop thread, it speaks for that CPU only."""
 
     def __init__(self):
         self.binary = build_wakeup_baseline()

@@ -20,7 +20,8 @@ The table is controller_manager_bench.py's (the node's cycle log, cycles that st
 window): periodicity std (Hz, ros2_control WARN above 5 Hz), execution time mean/std (us,
 WARN above a std of 100 us), the longest period and the periods over 1.5x / 2x nominal;
 beside it what the policy controller reported on ~/introspection_data at the end (mode,
-missed steps, step time); with `--witness`, which late cycles the machine shared.
+missed steps) and its step time in the window (median and max of the values it published at
+20 Hz); with `--witness`, which late cycles the machine shared.
 
     source env.sh && python benchmarks/policy_in_manager_timing_bench.py [--seconds 8] [--busy 1] [--cases 0,1] \
         [--witness]
@@ -30,6 +31,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import statistics
 import sys
 import tempfile
 import time
@@ -76,7 +78,8 @@ def params_file(controller: str, overrides: dict, manager_overrides: dict) -> di
 def drive(driver: Driver, controller: str, seconds: float) -> tuple:
     """Ball states at 60 Hz (and forward commands at 60 Hz, the nodes' rate, for the baseline); 3 s warm-up (the
     policy homes, sees the ball and engages), then `seconds`. Returns the window and the policy
-    controller's last introspection values."""
+    controller's last introspection values, with "step_samples": its step time (us) as
+    published (20 Hz, the last step's) during the window."""
     from ball_tracker_msgs.msg import BallState
     from pal_statistics_msgs.msg import Statistics
     from rclpy.qos import qos_profile_sensor_data
@@ -86,11 +89,15 @@ def drive(driver: Driver, controller: str, seconds: float) -> tuple:
     balls = node.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
     forward = node.create_publisher(Float64MultiArray, "/forward_position_controller/commands", 10)
     seen = {}
+    step_samples = []
+    measuring = False
 
     def on_introspection(msg):
         for item in msg.statistics:
             if item.name.startswith(POLICY + "."):
                 seen[item.name[len(POLICY) + 1:]] = item.value
+                if measuring and item.name == POLICY + ".step_time_us":
+                    step_samples.append(item.value)
     node.create_subscription(Statistics, "/controller_manager/introspection_data/full", on_introspection, 10)
     driver.list_controllers_client(timeout_s=90)   # waits until the manager answers
     t0 = time.time()
@@ -112,8 +119,9 @@ def drive(driver: Driver, controller: str, seconds: float) -> tuple:
         node.create_timer(1.0 / 60.0, on_forward_timer)
     driver.spin_for(3.0)
     start = time.monotonic()
+    measuring = True
     driver.spin_for(seconds)
-    return (start, time.monotonic()), dict(seen)
+    return (start, time.monotonic()), {**seen, "step_samples": step_samples}
 
 
 def run_case(controller: str, overrides: dict, manager_overrides: dict, seconds: float, witness: bool) -> tuple:
@@ -141,15 +149,16 @@ def main() -> None:
     chosen = [CASES[int(i)] for i in args.cases.split(",")] if args.cases else CASES
     print(f"load average at start: {os.getloadavg()[0]:.2f}; {os.cpu_count()} CPUs; window {args.seconds:g} s; "
           f"{args.busy} busy process(es)")
-    print(f"{HEADER} | policy: mode, missed steps, step us")
+    print(f"{HEADER} | policy: mode, missed steps, step us median / max")
     with Busy(args.busy):
         for label, controller, overrides, manager_overrides in chosen * args.repeat:
             result, seen = run_case(controller, overrides, manager_overrides, args.seconds, args.witness)
             policy = ""
             if controller == POLICY:
                 mode = MODES.get(seen.get("mode"), seen.get("mode"))
+                steps = seen["step_samples"] or [math.nan]
                 policy = (f" | {mode}, {seen.get('missed_steps', math.nan):.0f}, "
-                          f"{seen.get('step_time_us', math.nan):.0f}")
+                          f"{statistics.median(steps):.0f} / {max(steps):.0f}")
             print(row(label, 500, result) + policy, flush=True)
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
