@@ -83,6 +83,11 @@ scaled_joint_trajectory_controller:
     joints: {second}
     speed_scaling_interface_name: speed_scaling/speed_scaling_factor
 """
+LATE_PERIODS = 0.5              # a cycle starting this many periods late is counted (1 ms at 500 Hz)
+WITNESS_PERIOD_S = 1e-3
+WITNESS_LATE_S = 0.5e-3
+WITNESS_PRIORITY_ABOVE_LOOP = 10
+
 # Python's own defaults: what a plain rclpy loop thread gets
 PLAIN = {"thread_priority": 0, "executor_thread_priority": 0, "gil_switch_interval": 0.005,
          "gc_mode": "automatic", "wake_tail": 0.0, "spin_tail": 0.0, "hold_interpreter": False,
@@ -198,14 +203,10 @@ def run_manager(params_yaml: str, overrides: dict, drive_with, witness: bool = F
         stop_groups([process], grace_s=20.0)  # a clean stop (Ctrl-C) writes the cycle log
         log.close()
         lease.release()
-        if machine is not None:
-            machine.stop()
+        witness_log = machine.stop() if machine is not None else {}
     if not cycle_log.exists():
         raise RuntimeError(f"no cycle log (node log: {tmp / 'node.log'})")
-    data = dict(np.load(cycle_log))
-    if machine is not None:
-        data.update(machine.log())
-    return data, window, result
+    return {**np.load(cycle_log), **witness_log}, window, result
 
 
 def run_case(rate: int, params: dict, subscribe: bool, seconds: float, list_calls: bool = True,
@@ -238,7 +239,8 @@ def timing(data, t0: float, t1: float) -> dict:
     late_starts = np.flatnonzero(late > LATE_PERIODS * period * 1e6)
     shared = None
     if "witness_deadline" in data:
-        shared = sum(witness_was_late(data, d[i], s[i]) for i in late_starts)
+        stalls = witness_stalls(data)
+        shared = sum(witness_was_late(stalls, d[i], s[i]) for i in late_starts)
     return dict(late_count=len(late_starts), late_shared=shared,
                 woke_p99=np.percentile(woke_late, 99) if len(woke_late) else math.nan,
                 ready_p99=np.percentile(ready_late, 99) if len(ready_late) else math.nan,
@@ -248,11 +250,6 @@ def timing(data, t0: float, t1: float) -> dict:
                 over_2=int((periods > 2.0 * period).sum()), p99_period=np.percentile(periods, 99) * 1e3,
                 late_p50=np.percentile(late, 50), late_p99=np.percentile(late, 99))
 
-
-LATE_PERIODS = 0.5              # a cycle starting this many periods late is counted (1 ms at 500 Hz)
-WITNESS_PERIOD_S = 1e-3
-WITNESS_LATE_S = 0.5e-3
-WITNESS_PRIORITY_ABOVE_LOOP = 10
 
 HEADER = (f"{'case':<42} {'rate':>5} {'achvd Hz':>8} {'per std Hz':>10} {'exec us':>8} {'exec std':>8} "
           f"{'max per ms':>10} {'>1.5x':>5} {'>2x':>4} {'p99 ms':>7} {'late p50':>8} {'late p99':>8} "
@@ -340,24 +337,30 @@ class MachineWitness:
                                          str(WITNESS_PERIOD_S * 1e6), "3600", str(cpu), "0", str(self.out)],
                                         stderr=subprocess.PIPE, text=True)
 
-    def stop(self) -> None:
+    def stop(self) -> dict:
+        """End the witness; its log ({"witness_deadline", "witness_woke"} arrays)."""
         self.process.terminate()        # it writes the cycles so far
-        _, error = self.process.communicate(timeout=10)
-        if self.process.returncode != 0:
-            raise RuntimeError(f"the machine witness failed ({self.process.returncode}): {error.strip()[:200]}")
+        try:
+            _, error = self.process.communicate(timeout=10)
+            if self.process.returncode != 0:
+                raise RuntimeError(f"the machine witness failed ({self.process.returncode}): {error.strip()[:200]}")
+            deadline, _, woke = read_wakeup_log(self.out)
+            return {"witness_deadline": deadline, "witness_woke": woke}
+        finally:
+            shutil.rmtree(self.binary.parent, ignore_errors=True)
 
-    def log(self) -> dict:
-        deadline, _, woke = read_wakeup_log(self.out)
-        shutil.rmtree(self.binary.parent, ignore_errors=True)
-        return {"witness_deadline": deadline, "witness_woke": woke}
+
+def witness_stalls(data: dict) -> tuple:
+    """(deadlines, wake-ups) of the witness's wakes over WITNESS_LATE_S late: when the machine
+    took the CPU."""
+    late = data["witness_woke"] - data["witness_deadline"] > WITNESS_LATE_S
+    return data["witness_deadline"][late], data["witness_woke"][late]
 
 
-def witness_was_late(data: dict, deadline: float, start: float) -> bool:
-    """Whether the witness woke over WITNESS_LATE_S late at some time between a cycle's
-    deadline and its start."""
-    w_deadline, w_woke = data["witness_deadline"], data["witness_woke"]
-    late = w_woke - w_deadline > WITNESS_LATE_S
-    return bool(np.any(late & (w_deadline < start) & (w_woke > deadline)))
+def witness_was_late(stalls: tuple, deadline: float, start: float) -> bool:
+    """Whether one of the witness's `stalls` overlaps a cycle's lateness (its deadline to its start)."""
+    stall_deadline, stall_woke = stalls
+    return bool(np.any((stall_deadline < start) & (stall_woke > deadline)))
 
 
 class Busy:

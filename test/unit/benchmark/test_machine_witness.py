@@ -24,9 +24,10 @@ spec.loader.exec_module(bench)
 def test_a_cycle_is_the_machines_only_when_the_witness_was_late_within_it():
     witness = {"witness_deadline": np.array([1.000, 1.001, 1.002, 1.010]),
                "witness_woke": np.array([1.0001, 1.0045, 1.0021, 1.0102])}   # the second 3.5 ms late
-    assert bench.witness_was_late(witness, deadline=1.002, start=1.005)           # overlaps the late wake
-    assert not bench.witness_was_late(witness, deadline=1.006, start=1.008)      # after it
-    assert not bench.witness_was_late(witness, deadline=1.0095, start=1.0115)    # only 0.2 ms late there
+    stalls = bench.witness_stalls(witness)
+    assert bench.witness_was_late(stalls, deadline=1.002, start=1.005)           # overlaps the late wake
+    assert not bench.witness_was_late(stalls, deadline=1.006, start=1.008)      # after it
+    assert not bench.witness_was_late(stalls, deadline=1.0095, start=1.0115)    # only 0.2 ms late there
 
 
 def test_timing_counts_late_starts_and_those_the_witness_shared():
