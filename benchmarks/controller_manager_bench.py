@@ -41,7 +41,8 @@ Tables:
   causes       one knob changed at a time against the defaults, at 500 Hz under load, cases
                interleaved over `--rounds` so a change in the machine's load hits all alike
   tails        how the loop waits for its deadline (held lock, busy wait), at 500 Hz under
-               load and 1 kHz without, interleaved over `--rounds`
+               load and 1 kHz without, interleaved over `--rounds` (the held sleep is at most
+               a fifth of a period: 200 us at 1 kHz, manager/loop.py)
   cost         the statistics' own cost, in-process
 
     source env.sh && python benchmarks/controller_manager_bench.py [--table causes] [--seconds 5] [--busy 1] [--witness]
@@ -109,7 +110,8 @@ CAUSES = [
                                               "hold_interpreter": True}, True),
     ("+ spin tail 100 us", {"executor_on_loop_cpu": False, "wake_tail": 0.0}, True),
     ("+ executor on the loop's CPU", {"wake_tail": 0.0}, True),
-    ("+ held sleep 200 us before the spin (defaults)", {}, True),
+    ("+ held sleep 300 us before the spin (defaults)", {}, True),
+    ("defaults, held sleep 200 us", {"wake_tail": 2e-4}, True),
     ("defaults, switch interval 20 us", {"gil_switch_interval": 2e-5}, True),
     ("defaults, interpreter not held in the cycle", {"hold_interpreter": False}, True),
     ("defaults, executor normal priority", {"executor_thread_priority": 0}, True),
@@ -122,8 +124,9 @@ TAILS = [
     ("no tail", {"wake_tail": 0.0, "spin_tail": 0.0}),
     ("spin 100 us", {"wake_tail": 0.0}),
     ("spin 200 us", {"wake_tail": 0.0, "spin_tail": 2e-4}),
-    ("held 200 + spin 100 us (defaults)", {}),
-    ("held 200 + spin 100 us, switch 20 us", {"gil_switch_interval": 2e-5}),
+    ("held 300 + spin 100 us (defaults)", {}),
+    ("held 200 + spin 100 us", {"wake_tail": 2e-4}),
+    ("held 200 + spin 100 us, switch 20 us", {"wake_tail": 2e-4, "gil_switch_interval": 2e-5}),
     ("spin 100 us, switch 20 us (former defaults)", {"wake_tail": 0.0, "gil_switch_interval": 2e-5}),
 ]
 

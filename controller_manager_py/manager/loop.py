@@ -42,7 +42,7 @@ benchmarks/controller_manager_bench.py):
     that long per cycle). `wake_tail` (s): before that, a second sleep *holding* the lock
     (clock_nanosleep through ctypes.PyDLL): a wait for the lock after the first sleep comes
     out of this sleep's time, ahead of the deadline, and this sleep's own late wake-up is
-    absorbed by the spin.
+    absorbed by the spin. At most WAKE_TAIL_MAX_FRACTION of a period.
   - Garbage collection. A collection runs in whichever thread allocates, holding the lock;
     a full one over the ~10^5 objects of an rclpy process takes milliseconds. With
     `gc_mode="idle"` the objects alive at start are frozen (gc.freeze), automatic collection
@@ -82,6 +82,11 @@ CYCLE_LOG_LENGTH = 1 << 16
 MIN_PERIOD_FRACTION = 0.98
 """After a late start the next cycle comes at least this fraction of a period later: a late
 wake-up moves the schedule instead of being followed by a short period."""
+WAKE_TAIL_MAX_FRACTION = 0.2
+"""The held sleep takes at most this share of a period: the executor gets the interpreter only
+outside the cycle and the tails, and at 1 kHz a 300 us held sleep (with the 100 us spin) left
+it too little: it fell behind and held the lock at the loop's wake-ups (54 late cycles of the
+manager's own in five 8 s runs, against 6 with 200 us)."""
 IDLE_GC_FRACTION = 0.3
 GC_OVERDUE = 50  # times the first generation's threshold: collected even without slack
 setswitchinterval = sys.setswitchinterval
@@ -101,7 +106,7 @@ class ControlLoop:
         self.period = 1.0 / cm.update_rate
         self.blocking = expect_blocking_read_write
         self.minimum_cycle_time = minimum_cycle_time
-        self.wake_tail = min(max(0.0, wake_tail), 0.5 * self.period)
+        self.wake_tail = min(max(0.0, wake_tail), WAKE_TAIL_MAX_FRACTION * self.period)
         self.spin_tail = min(max(0.0, spin_tail), 0.5 * self.period)
         self.gc_mode = gc_mode
         self.hold_interpreter = hold_interpreter

@@ -47,7 +47,7 @@ from ..hardware_interface.types import State
 from ..manager.controller_manager import ControllerError, ControllerManager
 from ..manager.diagnostics import THRESHOLD_PARAMS, roll_up
 from ..manager.introspection import introspection_entries, statistics_entries
-from ..manager.loop import ControlLoop
+from ..manager.loop import WAKE_TAIL_MAX_FRACTION, ControlLoop
 from ..manager.resource_manager import ResourceError
 from ..manager.switching import STRICT, SwitchError
 from ..parameters import Param, ParameterError, declare_parameters
@@ -93,9 +93,10 @@ SCHEMA = (
           min=1e-6, max=0.01),
     Param("hold_interpreter", True, "the loop keeps Python's interpreter lock from its wake-up until it "
           "sleeps (the switch interval is raised meanwhile), so no other thread interrupts a cycle"),
-    Param("wake_tail", 2e-4, "before the spin tail, this part of the wait is slept holding the interpreter: "
+    Param("wake_tail", 3e-4, "before the spin tail, this part of the wait is slept holding the interpreter: "
           "the loop takes the lock back this long before the deadline, so waiting for a thread that holds it "
-          "does not delay the cycle (0: off)", unit="s", min=0.0, max=0.01),
+          f"does not delay the cycle (0: off; at most {WAKE_TAIL_MAX_FRACTION:.0%} of the period)", unit="s",
+          min=0.0, max=0.01),
     Param("spin_tail", 1e-4, "the last part before a deadline is a busy wait holding the interpreter (beats the "
           "kernel's wake-up "
           "latency; costs that much CPU per cycle)", unit="s", min=0.0, max=0.01),
@@ -288,6 +289,10 @@ class ControllerManagerNode(Node):
                                 gc_mode=self.params["gc_mode"], hold_interpreter=self.params["hold_interpreter"],
                                 cycle_log=self.params["cycle_log_file"])
         self.loop.idle_hook = self.on_loop_idle
+        if self.loop.wake_tail < self.params["wake_tail"]:
+            self.get_logger().info(f"wake_tail: {self.params['wake_tail'] * 1e6:.0f} us is more than "
+                                   f"{WAKE_TAIL_MAX_FRACTION:.0%} of the {self.loop.period * 1e3:g} ms period; "
+                                   f"{self.loop.wake_tail * 1e6:.0f} us used")
         self.on_registry_timer()
         if not self.context.ok():
             return

@@ -14,7 +14,7 @@ from cm_helpers import make_manager, spawn
 
 from controller_manager_py import realtime
 from controller_manager_py.hardware_interface import return_type
-from controller_manager_py.manager.loop import MIN_PERIOD_FRACTION, ControlLoop
+from controller_manager_py.manager.loop import MIN_PERIOD_FRACTION, WAKE_TAIL_MAX_FRACTION, ControlLoop
 
 COUNTING = "cm_helpers:CountingController"
 
@@ -59,6 +59,13 @@ def test_short_periods_never_follow_a_late_start(tmp_path):
     assert float(data["period"]) == pytest.approx(0.002)
     assert np.diff(data["start"]).min() >= MIN_PERIOD_FRACTION * 0.002 - 1e-6
     assert (data["end"] >= data["start"]).all()
+
+
+def test_the_held_sleep_is_capped_at_a_share_of_the_period():
+    assert ControlLoop(make_manager(rate=500), wake_tail=3e-4).wake_tail == pytest.approx(3e-4)
+    at_1_khz = ControlLoop(make_manager(rate=1000), wake_tail=3e-4)
+    assert at_1_khz.wake_tail == pytest.approx(WAKE_TAIL_MAX_FRACTION * 1e-3)
+    assert ControlLoop(make_manager(rate=500), wake_tail=-1.0).wake_tail == 0.0
 
 
 class Littering:
