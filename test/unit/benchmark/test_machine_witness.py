@@ -1,6 +1,6 @@
 """The controller manager benchmarks' machine witness: wakeup_baseline.c stopped early still
 writes the cycles it ran, and a late cycle of the manager counts as the machine's only when
-the witness was late inside that cycle's lateness."""
+the witness was late inside that cycle's lateness or the loop's held sleep came back late."""
 import importlib.util
 import os
 import shutil
@@ -44,6 +44,23 @@ def test_timing_counts_late_starts_and_those_the_witness_shared():
     assert bench.late_starts(r) == "2 (1)"
     del data["witness_deadline"], data["witness_woke"]
     assert bench.late_starts(bench.timing(data, start[0], start[-1])) == "2"
+
+
+def test_a_held_sleep_that_came_back_half_a_period_late_is_the_machines_too():
+    period, spin, held = 0.001, 1e-4, 2e-4
+    deadline = np.arange(300) * period + 10.0
+    start = deadline + 5e-6
+    woke = deadline - spin - held + 20e-6           # the lock-releasing sleep, on time
+    ready = deadline - spin + 10e-6                  # the held sleep, on time
+    ready[100] = deadline[100] + 0.7e-3              # held sleep 0.8 ms late: nothing but the machine holds it up
+    start[100] = ready[100] + 3e-6
+    woke[200] = deadline[200] + 0.7e-3               # the lock-releasing sleep late: kernel or interpreter lock
+    ready[200] = start[200] = woke[200] + 3e-6
+    data = {"deadline": deadline, "start": start, "end": start + 8e-5, "woke": woke, "ready": ready,
+            "period": period, "wake_tail": held, "spin_tail": spin,
+            "witness_deadline": np.array([5.0]), "witness_woke": np.array([5.0001])}   # never late
+    r = bench.timing(data, start[0], start[-1])
+    assert (r["late_count"], r["late_shared"]) == (2, 1)
 
 
 def test_the_c_wait_stopped_early_writes_the_cycles_it_ran(tmp_path):
