@@ -56,6 +56,9 @@ class ControllerManager:
         self._failed: List[str] = []  # reused every cycle
         self._failed_controllers: List[ControllerSpec] = []
         self.version = 0  # bumped on every visible change (lists, activity, statistics names)
+        # called after every such change, from whichever thread made it (the loop's included):
+        # it must return at once, e.g. by waking the thread that publishes the change
+        self.on_change: Callable[[], None] = lambda: None
         # the manager's own statistics: ros2_control's per-cycle times (us) and our windows
         self.execution_time = ExecutionTime()
         self.loop_stats = PeriodicityStats()
@@ -268,6 +271,7 @@ class ControllerManager:
 
     def _changed(self) -> None:
         self.version += 1
+        self.on_change()
 
     # ---- switching ----------------------------------------------------------------------------
     def switch_controller(self, activate: List[str], deactivate: List[str], strictness: int = switching.STRICT,

@@ -21,8 +21,8 @@ parameters come from the same --params-file (the `<name>:` section) or from a fi
 `<name>.params_file`. `<name>.fallback_controllers` lists fallbacks.
 
 Time: the cycle's time is the manager's clock (a simulated hardware's, else the system's);
-the node's ROS clock stamps messages. The node's own timers (start-up, statistics,
-/diagnostics) run on the steady clock: with use_sim_time:=true and the simulated arm in
+the node's ROS clock stamps messages. The node's own timers (start-up, /diagnostics) run
+on the steady clock: with use_sim_time:=true and the simulated arm in
 this very process, /clock only ticks once the loop is started, so start-up on the ROS clock
 would wait for itself.
 """
@@ -143,8 +143,11 @@ class ControllerManagerNode(Node):
         # registries still to publish this round, and each one's last publishing time (s)
         self._pending_publish = []
         self._publish_cost = {}
+        # woken by each change instead of polling: an executor wake-up is a moment the loop
+        # may find the interpreter lock taken
+        self._registry_change = self.create_guard_condition(self.on_registry_change)
+        self.cm.on_change = self._registry_change.trigger
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(0.05, self.on_registry_timer, clock=steady)
         self.create_timer(self.params["diagnostics.period"], self.on_diagnostics_timer, clock=steady)
         self._description_sub = None
         urdf = self._description_from_parameters()
@@ -293,7 +296,7 @@ class ControllerManagerNode(Node):
             self.get_logger().info(f"wake_tail: {self.params['wake_tail'] * 1e6:.0f} us is more than "
                                    f"{WAKE_TAIL_MAX_FRACTION:.0%} of the {self.loop.period * 1e3:g} ms period; "
                                    f"{self.loop.wake_tail * 1e6:.0f} us used")
-        self.on_registry_timer()
+        self.on_registry_change()
         if not self.context.ok():
             return
         self.loop.start()
@@ -305,8 +308,9 @@ class ControllerManagerNode(Node):
         self.cm.configure_controller(name)
 
     # ---- publishers -------------------------------------------------------------------------
-    def on_registry_timer(self) -> None:
-        """Executor, 20 Hz: after a change, new statistics names and an ~/activity message."""
+    def on_registry_change(self) -> None:
+        """Executor, after the manager's `on_change` (any thread): the statistics names and an
+        ~/activity message as of now (several changes in a row: once, with the latest)."""
         version = self.cm.version
         if version != self._published_version:
             self._published_version = version
@@ -365,6 +369,7 @@ class ControllerManagerNode(Node):
             except Exception as error:  # noqa: BLE001 - best effort at exit
                 if self.context.ok():
                     self.get_logger().error(f"shutdown: {error!r}")
+            self.cm.on_change = lambda: None   # the guard condition goes with the node
             return super().destroy_node()
 
 

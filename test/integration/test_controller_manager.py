@@ -85,6 +85,10 @@ def test_services_commands_switching_and_numbers_over_dds(launcher, graph):
     listed = controllers(graph)
     assert listed["scaled_joint_trajectory_controller"].state == "active"
     assert listed["forward_position_controller"].state == "inactive"
+    # ~/activity follows the change (the manager is told, it does not poll)
+    graph.collect(ControllerManagerActivity, "/controller_manager/activity", qos=LATCHED, timeout=10,
+                  predicate=lambda m: {c.name: c.state.label for c in m.controllers}.get(
+                      "scaled_joint_trajectory_controller") == "active")
 
     # the trajectory controller takes over from where the arm is and reaches the waypoint
     goal = [0.0, -1.5, 1.5, -1.5, 1.5, 0.0]

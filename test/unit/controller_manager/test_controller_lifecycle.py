@@ -30,6 +30,23 @@ def test_load_configure_activate_deactivate_cleanup_unload():
     assert "fwd" not in cm.controllers
 
 
+def test_every_visible_change_calls_on_change_once():
+    """The node publishes ~/activity and new statistics names when told, not by polling."""
+    cm = make_manager()
+    versions = []
+    cm.on_change = lambda: versions.append(cm.version)
+    cm.load_controller("fwd", FORWARD, {"joints": JOINTS})
+    cm.configure_controller("fwd")
+    assert len(versions) == 2
+    cm.switch_controller(["fwd"], [])
+    cm.switch_controller([], ["fwd"])
+    cm.cleanup_controller("fwd")
+    cm.unload_controller("fwd")
+    assert len(versions) >= 6 and versions == sorted(set(versions)) and versions[-1] == cm.version
+    run(cm, 10)   # cycles without a change tell nobody
+    assert versions[-1] == cm.version
+
+
 def test_unknown_controller_type_and_duplicate_load_are_refused():
     cm = make_manager()
     with pytest.raises(ControllerError, match="unknown controller plugin 'acme/Magic'"):
