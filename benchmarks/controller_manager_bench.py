@@ -22,13 +22,13 @@ from the cycles that started inside the measuring window:
                     wake-up + waiting for the interpreter lock) and the lock-holding sleep
                     (kernel wake-up alone), us
   late>T/2          cycles that started over half a period after their deadline (1 ms at
-    (machine)       500 Hz); with `--witness`, in brackets how many of them were the
-                    machine's: a witness thread in C (benchmarks/native/wakeup_baseline.c,
-                    SCHED_FIFO 10 above the loop, on its CPU, waking every 0.937 ms) woke over
-                    0.5 ms late between that cycle's deadline and its start, so the CPU was
-                    taken from both by the kernel or the hypervisor; or the loop's held sleep
-                    (`wake_tail`: the interpreter lock held, so no Python thread in the way)
-                    itself came back over half a period late. The witness sees a stall only
+    (machine)       500 Hz); in brackets how many of them were the machine's: the loop's held
+                    sleep (`wake_tail`: the interpreter lock held, so no Python thread in the
+                    way) itself came back over half a period late; or, with `--witness`, a
+                    witness thread in C (benchmarks/native/wakeup_baseline.c, SCHED_FIFO 10
+                    above the loop, on its CPU, waking every 0.937 ms) woke over 0.5 ms late
+                    between that cycle's deadline and its start, so the CPU was taken from
+                    both by the kernel or the hypervisor. The witness sees a stall only
                     when one of its deadlines falls in it, so it misses many short ones; the
                     held sleep sees those that end it. The rest is the manager's own (its
                     process, its interpreter) or a stall both missed. The kernel here does not
@@ -254,12 +254,13 @@ def timing(data, t0: float, t1: float) -> dict:
     # no Python thread in the way: only the kernel or the hypervisor) came back that late
     late_starts = np.flatnonzero(late > LATE_PERIODS * period * 1e6)
     shared = None
-    if "witness_deadline" in data:
-        stalls = witness_stalls(data)
+    witness = "witness_deadline" in data
+    if witness or tail > spin:
+        stalls = witness_stalls(data) if witness else None
         held_late = np.zeros(len(s))
         if tail > spin:
             held_late[1:] = np.where(waited, ready - np.maximum(woke, d[1:] - spin), 0.0)
-        shared = sum(witness_was_late(stalls, d[i], s[i]) or held_late[i] > LATE_PERIODS * period
+        shared = sum((witness and witness_was_late(stalls, d[i], s[i])) or held_late[i] > LATE_PERIODS * period
                      for i in late_starts)
     return dict(late_count=len(late_starts), late_shared=shared,
                 woke_p99=np.percentile(woke_late, 99) if len(woke_late) else math.nan,
@@ -286,7 +287,7 @@ def row(label: str, rate: int, r: dict) -> str:
 
 
 def late_starts(r: dict) -> str:
-    """'n' cycles over LATE_PERIODS late, or 'n (m)' with m of them shared by the machine witness."""
+    """'n' cycles over LATE_PERIODS late, or 'n (m)' with m of them the machine's (held sleep, witness)."""
     return str(r["late_count"]) if r["late_shared"] is None else f"{r['late_count']} ({r['late_shared']})"
 
 
