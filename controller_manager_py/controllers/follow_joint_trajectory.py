@@ -75,6 +75,9 @@ class TrajectoryRosInterface:
                                    execute_callback=self.execute, goal_callback=self.on_goal,
                                    handle_accepted_callback=self.on_accepted, cancel_callback=self.on_cancel)
         self.monitor = node.create_timer(1.0 / controller.params["action_monitor_rate"], self.on_monitor)
+        # while the controller is inactive both timers stop (they would wake the executor for
+        # nothing); its first update after an activation starts them again through this
+        self.activation = node.create_guard_condition(self.on_activation)
 
     def destroy(self) -> None:
         self.on_monitor()  # deliver the outcomes the loop wrote last
@@ -82,6 +85,7 @@ class TrajectoryRosInterface:
         for timer in (self.state_timer, self.monitor):
             if timer is not None:
                 node.destroy_timer(timer)
+        node.destroy_guard_condition(self.activation)
         self.server.destroy()
         node.destroy_service(self.query)
         node.destroy_publisher(self.state_pub)
@@ -113,6 +117,8 @@ class TrajectoryRosInterface:
         c.offer(goal)  # preempts the running goal
         if not c.active:  # deactivated since on_goal: never leave a goal waiting
             goal.run.finish(GoalRun.ABORTED, INVALID_GOAL, "the controller was deactivated")
+        if self.monitor.is_canceled():  # (stopped meanwhile: it delivers the outcome)
+            self.monitor.reset()
         handle.execute()
 
     def on_cancel(self, handle) -> CancelResponse:
@@ -129,11 +135,20 @@ class TrajectoryRosInterface:
             handle.abort()
         return self.Action.Result(error_code=code, error_string=text)
 
+    def announce_activation(self) -> None:
+        """Loop thread, the controller's first update after activation: wakes the executor
+        (a guard condition's trigger: it neither blocks nor allocates)."""
+        self.activation.trigger()
+
+    def on_activation(self) -> None:
+        """Executor, after announce_activation: the timers that stopped while inactive run again."""
+        for timer in (self.state_timer, self.monitor):
+            if timer is not None and timer.is_canceled():
+                timer.reset()
+
     def on_monitor(self) -> None:
-        """Results of finished goals, cancels, feedback of running ones; the state timer back
-        once the controller is active again (publish_state stops it while inactive)."""
-        if self.state_timer is not None and self.c.active and self.state_timer.is_canceled():
-            self.state_timer.reset()
+        """Results of finished goals, cancels, feedback of running ones. Stops its own timer
+        once the controller is inactive and every goal has its outcome."""
         for goal_id, (handle, run, future) in list(self._runs.items()):
             if run.outcome is None and handle.is_cancel_requested:
                 run.finish(GoalRun.CANCELED, 0, "Goal canceled: holding position")
@@ -144,6 +159,8 @@ class TrajectoryRosInterface:
                 future.set_result(run.outcome)
             elif run is self.c._run and self.c._snapshot is not None:
                 handle.publish_feedback(self.feedback())
+        if not self.c.active and not self._runs:
+            self.monitor.cancel()
 
     def feedback(self):
         time, _, desired_p, desired_v, actual_p, actual_v, _ = self.c._snapshot
@@ -165,7 +182,7 @@ class TrajectoryRosInterface:
         if not c.active:
             # an inactive controller publishes no state: its timer stops rather than wake the
             # executor for nothing (at 100 Hz, 6-7 % of a core in the simulated arm), and
-            # on_monitor starts it again after activation
+            # on_activation starts it again
             self.state_timer.cancel()
             return
         snapshot = c._snapshot

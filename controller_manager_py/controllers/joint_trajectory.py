@@ -207,6 +207,7 @@ class JointTrajectoryController(ControllerInterface):
             self.register_introspection(f"{joint}.desired_position", lambda j=j: self.desired_p[j])
             self.register_introspection(f"{joint}.desired_velocity", lambda j=j: self.desired_v[j])
         self.ros = None
+        self._announce_activation = False
         if self.get_node() is not None:
             from .follow_joint_trajectory import TrajectoryRosInterface
             self.ros = TrajectoryRosInterface(self, self.get_node())
@@ -338,6 +339,7 @@ class JointTrajectoryController(ControllerInterface):
         self._end_pending_goals("Current goal cancelled: the controller was (re)activated.")
         self._hold_here()
         self.traj_time = 0.0
+        self._announce_activation = True   # to the ROS side, from the first update (active by then)
         return CallbackReturn.SUCCESS
 
     def on_deactivate(self, previous_state: State) -> CallbackReturn:
@@ -442,6 +444,10 @@ class JointTrajectoryController(ControllerInterface):
         self._stop_here()
 
     def update(self, time: float, period: float) -> return_type:
+        if self._announce_activation:
+            self._announce_activation = False
+            if self.ros is not None:
+                self.ros.announce_activation()
         self._read_state()
         scale = 1.0
         if self._scaling is not None:

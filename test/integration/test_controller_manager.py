@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 from builtin_interfaces.msg import Duration
+from control_msgs.msg import JointTrajectoryControllerState
 from controller_manager_msgs.msg import ControllerManagerActivity
 from controller_manager_msgs.srv import (
     ListControllers,
@@ -89,6 +90,8 @@ def test_services_commands_switching_and_numbers_over_dds(launcher, graph):
     graph.collect(ControllerManagerActivity, "/controller_manager/activity", qos=LATCHED, timeout=10,
                   predicate=lambda m: {c.name: c.state.label for c in m.controllers}.get(
                       "scaled_joint_trajectory_controller") == "active")
+    # its state timer, stopped while it was inactive, runs again
+    graph.collect(JointTrajectoryControllerState, "/scaled_joint_trajectory_controller/controller_state", timeout=10)
 
     # the trajectory controller takes over from where the arm is and reaches the waypoint
     goal = [0.0, -1.5, 1.5, -1.5, 1.5, 0.0]
