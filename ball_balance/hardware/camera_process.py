@@ -15,6 +15,8 @@ touches the manager's interpreter; the kernel schedules rendering like any other
   `render_cpu_s` (the child's CPU time for all frames) are read from shared memory.
 - `priority` > 0: the child and all its threads (the renderer's, DDS's) run SCHED_FIFO at
   that priority, so that a busy machine does not delay a frame (camera_priority).
+- `render_threads` > 0: the software renderer's (Mesa llvmpipe's) thread count in the child,
+  through LP_NUM_THREADS (camera_render_threads); 0 leaves Mesa's default, one per CPU.
 - `publish` (a `PublishSettings`, or None to render only): the child publishes
   /camera/image_raw and /camera/camera_info itself, stamped with the snapshot's time plus
   `stamp_offset_s`, and with `latency_trace` the "rendered" event on /sim/latency_trace.
@@ -55,9 +57,11 @@ class CameraProcess:
     """Renders (and publishes) submitted snapshots in a child process."""
 
     def __init__(self, model, camera: CameraConfig, exposure: float, publish: Optional[PublishSettings] = None,
-                 on_error: Optional[Callable[[BaseException], None]] = None, priority: int = 0):
+                 on_error: Optional[Callable[[BaseException], None]] = None, priority: int = 0,
+                 render_threads: int = 0):
         """priority: SCHED_FIFO priority (1-99) of every thread of the child (the renderer's
-        worker threads included); 0: normal scheduling."""
+        worker threads included); 0: normal scheduling. render_threads: llvmpipe's threads
+        (0: Mesa's default)."""
         # `python -m` rather than multiprocessing's spawn, which re-imports the parent's main
         # module (a script without a __main__ guard would start again in the child)
         self._init = pickle.dumps((model, camera, exposure, publish, priority))
@@ -71,6 +75,7 @@ class CameraProcess:
         self._snapshots = Connection(snapshots_w, readable=False)
         self._errors = Connection(errors_r, writable=False)
         self._on_error = on_error
+        self._render_threads = render_threads
         self._stopping = False
         self._broken = False
         self._process: Optional[subprocess.Popen] = None
@@ -80,6 +85,8 @@ class CameraProcess:
         package_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         env = dict(os.environ)   # this very package, wherever the parent imported it from
         env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, env.get("PYTHONPATH", "")) if p)
+        if self._render_threads > 0:   # Mesa reads it when the child creates its GL context
+            env["LP_NUM_THREADS"] = str(self._render_threads)
         self._process = subprocess.Popen(
             [sys.executable, "-m", "ball_balance.hardware.camera_process", *map(str, self._child_fds)],
             stdin=subprocess.PIPE, pass_fds=self._child_fds, env=env)

@@ -81,6 +81,10 @@ SCHEMA = (
     Param("camera_priority", 0, "SCHED_FIFO priority (1-99) of the camera process (camera_process=true): "
           "rendering and publishing are not delayed by other work on a busy machine; 0: normal scheduling",
           "", 0, 99),
+    Param("camera_render_threads", 0, "render threads of the software renderer (Mesa llvmpipe, LP_NUM_THREADS) "
+          "in the camera process (camera_process=true); 0: Mesa's default, one per CPU. 1 leaves a CPU to the "
+          "manager's loop while a frame renders: a higher real-time factor in lock-step pacing on 2 CPUs, a "
+          "slower frame (docs/simulation.md)", "", 0, 256),
     Param("image_reliable", False, "publish images reliable (keep-last 2) instead of sensor-data QoS "
           "(best effort, keep-last 1)"),
     Param("truth_rate_hz", 100.0, "/sim/ball_truth rate (sim time)", "Hz", 0.1, 1000.0),
@@ -254,10 +258,15 @@ class MujocoSystem(SystemInterface):
                                           self.ros.stamp_offset_s, self.params["latency_trace"],
                                           node.context.get_domain_id())
             self.camera = CameraProcess(self.world.model, self.world.config.camera, self.world.knobs.exposure,
-                                        publish, self._on_camera_error, self.params["camera_priority"])
+                                        publish, self._on_camera_error, self.params["camera_priority"],
+                                        self.params["camera_render_threads"])
             self.camera.start()
         elif self.params["camera_enabled"]:
             from ball_balance.sim.camera import CameraThread
+
+            if self.params["camera_render_threads"]:
+                self.get_logger().warning(f"{self.get_name()}: camera_render_threads applies to the camera process "
+                                          "(camera_process: true) only; ignored")
 
             self.camera = CameraThread(self.world.model, self.world.config.camera, self.world.knobs.exposure,
                                        self._on_frame, self._on_camera_error)

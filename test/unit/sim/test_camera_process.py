@@ -52,19 +52,36 @@ def test_child_failure_reaches_the_parent(world, monkeypatch):
     camera.submit(world.snapshot())   # after the failure: nothing raised in the loop
 
 
-def test_camera_priority_puts_every_thread_of_the_child_on_sched_fifo(world):
+def child_threads(world, **options) -> list:
+    """(scheduling policy, name) of each thread of a camera child started with `options`,
+    once it has rendered its first frame."""
     errors = []
-    camera = CameraProcess(world.model, world.config.camera, 1.0, None, errors.append, priority=1)
+    camera = CameraProcess(world.model, world.config.camera, 1.0, None, errors.append, **options)
     camera.start()
     try:
         camera.submit(world.snapshot())
         wait_for(lambda: camera.frames_rendered >= 1, 60.0, "the first rendered frame")
         tasks = f"/proc/{camera._process.pid}/task"
-        policies = {os.sched_getscheduler(int(tid)) for tid in os.listdir(tasks)}
+        threads = []
+        for tid in os.listdir(tasks):
+            with open(f"{tasks}/{tid}/comm") as comm:
+                threads.append((os.sched_getscheduler(int(tid)), comm.read().strip()))
     finally:
         camera.stop()
     assert errors == []
+    return threads
+
+
+def test_camera_priority_puts_every_thread_of_the_child_on_sched_fifo(world):
+    policies = {policy for policy, _ in child_threads(world, priority=1)}
     if policies == {os.SCHED_OTHER}:
         pytest.skip("SCHED_FIFO refused here (no CAP_SYS_NICE or rtprio limit)")
     # the renderer's worker threads too; Mesa's shader-cache thread puts itself on SCHED_BATCH
     assert os.SCHED_FIFO in policies and os.SCHED_OTHER not in policies
+
+
+def test_camera_render_threads_sets_the_software_renderers_thread_count(world):
+    render_threads = [name for _, name in child_threads(world, render_threads=1) if name.startswith("llvmpipe")]
+    if not render_threads:
+        pytest.skip("not rendering with Mesa's llvmpipe here (a GPU, or another software renderer)")
+    assert render_threads == ["llvmpipe-0"]
