@@ -24,16 +24,19 @@ from the cycles that started inside the measuring window:
   late>T/2          cycles that started over half a period after their deadline (1 ms at
     (machine)       500 Hz); in brackets how many of them were the machine's: the loop's held
                     sleep (`wake_tail`: the interpreter lock held, so no Python thread in the
-                    way) itself came back over half a period late; or, with `--witness`, a
-                    witness thread in C (benchmarks/native/wakeup_baseline.c, SCHED_FIFO 10
-                    above the loop, on its CPU, waking every 0.937 ms) woke over 0.5 ms late
-                    between that cycle's deadline and its start, so the CPU was taken from
-                    both by the kernel or the hypervisor. The witness sees a stall only
-                    when one of its deadlines falls in it, so it misses many short ones; the
-                    held sleep sees those that end it. The rest is the manager's own (its
-                    process, its interpreter) or a stall both missed. The kernel here does not
-                    preempt a system call (`Dynamic Preempt: none`), so "the kernel" includes
-                    a lower-priority thread's system call, the manager's own ones too
+                    way) itself came back over half a period late; or its lock-releasing
+                    sleep did, and the loop took the lock straight back (one voluntary
+                    context switch in the cycle log: no wait for the lock); or, with
+                    `--witness`, a witness thread in C (benchmarks/native/wakeup_baseline.c,
+                    SCHED_FIFO 10 above the loop, on its CPU, waking every 0.937 ms) woke
+                    over 0.5 ms late between that cycle's deadline and its start, so the CPU
+                    was taken from both by the kernel or the hypervisor. The witness sees a
+                    stall only when one of its deadlines falls in it, so it misses many short
+                    ones, and at 1 kHz its own wake-ups delay the loop; the sleeps see those
+                    that end them. The rest is the manager's own (its process, its
+                    interpreter) or a stall all missed. The kernel here does not preempt a
+                    system call (`Dynamic Preempt: none`), so "the kernel" includes a
+                    lower-priority thread's system call, the manager's own ones too
 
 The acceptance table ends with the machine's own limit at 1 kHz: the same wait without Python
 (benchmarks/native/wakeup_baseline.c, compiled with the system's C compiler: SCHED_FIFO at the
@@ -255,13 +258,19 @@ def timing(data, t0: float, t1: float) -> dict:
     late_starts = np.flatnonzero(late > LATE_PERIODS * period * 1e6)
     shared = None
     witness = "witness_deadline" in data
-    if witness or tail > spin:
+    if witness or tail > spin or "switches" in data:
         stalls = witness_stalls(data) if witness else None
         held_late = np.zeros(len(s))
         if tail > spin:
             held_late[1:] = np.where(waited, ready - np.maximum(woke, d[1:] - spin), 0.0)
+        # the lock-releasing sleep came back late although the loop took the lock straight back
+        # (one voluntary context switch: the sleep itself), so not the interpreter lock
+        released_late = np.zeros(len(s))
+        if "switches" in data:
+            alone = waited & (data["switches"][inside][1:] == 1)
+            released_late[1:] = np.where(alone, woke - (d[1:] - tail), 0.0)
         shared = sum((witness and witness_was_late(stalls, d[i], s[i])) or held_late[i] > LATE_PERIODS * period
-                     for i in late_starts)
+                     or released_late[i] > LATE_PERIODS * period for i in late_starts)
     return dict(late_count=len(late_starts), late_shared=shared,
                 woke_p99=np.percentile(woke_late, 99) if len(woke_late) else math.nan,
                 ready_p99=np.percentile(ready_late, 99) if len(ready_late) else math.nan,

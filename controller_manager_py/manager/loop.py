@@ -61,12 +61,16 @@ IDLE_GC_FRACTION of a period is left.
 Cycle log: with `cycle_log` set (a path), the last CYCLE_LOG_LENGTH cycles' deadline,
 start and end, and when the wait before it came back from its lock-releasing sleep
 (`woke`, the lock re-acquired) and from its lock-holding sleep (`ready`), all
-time.monotonic() s, are kept in preallocated arrays and written to that .npz file when the
-loop stops (with `wake_tail` and `spin_tail`), for timing analysis: the benchmark reads it.
+time.monotonic() s, and the loop thread's voluntary context switches during the
+lock-releasing sleep (`switches`: 1 when it slept and took the lock straight back, more when
+it then had to wait for the lock, so a late `woke` with 1 was the kernel's or the machine's),
+are kept in preallocated arrays and written to that .npz file when the loop stops (with
+`wake_tail` and `spin_tail`), for timing analysis: the benchmark reads it.
 """
 from __future__ import annotations
 
 import gc
+import resource
 import sys
 import threading
 import time as _time
@@ -90,6 +94,8 @@ manager's own in five 8 s runs, against 6 with 200 us)."""
 IDLE_GC_FRACTION = 0.3
 GC_OVERDUE = 50  # times the first generation's threshold: collected even without slack
 setswitchinterval = sys.setswitchinterval
+thread_usage = resource.getrusage   # (cycle log only: about 1 us a call)
+RUSAGE_THREAD = getattr(resource, "RUSAGE_THREAD", resource.RUSAGE_SELF)   # (Linux has it)
 
 
 class ControlLoop:
@@ -121,8 +127,8 @@ class ControlLoop:
         self.cpu_affinity = tuple(cpu_affinity)
         self.realtime = False  # True when the SCHED_FIFO priority was granted
         self.cycle_log = cycle_log
-        # deadline, start, end, woke, ready (see the module docstring)
-        self._log = tuple(array("d", bytes(8 * CYCLE_LOG_LENGTH)) for _ in range(5)) if cycle_log else None
+        # deadline, start, end, woke, ready, switches (see the module docstring)
+        self._log = tuple(array("d", bytes(8 * CYCLE_LOG_LENGTH)) for _ in range(6)) if cycle_log else None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="controller_manager_loop", daemon=True)
 
@@ -214,12 +220,16 @@ class ControlLoop:
                 delay = next_deadline - monotonic()
             if hold:
                 setswitchinterval(wake_interval)
+            if log is not None:
+                switches = thread_usage(RUSAGE_THREAD).ru_nvcsw
             if delay > tail:
                 sleep(delay - tail)  # releases the interpreter lock
             if hold:
                 setswitchinterval(hold_interval)
             if log is not None:
-                log[3][self.cycles % CYCLE_LOG_LENGTH] = monotonic()
+                i = self.cycles % CYCLE_LOG_LENGTH
+                log[3][i] = monotonic()
+                log[5][i] = thread_usage(RUSAGE_THREAD).ru_nvcsw - switches
             if tail > spin:
                 sleep_until(next_deadline - spin, hold_interpreter=True)
             if log is not None:
@@ -261,8 +271,9 @@ class ControlLoop:
 
             n = min(self.cycles, CYCLE_LOG_LENGTH)
             order = [(self.cycles - n + k) % CYCLE_LOG_LENGTH for k in range(n)]
-            deadline, start, end, woke, ready = (np.frombuffer(a, dtype=np.float64)[order] for a in self._log)
+            deadline, start, end, woke, ready, switches = (np.frombuffer(a, dtype=np.float64)[order]
+                                                           for a in self._log)
             np.savez(self.cycle_log, deadline=deadline, start=start, end=end, woke=woke, ready=ready,
-                     period=self.period, wake_tail=self.wake_tail, spin_tail=self.spin_tail)
+                     switches=switches, period=self.period, wake_tail=self.wake_tail, spin_tail=self.spin_tail)
         except Exception as error:  # noqa: BLE001 - a diagnostic aid never breaks shutdown
             self.cm.logger.error(f"cannot write the cycle log {self.cycle_log}: {error!r}")

@@ -65,6 +65,22 @@ def test_a_held_sleep_that_came_back_half_a_period_late_is_the_machines_too():
     assert bench.late_starts(bench.timing(data, start[0], start[-1])) == "2 (1)"
 
 
+def test_a_late_lock_releasing_sleep_is_the_machines_when_the_lock_was_taken_straight_back():
+    period, spin, held = 0.001, 1e-4, 2e-4
+    deadline = np.arange(300) * period + 10.0
+    start = deadline + 5e-6
+    woke = deadline - spin - held + 20e-6
+    ready = deadline - spin + 10e-6
+    switches = np.ones(300)
+    for k, extra_switches in ((100, 0), (200, 2)):     # both sleeps came back 0.7 ms late
+        woke[k] = deadline[k] + 0.7e-3
+        ready[k] = start[k] = woke[k] + 3e-6
+        switches[k] += extra_switches                  # the second then waited for the lock
+    data = {"deadline": deadline, "start": start, "end": start + 8e-5, "woke": woke, "ready": ready,
+            "switches": switches, "period": period, "wake_tail": held, "spin_tail": spin}
+    assert bench.late_starts(bench.timing(data, start[0], start[-1])) == "2 (1)"
+
+
 def test_the_c_wait_stopped_early_writes_the_cycles_it_ran(tmp_path):
     try:
         binary = bench.build_wakeup_baseline()

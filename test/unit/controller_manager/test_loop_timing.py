@@ -61,6 +61,34 @@ def test_short_periods_never_follow_a_late_start(tmp_path):
     assert (data["end"] >= data["start"]).all()
 
 
+def test_the_cycle_log_counts_the_waits_for_the_interpreter_lock_after_the_sleep(tmp_path):
+    """One voluntary context switch for the sleep alone; more while another thread keeps the
+    lock (here a busy Python thread with a short switch interval)."""
+    import sys
+    import threading
+
+    def switches(busy: bool):
+        log = tmp_path / f"cycles_{busy}.npz"
+        loop = ControlLoop(make_manager(rate=500), cycle_log=str(log))
+        stop = threading.Event()
+        holder = threading.Thread(target=lambda: [None for _ in iter(stop.is_set, True)], daemon=True)
+        if busy:
+            holder.start()
+        try:
+            run_loop(loop, lambda: loop.cycles >= 100)
+        finally:
+            stop.set()
+        return np.load(log)["switches"][10:]    # (the first cycles: start-up)
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-4)
+    try:
+        assert np.median(switches(busy=False)) == 1
+        assert np.median(switches(busy=True)) >= 2
+    finally:
+        sys.setswitchinterval(interval)
+
+
 def test_the_held_sleep_is_capped_at_a_share_of_the_period():
     assert ControlLoop(make_manager(rate=500), wake_tail=3e-4).wake_tail == pytest.approx(3e-4)
     at_1_khz = ControlLoop(make_manager(rate=1000), wake_tail=3e-4)
