@@ -137,7 +137,7 @@ class TrajectoryRosInterface:
 
     def announce_activation(self) -> None:
         """Loop thread, the controller's first update after activation: wakes the executor
-        (a guard condition's trigger: it neither blocks nor allocates)."""
+        (a guard condition's trigger, which does not block)."""
         self.activation.trigger()
 
     def on_activation(self) -> None:
