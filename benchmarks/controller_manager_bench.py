@@ -254,7 +254,8 @@ def timing(data, t0: float, t1: float) -> dict:
     ready_late = (ready[waited] - (d[1:][waited] - spin)) * 1e6
     # cycles that started over LATE_PERIODS late, and how many of them were the machine's: the
     # witness was late inside them, or the loop's own held sleep (the interpreter lock held, so
-    # no Python thread in the way: only the kernel or the hypervisor) came back that late
+    # no Python thread in the way: only the kernel or the hypervisor) came back that late, or
+    # its lock-releasing sleep did (below)
     late_starts = np.flatnonzero(late > LATE_PERIODS * period * 1e6)
     shared = None
     witness = "witness_deadline" in data
@@ -296,7 +297,7 @@ def row(label: str, rate: int, r: dict) -> str:
 
 
 def late_starts(r: dict) -> str:
-    """'n' cycles over LATE_PERIODS late, or 'n (m)' with m of them the machine's (held sleep, witness)."""
+    """'n' cycles over LATE_PERIODS late, or 'n (m)' with m of them the machine's (by the sleeps or the witness)."""
     return str(r["late_count"]) if r["late_shared"] is None else f"{r['late_count']} ({r['late_shared']})"
 
 

@@ -233,7 +233,7 @@ class ControlLoop:
             if tail > spin:
                 sleep_until(next_deadline - spin, hold_interpreter=True)
             if log is not None:
-                log[4][self.cycles % CYCLE_LOG_LENGTH] = monotonic()
+                log[4][i] = monotonic()
             if spin > 0.0:
                 while monotonic() < next_deadline:
                     pass

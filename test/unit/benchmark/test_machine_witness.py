@@ -1,6 +1,7 @@
 """The controller manager benchmarks' machine witness: wakeup_baseline.c stopped early still
 writes the cycles it ran, and a late cycle of the manager counts as the machine's only when
-the witness was late inside that cycle's lateness or the loop's held sleep came back late."""
+the witness was late inside that cycle's lateness, the loop's held sleep came back late, or
+its lock-releasing sleep came back late with the lock taken straight back."""
 import importlib.util
 import os
 import shutil
@@ -46,19 +47,30 @@ def test_timing_counts_late_starts_and_those_the_witness_shared():
     assert bench.late_starts(bench.timing(data, start[0], start[-1])) == "2"
 
 
+PERIOD, SPIN, HELD = 0.001, 1e-4, 2e-4
+
+
+def cycles_on_time():
+    """300 cycles at 1 kHz whose two sleeps came back on time: deadline, start, woke, ready."""
+    deadline = np.arange(300) * PERIOD + 10.0
+    woke = deadline - SPIN - HELD + 20e-6            # the lock-releasing sleep
+    ready = deadline - SPIN + 10e-6                  # the held sleep
+    return deadline, deadline + 5e-6, woke, ready
+
+
+def cycle_log(deadline, start, woke, ready, **more) -> dict:
+    return {"deadline": deadline, "start": start, "end": start + 8e-5, "woke": woke, "ready": ready,
+            "period": PERIOD, "wake_tail": HELD, "spin_tail": SPIN, **more}
+
+
 def test_a_held_sleep_that_came_back_half_a_period_late_is_the_machines_too():
-    period, spin, held = 0.001, 1e-4, 2e-4
-    deadline = np.arange(300) * period + 10.0
-    start = deadline + 5e-6
-    woke = deadline - spin - held + 20e-6           # the lock-releasing sleep, on time
-    ready = deadline - spin + 10e-6                  # the held sleep, on time
+    deadline, start, woke, ready = cycles_on_time()
     ready[100] = deadline[100] + 0.7e-3              # held sleep 0.8 ms late: nothing but the machine holds it up
     start[100] = ready[100] + 3e-6
     woke[200] = deadline[200] + 0.7e-3               # the lock-releasing sleep late: kernel or interpreter lock
     ready[200] = start[200] = woke[200] + 3e-6
-    data = {"deadline": deadline, "start": start, "end": start + 8e-5, "woke": woke, "ready": ready,
-            "period": period, "wake_tail": held, "spin_tail": spin,
-            "witness_deadline": np.array([5.0]), "witness_woke": np.array([5.0001])}   # never late
+    data = cycle_log(deadline, start, woke, ready,
+                     witness_deadline=np.array([5.0]), witness_woke=np.array([5.0001]))   # never late
     r = bench.timing(data, start[0], start[-1])
     assert (r["late_count"], r["late_shared"]) == (2, 1)
     del data["witness_deadline"], data["witness_woke"]    # the held sleep tells it without a witness
@@ -66,18 +78,13 @@ def test_a_held_sleep_that_came_back_half_a_period_late_is_the_machines_too():
 
 
 def test_a_late_lock_releasing_sleep_is_the_machines_when_the_lock_was_taken_straight_back():
-    period, spin, held = 0.001, 1e-4, 2e-4
-    deadline = np.arange(300) * period + 10.0
-    start = deadline + 5e-6
-    woke = deadline - spin - held + 20e-6
-    ready = deadline - spin + 10e-6
+    deadline, start, woke, ready = cycles_on_time()
     switches = np.ones(300)
     for k, extra_switches in ((100, 0), (200, 2)):     # both sleeps came back 0.7 ms late
         woke[k] = deadline[k] + 0.7e-3
         ready[k] = start[k] = woke[k] + 3e-6
         switches[k] += extra_switches                  # the second then waited for the lock
-    data = {"deadline": deadline, "start": start, "end": start + 8e-5, "woke": woke, "ready": ready,
-            "switches": switches, "period": period, "wake_tail": held, "spin_tail": spin}
+    data = cycle_log(deadline, start, woke, ready, switches=switches)
     assert bench.late_starts(bench.timing(data, start[0], start[-1])) == "2 (1)"
 
 

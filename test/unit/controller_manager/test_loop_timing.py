@@ -71,7 +71,12 @@ def test_the_cycle_log_counts_the_waits_for_the_interpreter_lock_after_the_sleep
         log = tmp_path / f"cycles_{busy}.npz"
         loop = ControlLoop(make_manager(rate=500), cycle_log=str(log))
         stop = threading.Event()
-        holder = threading.Thread(target=lambda: [None for _ in iter(stop.is_set, True)], daemon=True)
+
+        def hold_the_lock():
+            while not stop.is_set():
+                pass
+
+        holder = threading.Thread(target=hold_the_lock, daemon=True)
         if busy:
             holder.start()
         try:
