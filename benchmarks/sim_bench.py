@@ -18,7 +18,7 @@ Three kinds of rows:
     python benchmarks/sim_bench.py --quick      # fewer cycles
     python benchmarks/sim_bench.py --camera-modes   # 960x540 at 60 Hz only: the camera in a child
                                                     # process (default) and in a thread, side by side
-    python benchmarks/sim_bench.py --camera-modes --loop-priority 50 --camera-priority 30
+    python benchmarks/sim_bench.py --camera-modes --loop-priority 50
                                                     # loop thread and camera process on SCHED_FIFO
 
 "render ms" is the wall time of the last frame's render; "render cpu ms" the camera child
@@ -56,9 +56,8 @@ def physics_rtf(dt: float, sim_s: float) -> float:
     return steps * dt / (time.perf_counter() - start)
 
 
-def make_manager(camera_hz, width, height, node, pacing="lockstep", camera_process=True, camera_priority=0):
-    params = {"camera_enabled": camera_hz is not None, "pacing": pacing, "camera_process": camera_process,
-              "camera_priority": camera_priority}
+def make_manager(camera_hz, width, height, node, pacing="lockstep", camera_process=True):
+    params = {"camera_enabled": camera_hz is not None, "pacing": pacing, "camera_process": camera_process}
     if camera_hz is not None:
         params.update(camera_rate_hz=camera_hz, camera_width=width, camera_height=height)
     cm = ControllerManager(RATE_HZ, logger=logging.getLogger("sim_bench"))
@@ -113,10 +112,9 @@ def manager_unpaced(camera_hz, width, height, cycles, node):
     return (sim_s / wall, *numbers, "-", "-")
 
 
-def manager_paced(camera_hz, width, height, seconds, node, pacing="lockstep", camera_process=True, priorities=(0, 0)):
-    """priorities: SCHED_FIFO priority of the loop thread and of the camera process (0: normal)."""
-    loop_priority, camera_priority = priorities
-    cm, system = make_manager(camera_hz, width, height, node, pacing, camera_process, camera_priority)
+def manager_paced(camera_hz, width, height, seconds, node, pacing="lockstep", camera_process=True, loop_priority=0):
+    """loop_priority: SCHED_FIFO priority of the loop thread (0: normal)."""
+    cm, system = make_manager(camera_hz, width, height, node, pacing, camera_process)
     before = camera_ready(system)
     loop = ControlLoop(cm, thread_priority=loop_priority)
     t0, start, cpu0 = system.now(), time.perf_counter(), time.process_time()
@@ -139,10 +137,7 @@ def main(argv=None) -> int:
                         help="only 960x540 at 60 Hz, camera in a child process and in a thread, both pacings")
     parser.add_argument("--loop-priority", type=int, default=0,
                         help="SCHED_FIFO priority of the manager's loop thread in paced rows (0: normal)")
-    parser.add_argument("--camera-priority", type=int, default=0,
-                        help="SCHED_FIFO priority of the camera child process (MujocoSystem camera_priority)")
     args = parser.parse_args(argv)
-    priorities = (args.loop_priority, args.camera_priority)
     cycles = 1000 if args.quick else 2500
     seconds = 2.0 if args.quick else args.seconds
 
@@ -157,7 +152,7 @@ def main(argv=None) -> int:
         for pacing in ("lockstep", "realtime"):
             for process in (True, False):
                 label = f"pacing={pacing}, camera 60 Hz 960x540 in a {'child process' if process else 'thread'}"
-                rtf, *rest = manager_paced(60.0, 960, 540, seconds, node, pacing, process, priorities)
+                rtf, *rest = manager_paced(60.0, 960, 540, seconds, node, pacing, process, args.loop_priority)
                 rows.append((f"manager 500 Hz paced, {label}", f"{rtf:7.2f}", *rest))
     for dt in (0.001, 0.002) if not args.camera_modes else ():
         rows.append((f"physics alone, dt {dt * 1e3:.0f} ms", f"{physics_rtf(dt, 5.0 if not args.quick else 2.0):7.1f}",
@@ -169,11 +164,12 @@ def main(argv=None) -> int:
         rows.append((f"manager 500 Hz unpaced, {label}", f"{rtf:7.2f}", *rest))
     for camera_hz, width, height in full:
         label = "no camera" if camera_hz is None else f"camera {camera_hz:.0f} Hz {width}x{height}"
-        rtf, *rest = manager_paced(camera_hz, width, height, seconds, node, priorities=priorities)
+        rtf, *rest = manager_paced(camera_hz, width, height, seconds, node, loop_priority=args.loop_priority)
         rows.append((f"manager 500 Hz paced, {label}", f"{rtf:7.2f}", *rest))
     for camera_hz, width, height in full[1:4]:
         label = f"camera {camera_hz:.0f} Hz {width}x{height}"
-        rtf, *rest = manager_paced(camera_hz, width, height, seconds, node, "realtime", priorities=priorities)
+        rtf, *rest = manager_paced(camera_hz, width, height, seconds, node, "realtime",
+                                   loop_priority=args.loop_priority)
         rows.append((f"manager 500 Hz paced, pacing=realtime, {label}", f"{rtf:7.2f}", *rest))
     if node is not None:
         node.destroy_node()
@@ -187,8 +183,7 @@ def main(argv=None) -> int:
     for row in rows:
         print(" | ".join(str(c).ljust(w) for c, w in zip(row, widths, strict=True)))
     print(f"\nphysics dt 1 ms (manager rows), ros publishing: {not args.no_ros}, MUJOCO_GL egl/osmesa from env, "
-          f"load average {os.getloadavg()[0]:.1f}; SCHED_FIFO loop {args.loop_priority or 'off'}, camera "
-          f"{args.camera_priority or 'off'}")
+          f"load average {os.getloadavg()[0]:.1f}; SCHED_FIFO loop {args.loop_priority or 'off'}")
     return 0
 
 

@@ -59,14 +59,18 @@ else
 fi
 
 source "$ROOT/scripts/lib/stop_all.sh"
+source "$ROOT/scripts/lib/realtime.sh"
+realtime_for 1   # the controller manager
+MANAGER_RT=()
+((REALTIME)) || MANAGER_RT=(-p thread_priority:=0 -p executor_thread_priority:=0)
 on_stopped() { rm -rf "$WORK"; }
 trap stop_all INT TERM EXIT
 
 robot_state_publisher --ros-args -p "robot_description_file:=$URDF" &
 PIDS+=($!)
-# config/sim_manager.yaml: the simulated arm below the camera chain's SCHED_FIFO priorities (why: in that file)
+# config/sim_manager.yaml: the simulated arm's scheduling (why: in that file)
 ros2_control_node --ros-args --params-file "$CONTROLLERS" --params-file "$ROOT/config/sim_manager.yaml" \
-  -p "robot_description_file:=$URDF" \
+  -p "robot_description_file:=$URDF" ${MANAGER_RT[@]+"${MANAGER_RT[@]}"} \
   -p "activate_controllers:=$ACTIVE" -p "inactive_controllers:=$INACTIVE" &
 PIDS+=($!)
 echo "sim_arm.sh: running (robot_state_publisher ${PIDS[0]}, ros2_control_node ${PIDS[1]}); Ctrl-C stops" >&2

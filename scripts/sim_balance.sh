@@ -87,6 +87,10 @@ SIM_CONFIG="$ROOT/config/sim.yaml"
 LOGS="$(mktemp -d /tmp/ball_balance_graph.XXXXXX)"
 source "$ROOT/scripts/lib/stop_all.sh"
 source "$ROOT/scripts/lib/graph.sh"
+source "$ROOT/scripts/lib/realtime.sh"
+realtime_for 3   # the controller manager, the tracker, the controller
+RT_OFF=()
+((REALTIME)) || RT_OFF=(-p thread_priority:=0)
 on_stopped() { echo "sim_balance.sh: stopped (logs in $LOGS)" >&2; }
 trap stop_all INT TERM EXIT
 
@@ -96,14 +100,12 @@ start sim "$ROOT/scripts/sim_arm.sh" --sim-config "$SIM_CONFIG" --domain "$DOMAI
   ${SIM_PARAMS[@]+"${SIM_PARAMS[@]}"}
 if ((! TRUTH_FED)); then
   start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
-    -p "publish_debug_image:=$DEBUG_IMAGE"
+    -p "publish_debug_image:=$DEBUG_IMAGE" ${RT_OFF[@]+"${RT_OFF[@]}"}
 fi
-# peer_timeout_s 5 s (1 s for a real arm): with the simulated manager normally scheduled, at
-# load 30-36 on 2 cores the controller saw /joint_states gaps of 1.0-2.3 s wall time from a live
-# manager, stopped, and homed with the ball on the plate (it now runs at SCHED_FIFO 20,
-# config/sim_manager.yaml, but below the camera chain it can still be starved)
+# peer_timeout_s 5 s (1 s for a real arm): on a loaded 2-core machine the controller saw
+# /joint_states gaps of 1.0-2.3 s wall time from a live manager
 start controller "$EXE" --ros-args --params-file "$YAML" -p use_sim_time:=true -p peer_timeout_s:=5.0 \
-  ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"}
+  ${RT_OFF[@]+"${RT_OFF[@]}"} ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"}
 start visualizer ball_balance_visualizer --ros-args -p use_sim_time:=true ${VIS_PARAMS[@]+"${VIS_PARAMS[@]}"}
 # the simulation starts paused: it runs once the tracker (or the truth feed), the controller and
 # the monitor are up

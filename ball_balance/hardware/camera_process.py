@@ -13,8 +13,11 @@ touches the manager's interpreter; the kernel schedules rendering like any other
   drops older ones still queued (counted in `frames_skipped`), so a frame is never rendered
   late while a newer one waits. `frames_rendered`, `frames_skipped`, `last_render_s` and
   `render_cpu_s` (the child's CPU time for all frames) are read from shared memory.
-- `priority` > 0: the child and all its threads (the renderer's, DDS's) run SCHED_FIFO at
-  that priority, so that a busy machine does not delay a frame (camera_priority).
+- The child runs normally scheduled: software rendering is the heaviest work of the graph,
+  and at a real-time priority it starved everything else on a small machine. Lock-step
+  pacing (ball_balance/sim/lockstep.py) makes a slow frame cost wall time, not control.
+- `extra_render_s` > 0: each frame takes that much longer (a slower renderer, for tests and
+  benchmarks; camera_extra_render_s).
 - `render_threads` > 0: the software renderer's (Mesa llvmpipe's) thread count in the child,
   through LP_NUM_THREADS (camera_render_threads); 0 leaves Mesa's default, one per CPU.
 - `publish` (a `PublishSettings`, or None to render only): the child publishes
@@ -57,14 +60,13 @@ class CameraProcess:
     """Renders (and publishes) submitted snapshots in a child process."""
 
     def __init__(self, model, camera: CameraConfig, exposure: float, publish: Optional[PublishSettings] = None,
-                 on_error: Optional[Callable[[BaseException], None]] = None, priority: int = 0,
-                 render_threads: int = 0):
-        """priority: SCHED_FIFO priority (1-99) of every thread of the child (the renderer's
-        worker threads included); 0: normal scheduling. render_threads: llvmpipe's threads
-        (0: Mesa's default)."""
+                 on_error: Optional[Callable[[BaseException], None]] = None, render_threads: int = 0,
+                 extra_render_s: float = 0.0):
+        """render_threads: llvmpipe's threads (0: Mesa's default); extra_render_s: added to
+        each frame's render time."""
         # `python -m` rather than multiprocessing's spawn, which re-imports the parent's main
         # module (a script without a __main__ guard would start again in the child)
-        self._init = pickle.dumps((model, camera, exposure, publish, priority))
+        self._init = pickle.dumps((model, camera, exposure, publish, extra_render_s))
         stats_fd = os.memfd_create("sim_camera_stats")
         os.ftruncate(stats_fd, _STATS_BYTES)
         self._stats_map = mmap.mmap(stats_fd, _STATS_BYTES)
@@ -163,14 +165,8 @@ def _child_main(stats_fd: int, snapshots_fd: int, errors_fd: int) -> None:
     publisher = None
     renderer = None
     try:
-        model, camera, exposure, publish, priority = pickle.loads(sys.stdin.buffer.read())
+        model, camera, exposure, publish, extra_render_s = pickle.loads(sys.stdin.buffer.read())
         from ball_balance.sim.camera import CameraRenderer
-        from controller_manager_py.realtime import set_process_realtime_priority
-
-        # before the renderer and DDS start their threads, which inherit it
-        if priority > 0 and not set_process_realtime_priority(priority):
-            print(f"sim camera: could not get SCHED_FIFO priority {priority} (needs CAP_SYS_NICE or an rtprio "
-                  "limit); rendering at normal priority", file=sys.stderr, flush=True)
 
         renderer = CameraRenderer(model, camera, exposure)
         if publish is not None:
@@ -188,6 +184,8 @@ def _child_main(stats_fd: int, snapshots_fd: int, errors_fd: int) -> None:
             values = np.frombuffer(data, np.float64)
             cpu, start = time.process_time(), time.perf_counter()
             image = renderer.render(values[1:])
+            if extra_render_s > 0.0:
+                time.sleep(extra_render_s)
             stats[_LAST_RENDER_S] = time.perf_counter() - start
             stats[_CPU_S] += time.process_time() - cpu
             stats[_RENDERED] += 1

@@ -52,6 +52,7 @@ import numpy as np
 
 from ball_balance import robot
 from ball_balance.sim.config import CameraConfig, DomainKnobs, SimConfig, SimConfigError
+from ball_balance.sim.lockstep import FrameAnswerGate
 from ball_balance.sim.world import CommandError, SimulationError, SimWorld
 from controller_manager_py.hardware_interface import CallbackReturn, HardwareInfo, State, SystemInterface, return_type
 from controller_manager_py.parameters import Param, ParameterError, validate
@@ -61,7 +62,9 @@ SCHEMA = (
     Param("physics_dt", 0.001, "MuJoCo timestep", "s", 1e-4, 0.005),
     Param("servo_lag", 0.005, "joint servo time constant", "s", 5e-4, 0.1),
     Param("ball_shell", True, "thin-shell ball (rolls at 3/5 g sin(tilt)); false: solid (5/7)"),
-    Param("pacing", "lockstep", "lockstep: advance one cycle period per cycle; realtime: follow the wall clock",
+    Param("pacing", "lockstep", "lockstep: advance one cycle period per cycle, and hold before the next camera "
+          "frame until the last one is answered (a /ball_state of its stamp, then a /plate_cmd), so a slower "
+          "machine slows simulated time, not the control; realtime: follow the wall clock",
           choices=("lockstep", "realtime")),
     Param("cycle_period", 0.002, "sim time per cycle when the manager gives no usable period", "s", 1e-4, 0.1),
     Param("sim_time", True, "own the manager's clock and publish /clock"),
@@ -78,13 +81,12 @@ SCHEMA = (
     Param("camera_frame_id", "camera_optical_frame", "frame_id of the image messages"),
     Param("camera_process", True, "render and publish the camera in a child process (never holds the "
           "manager's interpreter lock); false: a thread of the manager"),
-    Param("camera_priority", 0, "SCHED_FIFO priority (1-99) of the camera process (camera_process=true): "
-          "rendering and publishing are not delayed by other work on a busy machine; 0: normal scheduling",
-          "", 0, 99),
     Param("camera_render_threads", 0, "render threads of the software renderer (Mesa llvmpipe, LP_NUM_THREADS) "
           "in the camera process (camera_process=true); 0: Mesa's default, one per CPU. 1 leaves a CPU to the "
           "manager's loop while a frame renders: a higher real-time factor in lock-step pacing on 2 CPUs, a "
           "slower frame (docs/simulation.md)", "", 0, 256),
+    Param("camera_extra_render_s", 0.0, "added to every frame's render time (a slower renderer, for tests and "
+          "benchmarks of how the graph copes)", "s", 0.0, 10.0),
     Param("image_reliable", False, "publish images reliable (keep-last 2) instead of sensor-data QoS "
           "(best effort, keep-last 1)"),
     Param("truth_rate_hz", 100.0, "/sim/ball_truth rate (sim time)", "Hz", 0.1, 1000.0),
@@ -191,6 +193,7 @@ class MujocoSystem(SystemInterface):
         self.ros = None
         self.commands_refused = 0
         self.overruns = 0
+        self.answers: Optional[FrameAnswerGate] = None
         self._last_warn = -math.inf
 
     # ---- lifecycle (executor thread) -----------------------------------------------------
@@ -258,8 +261,8 @@ class MujocoSystem(SystemInterface):
                                           self.ros.stamp_offset_s, self.params["latency_trace"],
                                           node.context.get_domain_id())
             self.camera = CameraProcess(self.world.model, self.world.config.camera, self.world.knobs.exposure,
-                                        publish, self._on_camera_error, self.params["camera_priority"],
-                                        self.params["camera_render_threads"])
+                                        publish, self._on_camera_error, self.params["camera_render_threads"],
+                                        self.params["camera_extra_render_s"])
             self.camera.start()
         elif self.params["camera_enabled"]:
             from ball_balance.sim.camera import CameraThread
@@ -272,6 +275,11 @@ class MujocoSystem(SystemInterface):
                                        self._on_frame, self._on_camera_error)
             self.camera.start()
         self._next_frame_s = self.world.time_s
+        frames = self.params["camera_enabled"] or self.params["truth_fed"]
+        self.answers = (FrameAnswerGate() if frames and self.params["pacing"] == "lockstep" and self.ros is not None
+                        else None)
+        if self.answers is not None:
+            self.ros.follow_answers(self.answers, self.camera)
         self._next_truth_s = self.world.time_s
         # the domain's pushes (`pushes`): every push_interval_s, a seeded direction
         self._next_push_s = self.world.knobs.push_interval_s if self.world.knobs.push_speed_m_s > 0 else math.inf
@@ -283,6 +291,8 @@ class MujocoSystem(SystemInterface):
             self.register_introspection("ball_y", lambda: self._ball[1].value)
             self.register_introspection("commands_refused", lambda: float(self.commands_refused))
             self.register_introspection("pacing_overruns", lambda: float(self.overruns))
+            self.register_introspection("lockstep_frames_given_up",
+                                        lambda: float(self.answers.frames_given_up if self.answers else 0))
         return CallbackReturn.SUCCESS
 
     def on_activate(self, previous_state: State) -> CallbackReturn:
@@ -322,9 +332,13 @@ class MujocoSystem(SystemInterface):
                 self._requests.popleft()()
             except CommandError as error:   # validated by sim_ros already; never stop the loop
                 self.get_logger().warning(f"{self.get_name()}: simulation request refused: {error}")
+        answers = self.answers
+        frame_due = world.time_s >= self._next_frame_s
         if self.paused:
             steps, self._steps_requested = self._steps_requested, 0
             self._wall_anchor = None   # realtime pacing restarts from here when resumed
+        elif frame_due and answers is not None and answers.must_wait():
+            steps = 0   # lock-step: the next frame waits for the answer to the last one
         else:
             steps = self._steps_for(period)
         try:
@@ -340,11 +354,14 @@ class MujocoSystem(SystemInterface):
             speed = world.knobs.push_speed_m_s
             self._push(speed * math.cos(angle), speed * math.sin(angle))
         self._copy_states()
-        if t >= self._next_frame_s:  # a camera frame (rendered, and/or a truth-fed detection)
+        # a camera frame (rendered, and/or a truth-fed detection), unless lock-step holds it back
+        if t >= self._next_frame_s and not (answers is not None and answers.must_wait()):
+            if answers is not None:
+                answers.frame_captured(t)
             self._next_frame_s = max(self._next_frame_s + 1.0 / self.params["camera_rate_hz"], t)
             if camera is not None:
                 snapshot = world.snapshot()
-                if ros is not None:   # first: a camera process of higher priority renders at once
+                if ros is not None:
                     ros.trace("capture", t)
                 camera.submit(snapshot)
             if ros is not None and self.params["truth_fed"]:

@@ -9,12 +9,15 @@ child process publishes them, ball_balance/hardware/camera_process.py). Services
 from __future__ import annotations
 
 import math
+import time
 from typing import Mapping
 
 import numpy as np
 from ball_tracker_msgs.msg import BallState
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from rclpy.clock import Clock as RosClock
+from rclpy.clock import ClockType
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from scipy.spatial.transform import Rotation
@@ -26,6 +29,7 @@ from ball_balance.plate_geometry import PLATE_FRAME
 from ball_balance.robot import BASE_FRAME
 from ball_balance.ros.images import encode_image
 from ball_balance.sim.config import camera_intrinsics
+from ball_balance.sim.lockstep import REPORT_PERIOD_S, PaceReport
 from ball_balance.tf.ros import StaticTransformBroadcaster, transform_to_msg
 from ball_balance.tf.transform import Transform
 
@@ -168,6 +172,23 @@ class SimRosIo:
                                 f"(x={truth.x:+.3f} m, y={truth.y:+.3f} m); call /sim/reset_ball to put it back")
 
     # ---- executor thread ----------------------------------------------------------------
+    def follow_answers(self, answers, camera) -> None:
+        """Lock-step: feed `answers` (a FrameAnswerGate) the /ball_state stamps and the /plate_cmd
+        arrivals, and say every REPORT_PERIOD_S how fast simulated time runs and why."""
+        self.subscriptions += [
+            self.node.create_subscription(BallState, "/ball_state", lambda msg: answers.on_state(
+                msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 - self.stamp_offset_s), qos_profile_sensor_data),
+            self.node.create_subscription(Vector3Stamped, "/plate_cmd", lambda msg: answers.on_command(), 10),
+        ]
+        self._pace = PaceReport(answers, camera, self.world, 1.0 / self.params["camera_rate_hz"])
+        self._pace_timer = self.node.create_timer(REPORT_PERIOD_S, self._report_pace,
+                                                  clock=RosClock(clock_type=ClockType.STEADY_TIME))
+
+    def _report_pace(self) -> None:
+        line = self._pace.line(time.monotonic())
+        if line:
+            self.logger.info(line)
+
     def _handle_reset(self, request, response):
         self.controls.request_reset_ball()
         response.success, response.message = True, "ball reset to the plate centre"
@@ -234,6 +255,8 @@ class SimRosIo:
                        self.clock_pub, self.detection_pub, self.trace_pub):
             if entity is not None:
                 self.node.destroy_publisher(entity)
+        if getattr(self, "_pace_timer", None) is not None:
+            self.node.destroy_timer(self._pace_timer)
         for service in self.services:
             self.node.destroy_service(service)
         for subscription in self.subscriptions:

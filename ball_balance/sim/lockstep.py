@@ -1,0 +1,122 @@
+"""Lock-step with the control chain: simulated time waits for the answer to each camera frame.
+
+With `pacing: lockstep` the simulation advances one manager period per cycle, but the camera
+chain (render, tracker, controller) runs in other processes at whatever speed the machine
+allows. Left alone, a slow renderer makes the chain's latency grow in simulated time, and the
+same controller balances worse on a slower machine. `FrameAnswerGate` closes that gap: the
+simulation does not capture the next frame, and so does not move more than one camera period
+past a frame, until the answer to that frame has come back:
+
+1. the loop captures frame k at simulated time t_k (`frame_captured(t_k)`);
+2. a /ball_state stamped t_k arrives (the tracker's estimate from that frame: `on_state`);
+3. a /plate_cmd arrives after it (the controller's step on that state: `on_command`).
+
+The latency budget is therefore one camera period of simulated time, whatever the machine; a
+faster chain answers sooner and the simulation does not wait at all.
+
+Waiting starts with the first answer seen, so a graph with no tracker or no controller runs
+free. A frame left unanswered for `timeout_wall_s` of wall-clock time (a lost message, a dead
+node) is given up: it is counted, and waiting resumes with the next answer.
+
+Threads: the loop calls `frame_captured`, `must_wait` and reads the counts; the executor calls
+`on_state` and `on_command`. One lock guards the few fields (held for microseconds).
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Callable, Optional
+
+STAMP_TOLERANCE_S = 1e-6      # header stamps are whole nanoseconds: a frame's time survives as one
+ANSWER_TIMEOUT_WALL_S = 5.0   # a frame unanswered this long is lost, not slow
+
+
+class FrameAnswerGate:
+    def __init__(self, timeout_wall_s: float = ANSWER_TIMEOUT_WALL_S,
+                 wall_clock: Callable[[], float] = time.monotonic):
+        self.timeout_wall_s = timeout_wall_s
+        self._wall = wall_clock
+        self._lock = threading.Lock()
+        self._pending_s: Optional[float] = None   # capture time of the frame awaiting its answer
+        self._state_seen = False                  # its /ball_state has arrived
+        self._captured_wall_s = 0.0
+        self._answers_coming = False              # an answer was seen since the last give-up
+        self.frames_answered = 0
+        self.frames_given_up = 0
+        self.wait_wall_s = 0.0                    # wall time spent waiting (for the real-time factor)
+        self._wait_started_wall_s: Optional[float] = None
+
+    def frame_captured(self, time_s: float) -> None:
+        """(loop) Frame captured at simulated time `time_s`: its answer is awaited from now."""
+        with self._lock:
+            self._pending_s, self._state_seen = time_s, False
+            self._captured_wall_s = self._wall()
+
+    def on_state(self, stamp_s: float) -> None:
+        """(executor) A /ball_state stamped `stamp_s` arrived."""
+        with self._lock:
+            if self._pending_s is not None and abs(stamp_s - self._pending_s) <= STAMP_TOLERANCE_S:
+                self._state_seen = True
+
+    def on_command(self) -> None:
+        """(executor) A /plate_cmd arrived: the answer, when the pending frame's state came first."""
+        with self._lock:
+            if self._pending_s is not None and self._state_seen:
+                self._pending_s = None
+                self._answers_coming = True
+                self.frames_answered += 1
+
+    def must_wait(self) -> bool:
+        """(loop) True while the next frame is due and the last one is still unanswered."""
+        with self._lock:
+            now = self._wall()
+            waiting = self._pending_s is not None and self._answers_coming
+            if waiting and now - self._captured_wall_s > self.timeout_wall_s:
+                self.frames_given_up += 1
+                self._pending_s, self._answers_coming, waiting = None, False, False
+            if waiting and self._wait_started_wall_s is None:
+                self._wait_started_wall_s = now
+            elif not waiting and self._wait_started_wall_s is not None:
+                self.wait_wall_s += now - self._wait_started_wall_s
+                self._wait_started_wall_s = None
+            return waiting
+
+
+REPORT_PERIOD_S = 10.0   # wall-clock seconds between two pace lines
+
+
+class PaceReport:
+    """The pace line the simulation logs: how fast simulated time runs and why.
+
+    The camera's rate and resolution are never lowered to suit the machine, since they shape
+    what the controllers see; a machine too slow for them gets slower simulated time instead,
+    and the first line says so with the render time measured."""
+
+    def __init__(self, answers: FrameAnswerGate, camera, world, frame_period_s: float):
+        self.answers, self.camera, self.world = answers, camera, world
+        self.frame_period_s = frame_period_s
+        self._last = None   # (wall s, sim s, wait s, given up)
+        self._explained = False
+
+    def line(self, wall_s: float) -> str:
+        sim_s, wait_s, given_up = self.world.time_s, self.answers.wait_wall_s, self.answers.frames_given_up
+        last, self._last = self._last, (wall_s, sim_s, wait_s, given_up)
+        if last is None or wall_s <= last[0] or sim_s <= last[1]:
+            return ""   # the first call, or paused
+        span_s = wall_s - last[0]
+        factor = (sim_s - last[1]) / span_s
+        waited = min(1.0, (wait_s - last[2]) / span_s)
+        render_ms = 1e3 * self.camera.last_render_s if self.camera is not None else 0.0
+        text = (f"simulated time at {factor:.2f}x real time, t = {sim_s:.1f} s (lock-step: {100 * waited:.0f} % of "
+                f"the wall time waiting for the camera chain's answers")
+        if render_ms > 0.0:
+            text += f"; a frame renders in {render_ms:.1f} ms"
+        text += ")"
+        if given_up > last[3]:
+            text += f"; {given_up - last[3]} frame(s) never answered within {self.answers.timeout_wall_s:g} s"
+        if not self._explained and waited > 0.05:
+            self._explained = True
+            text += (f". This machine answers a frame more slowly than the camera's {1e3 * self.frame_period_s:.1f} "
+                     "ms frame period: simulated time slows down to keep the camera's rate, resolution and latency "
+                     "budget, so the outcome does not depend on the machine")
+        return text
