@@ -28,7 +28,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from ball_balance.benchmark.episode import REFERENCES, EpisodeSpec, reference_protocol, run_episode  # noqa: E402
+from ball_balance.benchmark.episode import (  # noqa: E402
+    REFERENCES,
+    EpisodeSpec,
+    demo_spec,
+    reference_protocol,
+    release_point,
+    run_episode,
+)
 from ball_balance.benchmark.report import (  # noqa: E402
     EPISODE_COLUMNS,
     aggregate,
@@ -76,7 +83,6 @@ def known_controllers():
 
 def run_live(spec: EpisodeSpec, out: Path):
     """One episode of the real graph: sim_balance.sh with the same release rule, reference and domain."""
-    import math
     import os
     import subprocess
 
@@ -84,16 +90,16 @@ def run_live(spec: EpisodeSpec, out: Path):
 
     from ball_balance.benchmark.episode import REFERENCES, EpisodeResult
 
-    rng = np.random.default_rng(spec.seed + 7919)   # the lock-step episodes' release rule
-    radius, angle = rng.uniform(*spec.release_radius_m), rng.uniform(0, 2 * math.pi)
+    x, y = release_point(spec, np.random.default_rng(spec.seed + 7919))   # the lock-step episodes' rule
     ref = REFERENCES[spec.reference]
     folder = out / "live" / f"{spec.controller}_{spec.reference}_{spec.domain}_{spec.seed}"
-    cmd = [str(ROOT / "scripts" / "sim_balance.sh"), "--controller", spec.controller,
-           "--ball", f"{radius * math.cos(angle):.4f}", f"{radius * math.sin(angle):.4f}",
+    cmd = [str(ROOT / "scripts" / "sim_balance.sh"), "--controller", spec.controller, "--ball", f"{x:.4f}", f"{y:.4f}",
            "--domain", spec.domain, "--seed", str(spec.seed), "--duration", str(spec.duration_s),
            "--out", str(folder), "--reference", ref["reference_kind"]]
     if "reference_radius_m" in ref:
         cmd += ["--radius", str(ref["reference_radius_m"]), "--period", str(ref["reference_period_s"])]
+    for name, value in spec.overrides:
+        cmd += ["--param", f"{name}:={value}"]
     env = dict(os.environ)
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=20 * spec.duration_s)
@@ -141,6 +147,9 @@ def main(argv=None) -> int:
     parser.add_argument("--out", default=str(ROOT / "artifacts" / "bench"), help="output folder")
     parser.add_argument("--live", action="store_true",
                         help="run the live multi-process graph (scripts/sim_balance.sh) instead: wall-clock, slow")
+    parser.add_argument("--demo", action="store_true",
+                        help="only the scenario of scripts/run_demo.sh (release at (0.08, -0.05) m, circle after "
+                             "6 s, camera 60 Hz, vision mode, 30 s) for --controllers, --domains and --seed")
     parser.add_argument("--baseline", default="pid",
                         help="the controller the others are compared with on the same seeds (default: pid)")
     parser.add_argument("--combine", nargs="+", metavar="DIR",
@@ -159,10 +168,12 @@ def main(argv=None) -> int:
     references = names(" ".join(args.references), set(REFERENCES), "reference")
     protocols = ["ours", "reference"] if args.protocol == "both" else [args.protocol]
 
+    if args.demo:
+        references, protocols = ["circle"], ["demo"]
     cells = [(c, r, d, p) for p in protocols for r in references for d in domains for c in controllers]
     total = len(cells) * args.episodes
     print(f"closed-loop benchmark: {len(cells)} cells x {args.episodes} episodes = {total} episodes of "
-          f"{args.duration:.0f} s, mode {args.mode}", flush=True)
+          f"{30.0 if args.demo else args.duration:.0f} s, mode {'vision' if args.demo else args.mode}", flush=True)
     results = []
     t_start = time.monotonic()
     for i, (controller, reference, domain, protocol) in enumerate(cells):
@@ -171,6 +182,8 @@ def main(argv=None) -> int:
                                duration_s=args.duration, mode=args.mode)
             if protocol == "reference":
                 spec = reference_protocol(spec)
+            elif protocol == "demo":
+                spec = demo_spec(controller, domain, args.seed + k)
             results.append(run_live(spec, Path(args.out)) if args.live else run_episode(spec))
         done = (i + 1) * args.episodes
         print(f"  [{done}/{total}] {controller} {protocol} {reference} {domain}: "

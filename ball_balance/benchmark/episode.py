@@ -110,6 +110,7 @@ class EpisodeSpec:
     fast_noise_floor_m: float = 0.0005      # pixel quantisation of the real tracker, roughly
     vision_noise_floor: float = 2.0         # sensor noise of a real camera, grey levels (vision mode)
     release_radius_m: tuple = (0.05, 0.10)
+    release_xy_m: tuple = ()                # (x, y): released there instead (release_radius_m unused)
     release_speed_m_s: tuple = (0.0, 0.0)   # rolling speed at release, seeded direction
     ball: str = ""                          # "" (the domain's), "shell" or "solid"
     knobs: tuple = ()                       # DomainKnobs overrides ((name, value), ...)
@@ -124,6 +125,29 @@ class EpisodeSpec:
     # controller without the ramp writes them.
     command_write_hz: float = 500.0
     record: bool = False                    # keep time series (for plots)
+
+
+def release_point(spec: EpisodeSpec, rng) -> tuple:
+    """Where the ball is released (plate frame, m): `release_xy_m`, else a seeded point at a
+    radius in `release_radius_m` (drawn from `rng` either way, so later draws do not change)."""
+    radius = rng.uniform(*spec.release_radius_m)
+    angle = rng.uniform(0, 2 * math.pi)
+    if spec.release_xy_m:
+        return tuple(spec.release_xy_m)
+    return radius * math.cos(angle), radius * math.sin(angle)
+
+
+DEMO_START_DELAY_S = 6.0
+
+
+def demo_spec(controller: str, domain: str = "standard", seed: int = 0, duration_s: float = 30.0) -> EpisodeSpec:
+    """The scenario of scripts/run_demo.sh, lock-stepped: the ball released at rest at
+    (0.08, -0.05) m, balanced at the centre, then a circle r = 0.10 m, T = 10 s from 6 s on;
+    the rendered camera at 60 Hz (config/sim.yaml) and the full tracker, each frame answered
+    one frame period after its capture, as the lock-stepped graph guarantees at the latest."""
+    return EpisodeSpec(controller=controller, domain=domain, reference="circle", seed=seed, duration_s=duration_s,
+                       mode="vision", camera_rate_hz=60.0, vision_delay_s=1.0 / 60.0, release_xy_m=(0.08, -0.05),
+                       overrides=(("reference_start_delay_s", DEMO_START_DELAY_S),), protocol="demo")
 
 
 def reference_protocol(spec: EpisodeSpec) -> EpisodeSpec:
@@ -299,9 +323,7 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
     events = episode_events(spec, knobs)
     world = SimWorld(SimConfig(), knobs, urdf_text=robot_description(), seed=spec.seed)
     rng = np.random.default_rng(spec.seed + 7919)
-    radius = rng.uniform(*spec.release_radius_m)
-    angle = rng.uniform(0, 2 * math.pi)
-    world.reset(HOME_POSITIONS_RAD, (radius * math.cos(angle), radius * math.sin(angle)))
+    world.reset(HOME_POSITIONS_RAD, release_point(spec, rng))
     if spec.release_speed_m_s[1] > 0.0:
         speed, heading = rng.uniform(*spec.release_speed_m_s), rng.uniform(0, 2 * math.pi)
         world.push_ball(speed * math.cos(heading), speed * math.sin(heading))
