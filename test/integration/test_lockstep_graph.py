@@ -1,0 +1,51 @@
+"""Lock-step on a slower machine: the whole simulated graph (camera, tracker, PID, monitor) with
+its rendering slowed to several times a frame period gives the monitor's figures of an
+unslowed run, only later. Both graphs run at once on private domains, so each also has the
+other's load."""
+import re
+from pathlib import Path
+
+import pytest
+
+from harness import ROOT, DomainLease, Launcher
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
+
+DURATION_S = 12.0
+EXTRA_RENDER_S = 0.06   # each frame renders at least 60 ms: over three 16.7 ms frame periods
+
+
+def metrics(folder: Path) -> dict:
+    lines = (folder / "metrics.txt").read_text().splitlines()
+    return {k: float(v) for k, v in (line.split(": ") for line in lines)}
+
+
+@pytest.mark.timeout(900)
+def test_slower_rendering_changes_how_long_the_run_takes_not_its_figures(tmp_path):
+    leases = [DomainLease(), DomainLease()]
+    launchers = [Launcher(lease.domain_id, tmp_path) for lease in leases]
+    graphs = []
+    try:
+        for launcher, extra in zip(launchers, (0.0, EXTRA_RENDER_S), strict=True):
+            out = tmp_path / f"render_plus_{extra:g}"
+            cmd = [str(ROOT / "scripts" / "sim_balance.sh"), "--controller", "pid", "--duration", str(DURATION_S),
+                   "--out", str(out), "--sim-param", f"camera_extra_render_s={extra}"]
+            graphs.append((launcher.start(cmd, name=out.name), out))
+        for graph, _ in graphs:
+            assert graph.wait(timeout=800) == 0, graph.output()[-3000:]
+    finally:
+        for launcher in launchers:
+            launcher.stop_all()
+        for lease in leases:
+            lease.release()
+    quick, slowed = (metrics(out) for _, out in graphs)
+    assert quick["drop"] == slowed["drop"] == 0
+    assert abs(quick["rmse_steady_m"] - slowed["rmse_steady_m"]) <= 1e-3, (quick, slowed)
+    assert abs(quick["settle_s"] - slowed["settle_s"]) <= 0.5, (quick, slowed)
+    renders_ms = [float(ms) for ms in re.findall(r"a frame renders in ([0-9.]+) ms", sim_log(graphs[1][0].output()))]
+    assert renders_ms and min(renders_ms) >= 1e3 * EXTRA_RENDER_S   # it was slowed, and said how fast it ran
+
+
+def sim_log(script_output: str) -> str:
+    match = re.search(r"logs in (/tmp/ball_balance_graph\.\w+)", script_output)
+    return (Path(match.group(1)) / "sim.log").read_text(errors="replace") if match else ""
