@@ -195,6 +195,7 @@ class MujocoSystem(SystemInterface):
         self.overruns = 0
         self.answers: Optional[FrameAnswerGate] = None
         self._last_warn = -math.inf
+        self._last_behind_warn = -math.inf
 
     # ---- lifecycle (executor thread) -----------------------------------------------------
     def on_init(self, info: HardwareInfo) -> CallbackReturn:
@@ -387,6 +388,12 @@ class MujocoSystem(SystemInterface):
                 self.overruns += 1
                 steps = int(0.05 / dt)
                 self._wall_anchor = (wall, self.world.time_s + steps * dt)
+                if wall - self._last_behind_warn > 5.0:
+                    self._last_behind_warn = wall
+                    self.get_logger().warning(
+                        f"{self.get_name()}: pacing realtime fell {behind * 1e3:.0f} ms behind the wall clock "
+                        f"({self.overruns} times so far); simulated time lags it from here. pacing: lockstep "
+                        "slows simulated time instead, with the same outcome on any machine")
             return max(0, steps)
         if not (0.0 < period < 0.1):
             period = self.params["cycle_period"]
