@@ -28,7 +28,9 @@ import time
 from typing import Callable, Optional
 
 STAMP_TOLERANCE_S = 1e-6      # header stamps are whole nanoseconds: a frame's time survives as one
-ANSWER_TIMEOUT_WALL_S = 5.0   # a frame unanswered this long is lost, not slow
+# a frame unanswered this long is lost, not slow; well below the controllers' dead-peer timeout
+# in simulation (peer_timeout_s 5 s in scripts/sim_balance.sh), which also watches /clock progress
+ANSWER_TIMEOUT_WALL_S = 2.0
 
 
 class FrameAnswerGate:
