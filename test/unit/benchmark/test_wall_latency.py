@@ -66,3 +66,19 @@ def test_a_state_after_the_last_clock_sample_read_is_not_counted():
     out = latency.latencies_s()
     assert out.size == 54                           # the states stamped 0.1-0.99 s
     assert np.all(np.abs(out - 0.012) < 1e-6)
+
+
+def test_on_the_stamps_each_frame_is_answered_by_the_command_written_after_its_state():
+    # simulated time at a fifth of real time; the controller stamps its commands with the last
+    # /clock it saw (a 10 ms grid), so the answer to a frame may be stamped before it: the write
+    # order pairs them, the stamps give the figure
+    latency = CameraToCommand()
+    frames_s = np.arange(0.1, 1.0, 1.0 / 30.0)
+    for frame_s in frames_s:
+        latency.add_state(frame_s, WALL0_S + 5.0 * (frame_s + 0.004))
+        latency.add_command(WALL0_S + 5.0 * (frame_s + 0.006), np.floor(frame_s * 100.0) / 100.0)
+    out = latency.stamp_latencies_s()
+    assert out.size == frames_s.size
+    assert np.allclose(out, np.floor(frames_s * 100.0) / 100.0 - frames_s)
+    assert np.all((out < 1e-9) & (out > -0.0101))
+    assert latency.stamp_latencies_s(since_s=0.5).size == np.count_nonzero(frames_s >= 0.5)
