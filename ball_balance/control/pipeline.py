@@ -167,7 +167,9 @@ class TickResult:
     refused: bool = False           # the guard rejected a non-finite/out-of-limit command
     # the reference at this tick's own time (x, y) [m], what /ball_reference publishes with the
     # tick's stamp: `ref` is ahead of it by the look-ahead, so a ball on a moving target would
-    # seem to trail it by that much (None when not engaged)
+    # seem to trail it by that much. The reference as given, without the lead-in from the ball
+    # after an engagement, so that errors measured against it are the benchmark's (None when
+    # not engaged)
     target_m: Optional[tuple] = None
 
 
@@ -244,7 +246,7 @@ class ControlPipeline:
             # a late but otherwise good state: keep controlling on its prediction (capped at
             # max_prediction_s)
             ref, predicted = self._control(now_s, obs)
-            target_p = self._tracked.sample(now_s - self.t_engaged).p
+            target_p = self.reference.sample(now_s - self.t_engaged).p   # the user's, not the lead-in
             target = (float(target_p[0]), float(target_p[1]))
             self._t_lost = None
         elif mode in (Mode.HOLDING, Mode.RETURNING):
