@@ -9,15 +9,18 @@
 
 Only argparse is imported up front; each verb imports rclpy and its modules when it runs,
 so `ros2py topic echo` starts quickly. Failures print one line and exit 1 (Ctrl-C exits 0).
+rclpy's teardown comes after the output and may take TEARDOWN_DEADLINE_S: a command that has
+done its work ends then with its own exit code, even when the teardown never returns.
 """
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import os
 import signal
 import sys
-from typing import List, Optional
+from typing import Callable, List, Optional
 
 PROG = "ros2py"
 QOS_RELIABILITY = ["reliable", "best_effort", "system_default"]
@@ -27,6 +30,12 @@ QOS_DURABILITY = ["volatile", "transient_local", "system_default"]
 LIST_SPIN_TIME_S = 6.0
 WAIT_FOR_NODE_S = 5.0  # discovering a node or topic can take 2-3 s on a loaded machine
 MAX_CACHE_BYTES = 100 * 1024 * 1024  # bag record: rosbag2's default --max-cache-size (about 110 VGA frames)
+# rclpy's teardown (executor, node, context, DDS participant) takes 10-30 ms here; with rclpy
+# 7.1.6 one `topic info` hung in Node.destroy_node for over ten minutes. Past this, the process
+# ends with the command's exit code.
+TEARDOWN_DEADLINE_S = 2.0
+CLOCK_MONOTONIC = 1  # <time.h>
+SIGEV_THREAD = 2  # <signal.h>: on expiry, call a function in a new thread
 
 
 def _verb(subparsers, name: str, target: str, help: str):
@@ -288,6 +297,16 @@ def main(argv: Optional[List[str]] = None) -> int:
     # of a script, `cmd &`, inherits that): `bag record` would otherwise never finish its file
     # on `kill -INT`. ros2cli's verbs and rosbag2 install their own SIGINT handler too.
     signal.signal(signal.SIGINT, signal.default_int_handler)
+    from ball_balance.cli.session import teardowns_deferred
+
+    with teardowns_deferred() as teardowns:
+        code = _run_verb(args)
+        _tear_down_within(TEARDOWN_DEADLINE_S, teardowns, code)
+    return code
+
+
+def _run_verb(args) -> int:
+    """The verb's exit code; its failures as one line on stderr."""
     module_name, function_name = args._target.split(":")
     try:
         from ball_balance.cli.errors import CliError
@@ -300,7 +319,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f"{PROG}: {error}", file=sys.stderr)
         code = 1
     except BrokenPipeError:  # `ros2py topic echo ... | head`
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        _discard_stdout()
         code = 0
     except Exception as error:  # noqa: BLE001 - one line, never a traceback wall
         if os.environ.get("ROS2PY_DEBUG"):
@@ -309,8 +328,79 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f"{PROG}: {type(error).__name__}: {text[0] if text else ''} (ROS2PY_DEBUG=1 shows the traceback)",
               file=sys.stderr)
         code = 1
-    sys.stdout.flush()
     return code or 0
+
+
+def _discard_stdout() -> None:
+    """Its reader has gone: what is still to be written goes nowhere (no error at exit)."""
+    os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+
+
+def _tear_down_within(deadline_s: float, teardowns: List[Callable[[], None]], code: int) -> None:
+    """Run the sessions' rclpy teardowns once the output is out; after deadline_s, _exit(code).
+
+    The deadline is kept outside the interpreter (_exit_after): rclpy's bindings hold the
+    interpreter lock while rcl and the DDS participant tear down, so a hang there would stop
+    any Python thread set to watch it. Dropping the sessions (gc) finalizes their contexts and
+    participants within the deadline too, instead of at interpreter exit.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except BrokenPipeError:
+            _discard_stdout()
+    if not teardowns:
+        return
+    disarm = _exit_after(deadline_s, code)
+    try:
+        for teardown in teardowns:
+            teardown()
+        teardowns.clear()
+        gc.collect()
+    except BaseException:  # noqa: BLE001 - Ctrl-C or a failure in the teardown: the command is done
+        os._exit(code)
+    disarm()
+
+
+def _exit_after(seconds: float, code: int) -> Callable[[], None]:
+    """End the process with _exit(code) after `seconds`, unless the returned disarm() comes first.
+
+    A POSIX timer (timer_create, SIGEV_THREAD) calls libc's _exit in a thread of its own with no
+    Python code on the way, so it fires even while a call into C holds the interpreter lock.
+    Without one, a daemon thread does it (which only a hang that releases the lock lets run).
+    """
+    import ctypes
+
+    class SigEvent(ctypes.Structure):  # struct sigevent: sigval, signal, notify, thread function, attributes
+        _fields_ = [("value", ctypes.c_long), ("signo", ctypes.c_int), ("notify", ctypes.c_int),
+                    ("function", ctypes.c_void_p), ("attributes", ctypes.c_void_p), ("padding", ctypes.c_byte * 48)]
+
+    class TimerSpec(ctypes.Structure):  # struct itimerspec: period, then first expiry (s, ns)
+        _fields_ = [("period_s", ctypes.c_long), ("period_ns", ctypes.c_long),
+                    ("expiry_s", ctypes.c_long), ("expiry_ns", ctypes.c_long)]
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.timer_create.argtypes = [ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p]
+        libc.timer_settime.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p]
+        libc.timer_delete.argtypes = [ctypes.c_void_p]
+        event = SigEvent(value=code, notify=SIGEV_THREAD, function=ctypes.cast(libc._exit, ctypes.c_void_p))
+        whole_s, fraction_s = divmod(seconds, 1.0)
+        expiry = TimerSpec(expiry_s=int(whole_s), expiry_ns=int(fraction_s * 1e9))
+        timer = ctypes.c_void_p()
+        if libc.timer_create(CLOCK_MONOTONIC, ctypes.byref(event), ctypes.byref(timer)) != 0:
+            raise OSError(ctypes.get_errno(), "timer_create failed")
+        if libc.timer_settime(timer, 0, ctypes.byref(expiry), None) != 0:
+            libc.timer_delete(timer)
+            raise OSError(ctypes.get_errno(), "timer_settime failed")
+        return lambda: libc.timer_delete(timer)
+    except (AttributeError, OSError):
+        import threading
+
+        watchdog = threading.Timer(seconds, os._exit, (code,))
+        watchdog.daemon = True
+        watchdog.start()
+        return watchdog.cancel
 
 
 if __name__ == "__main__":

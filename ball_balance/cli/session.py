@@ -6,10 +6,11 @@ moment; so do we. The node is hidden (`_ros2py_<pid>`), serves no parameters and
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import time
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Callable, Dict, Iterator, List, Optional, Tuple
 
 from ball_balance.cli.errors import CliError
 
@@ -62,6 +63,24 @@ SETTLE_S = 2.0
 ANNOUNCE_PHASE_S = 2.0
 
 
+# While the CLI's entry point runs a verb (teardowns_deferred), Session.close() leaves rclpy's
+# teardown here, for the entry point to run once the verb's output is out, under a deadline:
+# rclpy 7.1.6 once spent over ten minutes in Node.destroy_node (destroy_when_not_in_use). None:
+# close() tears down at once.
+_deferred_teardowns: Optional[List[Callable[[], None]]] = None
+
+
+@contextlib.contextmanager
+def teardowns_deferred() -> Iterator[List[Callable[[], None]]]:
+    """Within: Session.close() appends its teardown to the list given, and the caller runs them."""
+    global _deferred_teardowns
+    outer, _deferred_teardowns = _deferred_teardowns, []
+    try:
+        yield _deferred_teardowns
+    finally:
+        _deferred_teardowns = outer
+
+
 class Session:
     """`with Session() as s:` gives s.node, spun by s.spin_until(...)."""
 
@@ -86,6 +105,13 @@ class Session:
         self.close()
 
     def close(self) -> None:
+        """Tear rclpy down now, or leave that to the entry point (teardowns_deferred)."""
+        if _deferred_teardowns is None:
+            self.teardown()
+        elif self.teardown not in _deferred_teardowns:
+            _deferred_teardowns.append(self.teardown)
+
+    def teardown(self) -> None:
         try:
             self.executor.shutdown(timeout_sec=0.5)
             self.node.destroy_node()
