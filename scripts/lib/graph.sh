@@ -15,25 +15,42 @@ start() {  # start NAME CMD...: in the background, output to $LOGS/NAME.log
 # to their log)
 exec 3>&2
 
+# Each ros2py call runs under `timeout`: one that hangs (rclpy's teardown has, for minutes)
+# must not hold the start-up. A call gets ROS2PY_TIMEOUT_S (SIGTERM, SIGKILL 5 s later); a
+# discovery call takes up to about 7 s on a loaded machine.
+ROS2PY_TIMEOUT_S="${ROS2PY_TIMEOUT_S:-20}"
+ros2py_bounded() {  # ros2py_bounded SECONDS ARGS...: `ros2py ARGS...`, ended after SECONDS (status 124 or 137)
+  local seconds="$1"; shift
+  timeout -k 5 "$seconds" ros2py "$@"
+}
+
 # The graph scripts start the simulation paused (start_paused=true): while the nodes come up,
 # a domain's push or a plate out of level would move the ball before any controller acts.
 # `start resume resume_when TOPIC=Publisher|Subscription ...` waits until each topic has one,
 # resumes the simulation, then idles as a process of the graph (a timeout ends the graph).
-wait_for_endpoint() {  # wait_for_endpoint TOPIC Publisher|Subscription: up to 120 s
-  local info _
-  for _ in $(seq 240); do
-    info="$(ros2py topic info "$1" 2>/dev/null || true)"
-    [[ "$info" == *"$2 count: "[1-9]* ]] && return 0
+wait_for_endpoint() {  # wait_for_endpoint TOPIC Publisher|Subscription [SECONDS]: up to SECONDS (120)
+  local topic="$1" kind="$2" limit="${3:-120}"
+  local end=$((SECONDS + limit)) left info status=0
+  while ((left = end - SECONDS, left > 0)); do
+    status=0
+    info="$(ros2py_bounded $((left < ROS2PY_TIMEOUT_S ? left : ROS2PY_TIMEOUT_S)) topic info "$topic" 2>/dev/null)" \
+      || status=$?
+    [[ "$info" == *"$kind count: "[1-9]* ]] && return 0
     sleep 0.5
   done
-  echo "$(basename "$0"): no ${2,,} on $1 after 120 s" >&3
+  local hung=""
+  ((status == 124 || status == 137)) && hung=" (the last \`ros2py topic info $topic\` did not answer in time)"
+  echo "$(basename "$0"): no ${kind,,} on $topic after $limit s$hung" >&3
   return 1
 }
 resume_when() {
   local spec
   for spec in "$@"; do wait_for_endpoint "${spec%=*}" "${spec#*=}" || return 3; done
   # a manager that dies between the topics and the call would leave it waiting forever
-  ros2py service call --timeout 30 /sim/set_pause std_srvs/srv/SetBool "{data: false}" || return 3
+  if ! ros2py_bounded 60 service call --timeout 30 /sim/set_pause std_srvs/srv/SetBool "{data: false}"; then
+    echo "$(basename "$0"): the simulation was not resumed: the call to /sim/set_pause failed or timed out" >&3
+    return 3
+  fi
   echo "$(basename "$0"): simulation resumed (the graph is up)" >&3
   exec sleep infinity
 }
