@@ -53,7 +53,6 @@ class ControllerManager:
         self._switch_done = threading.Event()
         self._handoff = threading.Lock()  # pending plan: taken by the loop or withdrawn, never both
         self._cycle = 0
-        self._clock_s = float("nan")   # the hardware clock after the last read
         self._failed: List[str] = []  # reused every cycle
         self._failed_controllers: List[ControllerSpec] = []
         self.version = 0  # bumped on every visible change (lists, activity, statistics names)
@@ -411,9 +410,7 @@ class ControllerManager:
         if failed:
             self._hardware_failed(failed)
         t_read = _time.monotonic()
-        clock = self.rm.clock_component
-        if clock is None or self._clock_moved(clock.plugin.now()):
-            self._update(time, period)
+        self._update(time, period)
         t_update = _time.monotonic()
         self.rm.write(time, period, self._cycle, failed)
         if failed:
@@ -428,13 +425,6 @@ class ControllerManager:
         self.write_time.add(times.write_time)
         self.loop_stats.add(start, end)
         self._cycle += 1
-
-    def _clock_moved(self, now: float) -> bool:
-        """False when a hardware clock stood still over this cycle's read (a paused or held
-        simulation): then no controller is updated, as nothing has happened to sample;
-        commands already written still reach the hardware."""
-        moved, self._clock_s = now != self._clock_s, now
-        return moved
 
     def _update(self, time: float, period: float) -> None:
         cycle, failures = self._cycle, self._failed_controllers

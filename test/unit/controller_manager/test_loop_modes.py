@@ -116,21 +116,6 @@ def test_simulated_clock_from_the_hardware_drives_controller_time():
     assert cm.now() == pytest.approx(1000.0 + 0.001 * loop.cycles, abs=0.002)
 
 
-def test_no_controller_updates_while_the_hardware_clock_stands_still():
-    """A paused or held simulation: cycles go on, but with nothing new to sample no controller runs."""
-    cm = make_manager(urdf=MOCK_UR.replace("mock_components/GenericSystem", "cm_helpers:SimClockSystem"))
-    counter = spawn(cm, "counter", COUNTING)
-    system = cm.rm.components["mock_ur"].plugin
-    run(cm, 10)
-    assert counter.calls == 10
-    system.read = lambda time, period: return_type.OK   # the clock stops
-    run(cm, 10)
-    assert counter.calls == 10
-    del system.read              # and runs again
-    run(cm, 5)
-    assert counter.calls == 15
-
-
 def test_hardware_driven_mode_lets_a_blocking_read_set_the_pace():
     cm = make_manager(rate=500, urdf=MOCK_UR.replace("mock_components/GenericSystem", "cm_helpers:BlockingSystem"))
     loop = ControlLoop(cm, expect_blocking_read_write=True)
