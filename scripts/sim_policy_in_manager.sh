@@ -63,18 +63,25 @@ esac
 SIM_CONFIG="$ROOT/config/sim.yaml"
 ((TRUTH_FED)) && SIM_CONFIG="$ROOT/config/sim_truth_fed.yaml"
 LOGS="$(mktemp -d /tmp/ball_balance_graph.XXXXXX)"
-if [[ -n "$TILT_LAW$REFERENCE$RADIUS$PERIOD" ]]; then
+source "$ROOT/scripts/lib/realtime.sh"
+realtime_for 2   # the controller manager (with the controller in it), the tracker
+RT_OFF=()
+STEP_PRIORITY=""
+((REALTIME)) || { RT_OFF=(-p thread_priority:=0); STEP_PRIORITY=0; }
+if [[ -n "$TILT_LAW$REFERENCE$RADIUS$PERIOD$STEP_PRIORITY" ]]; then
   # the controller's node takes one parameter file: the chosen one with these values replaced
   # (checked by the controller's schema at configure)
   python - "$PARAMS_FILE" "$CONTROLLER" "tilt_law=$TILT_LAW" "reference_kind=$REFERENCE" \
-    "reference_radius_m=$RADIUS" "reference_period_s=$PERIOD" >"$LOGS/controller_params.yaml" <<'EOF'
+    "reference_radius_m=$RADIUS" "reference_period_s=$PERIOD" "step_thread_priority=$STEP_PRIORITY" \
+    >"$LOGS/controller_params.yaml" <<'EOF'
 import sys, yaml
 path, name, *changes = sys.argv[1:]
 values = yaml.safe_load(open(path))
 for change in changes:
     key, _, text = change.partition("=")
     if text:
-        values[name]["ros__parameters"][key] = text if key in ("tilt_law", "reference_kind") else float(text)
+        values[name]["ros__parameters"][key] = (text if key in ("tilt_law", "reference_kind")
+                                                else int(text) if key == "step_thread_priority" else float(text))
 yaml.safe_dump(values, sys.stdout)
 EOF
   PARAMS_FILE="$LOGS/controller_params.yaml"
@@ -89,7 +96,8 @@ echo "sim_policy_in_manager.sh: ${TILT_LAW:-policy} tilt law in the controller m
 start sim "$ROOT/scripts/sim_arm.sh" --sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" \
   --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y" --param start_paused=true
 if ((! TRUTH_FED)); then
-  start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true
+  start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
+    ${RT_OFF[@]+"${RT_OFF[@]}"}
 fi
 # load and configure (the model is checked here: a misfit fails with one line)
 if ! spawner "$CONTROLLER" -t ball_balance_controllers/BallBalanceController -p "$PARAMS_FILE" --inactive \
@@ -105,7 +113,7 @@ fi
 # ends the graph with its log lines, exit code 3).
 handover() {
   wait_for_endpoint /ball_reference Subscription || return 3
-  ros2py control switch_controllers --spin-time 30 --activate "$CONTROLLER" \
+  ros2py_bounded 60 control switch_controllers --spin-time 30 --activate "$CONTROLLER" \
     --deactivate forward_position_controller --strict || return 3
   echo "sim_policy_in_manager.sh: $CONTROLLER active (forward_position_controller inactive)" >&3
   resume_when /ball_state=Publisher

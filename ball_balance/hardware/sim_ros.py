@@ -38,6 +38,7 @@ from ball_balance.tf.transform import Transform
 # image_reliable=true: reliable keep-last 2 (also serves best-effort subscribers).
 IMAGE_SENSOR_DATA = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
 IMAGE_RELIABLE = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+PARTICIPANT_PREFIX_BYTES = 12   # an RTPS GUID: participant prefix (12 bytes), then the entity id
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
 
 
@@ -181,8 +182,22 @@ class SimRosIo:
             self.node.create_subscription(Vector3Stamped, "/plate_cmd", lambda msg: answers.on_command(), 10),
         ]
         self._pace = PaceReport(answers, camera, self.world, 1.0 / self.params["camera_rate_hz"])
-        self._pace_timer = self.node.create_timer(REPORT_PERIOD_S, self._report_pace,
-                                                  clock=RosClock(clock_type=ClockType.STEADY_TIME))
+        steady = RosClock(clock_type=ClockType.STEADY_TIME)
+        self._pace_timer = self.node.create_timer(REPORT_PERIOD_S, self._report_pace, clock=steady)
+        self._answers = answers
+        self._hosted_timer = self.node.create_timer(1.0, self._check_hosted_controller, clock=steady)
+
+    def _check_hosted_controller(self) -> None:
+        """Whether /plate_cmd comes from this process: a controller hosted in the manager (on a
+        node of its own, like every ros2_control controller). The nodes of one process share
+        its DDS participant, whose GUID prefix begins every endpoint's GID."""
+        name, namespace = self.node.get_name(), self.node.get_namespace()
+        ours = {bytes(info.endpoint_gid[:PARTICIPANT_PREFIX_BYTES])
+                for info in self.node.get_publishers_info_by_topic("/sim/ball_truth")
+                if info.node_name == name and info.node_namespace == namespace}
+        self._answers.answer_on_state = any(
+            bytes(info.endpoint_gid[:PARTICIPANT_PREFIX_BYTES]) in ours
+            for info in self.node.get_publishers_info_by_topic("/plate_cmd"))
 
     def _report_pace(self) -> None:
         line = self._pace.line(time.monotonic())
@@ -255,8 +270,9 @@ class SimRosIo:
                        self.clock_pub, self.detection_pub, self.trace_pub):
             if entity is not None:
                 self.node.destroy_publisher(entity)
-        if getattr(self, "_pace_timer", None) is not None:
-            self.node.destroy_timer(self._pace_timer)
+        for timer in (getattr(self, "_pace_timer", None), getattr(self, "_hosted_timer", None)):
+            if timer is not None:
+                self.node.destroy_timer(timer)
         for service in self.services:
             self.node.destroy_service(service)
         for subscription in self.subscriptions:

@@ -14,6 +14,11 @@ past a frame, until the answer to that frame has come back:
 The latency budget is therefore one camera period of simulated time, whatever the machine; a
 faster chain answers sooner and the simulation does not wait at all.
 
+A controller hosted in the simulation's own process (BallBalanceController in the controller
+manager) steps on the manager's time grid, which does not move while the simulation waits:
+for it the state's arrival in the process is the answer (`answer_on_state`), and its step
+follows within one control period of simulated time.
+
 Waiting starts with the first answer seen, so a graph with no tracker or no controller runs
 free. A frame left unanswered for `timeout_wall_s` of wall-clock time (a lost message, a dead
 node) is given up: it is counted, and waiting resumes with the next answer.
@@ -47,6 +52,7 @@ class FrameAnswerGate:
         self.frames_given_up = 0
         self.wait_wall_s = 0.0                    # wall time spent waiting (for the real-time factor)
         self._wait_started_wall_s: Optional[float] = None
+        self.answer_on_state = False              # the controller is in this process (see above)
 
     def frame_captured(self, time_s: float) -> None:
         """(loop) Frame captured at simulated time `time_s`: its answer is awaited from now."""
@@ -59,14 +65,19 @@ class FrameAnswerGate:
         with self._lock:
             if self._pending_s is not None and abs(stamp_s - self._pending_s) <= STAMP_TOLERANCE_S:
                 self._state_seen = True
+                if self.answer_on_state:
+                    self._answered()
 
     def on_command(self) -> None:
         """(executor) A /plate_cmd arrived: the answer, when the pending frame's state came first."""
         with self._lock:
             if self._pending_s is not None and self._state_seen:
-                self._pending_s = None
-                self._answers_coming = True
-                self.frames_answered += 1
+                self._answered()
+
+    def _answered(self) -> None:
+        self._pending_s = None
+        self._answers_coming = True
+        self.frames_answered += 1
 
     def must_wait(self) -> bool:
         """(loop) True while the next frame is due and the last one is still unanswered."""

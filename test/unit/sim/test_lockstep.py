@@ -122,3 +122,16 @@ def test_pace_report_states_the_real_time_factor_and_why(wall):
     assert "0.25x real time" in line and "60 %" in line and "40.0 ms" in line and "slows down" in line
     World.time_s = 5.0
     assert "slows down" not in report.line(wall.now_s + 20.0)   # explained once
+
+
+def test_a_controller_in_this_process_answers_with_the_states_arrival(system, wall):
+    cycles(system, 1)
+    system.answers.answer_on_state = True
+    system.answers.on_state(system.captured[-1])   # no /plate_cmd needed
+    cycles(system, 12)
+    frame = system.captured[-1]
+    cycles(system, 50, wall)
+    assert system.captured[-1] == frame            # held until its state arrives
+    system.answers.on_state(frame)
+    cycles(system, 1)
+    assert system.captured[-1] > frame
