@@ -30,12 +30,14 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Callable, Optional
+from collections import deque
+from typing import Callable, Deque, Optional
 
 STAMP_TOLERANCE_S = 1e-6      # header stamps are whole nanoseconds: a frame's time survives as one
 # a frame unanswered this long is lost, not slow; well below the controllers' dead-peer timeout
 # in simulation (peer_timeout_s 5 s in scripts/sim_balance.sh), which also watches /clock progress
 ANSWER_TIMEOUT_WALL_S = 2.0
+UNANSWERED_KEPT = 64          # frames remembered while running free (about 1 s at 60 Hz)
 
 
 class FrameAnswerGate:
@@ -44,49 +46,56 @@ class FrameAnswerGate:
         self.timeout_wall_s = timeout_wall_s
         self._wall = wall_clock
         self._lock = threading.Lock()
-        self._pending_s: Optional[float] = None   # capture time of the frame awaiting its answer
-        self._state_seen = False                  # its /ball_state has arrived
-        self._captured_wall_s = 0.0
-        self._answers_coming = False              # an answer was seen since the last give-up
+        # capture times of the frames not answered yet, oldest first: while the simulation runs
+        # free (before the first answer, after a give-up) a slow chain answers an older frame
+        # than the newest, and that answer must count, or waiting would never start
+        self._unanswered: Deque[float] = deque(maxlen=UNANSWERED_KEPT)
+        self._state_seen_s: Optional[float] = None   # the newest of them whose /ball_state arrived
+        self._captured_wall_s = 0.0                  # when the newest was captured
+        self._answers_coming = False                 # an answer was seen since the last give-up
         self.frames_answered = 0
         self.frames_given_up = 0
-        self.wait_wall_s = 0.0                    # wall time spent waiting (for the real-time factor)
+        self.wait_wall_s = 0.0                       # wall time spent waiting (for the real-time factor)
         self._wait_started_wall_s: Optional[float] = None
-        self.answer_on_state = False              # the controller is in this process (see above)
+        self.answer_on_state = False                 # the controller is in this process (see above)
 
     def frame_captured(self, time_s: float) -> None:
         """(loop) Frame captured at simulated time `time_s`: its answer is awaited from now."""
         with self._lock:
-            self._pending_s, self._state_seen = time_s, False
+            self._unanswered.append(time_s)
             self._captured_wall_s = self._wall()
 
     def on_state(self, stamp_s: float) -> None:
         """(executor) A /ball_state stamped `stamp_s` arrived."""
         with self._lock:
-            if self._pending_s is not None and abs(stamp_s - self._pending_s) <= STAMP_TOLERANCE_S:
-                self._state_seen = True
+            if any(abs(stamp_s - t) <= STAMP_TOLERANCE_S for t in self._unanswered):
+                self._state_seen_s = stamp_s
                 if self.answer_on_state:
                     self._answered()
 
     def on_command(self) -> None:
-        """(executor) A /plate_cmd arrived: the answer, when the pending frame's state came first."""
+        """(executor) A /plate_cmd arrived: the answer, when an unanswered frame's state came first."""
         with self._lock:
-            if self._pending_s is not None and self._state_seen:
+            if self._state_seen_s is not None:
                 self._answered()
 
     def _answered(self) -> None:
-        self._pending_s = None
+        """The frame whose state was seen, and every older one, are answered."""
+        while self._unanswered and self._unanswered[0] <= self._state_seen_s + STAMP_TOLERANCE_S:
+            self._unanswered.popleft()
+        self._state_seen_s = None
         self._answers_coming = True
         self.frames_answered += 1
 
     def must_wait(self) -> bool:
-        """(loop) True while the next frame is due and the last one is still unanswered."""
+        """(loop) True while the newest frame is still unanswered (and answers are coming)."""
         with self._lock:
             now = self._wall()
-            waiting = self._pending_s is not None and self._answers_coming
+            waiting = bool(self._unanswered) and self._answers_coming
             if waiting and now - self._captured_wall_s > self.timeout_wall_s:
                 self.frames_given_up += 1
-                self._pending_s, self._answers_coming, waiting = None, False, False
+                self._unanswered.clear()
+                self._state_seen_s, self._answers_coming, waiting = None, False, False
             if waiting and self._wait_started_wall_s is None:
                 self._wait_started_wall_s = now
             elif not waiting and self._wait_started_wall_s is not None:

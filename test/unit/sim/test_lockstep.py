@@ -135,3 +135,19 @@ def test_a_controller_in_this_process_answers_with_the_states_arrival(system, wa
     system.answers.on_state(frame)
     cycles(system, 1)
     assert system.captured[-1] > frame
+
+
+def test_waiting_starts_even_when_the_chain_is_slower_than_a_frame_from_the_start(system, wall):
+    """Running free, a slow chain answers an older frame than the newest: that answer counts."""
+    cycles(system, 40)                             # several frames captured, none answered
+    assert len(system.captured) >= 3
+    answer(system, system.captured[0])            # the first frame's answer, late
+    newest = system.captured[-1]
+    cycles(system, 100, wall)
+    assert system.captured[-1] == newest           # held before the next capture
+    assert system.now() == pytest.approx(newest + 1 / RATE_HZ, abs=1.5 * PERIOD_S)
+    assert system.answers.must_wait()
+    answer(system, system.captured[-2])            # an answer to a frame before the newest: still held
+    assert system.answers.must_wait()
+    answer(system, system.captured[-1])
+    assert not system.answers.must_wait()
