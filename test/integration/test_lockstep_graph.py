@@ -11,7 +11,7 @@ from harness import ROOT, DomainLease, Launcher
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
-DURATION_S = 12.0
+DURATION_S = 9.0
 EXTRA_RENDER_S = 0.06   # each frame renders at least 60 ms: over three 16.7 ms frame periods
 
 
