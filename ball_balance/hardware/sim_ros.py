@@ -30,7 +30,7 @@ from ball_balance.robot import BASE_FRAME
 from ball_balance.ros.images import encode_image
 from ball_balance.sim.config import camera_intrinsics
 from ball_balance.sim.lockstep import REPORT_PERIOD_S, PaceReport
-from ball_balance.tf.ros import StaticTransformBroadcaster, transform_to_msg
+from ball_balance.tf.ros import StaticTransformBroadcaster, stamp_to_ns, transform_to_msg
 from ball_balance.tf.transform import Transform
 
 # Images: sensor-data QoS (docs/design.md section 4), keep-last 1 (a best-effort frame is never resent, older
@@ -89,6 +89,7 @@ class SimRosIo:
             node.create_service(SetBool, "/sim/set_pause", self._handle_pause),
             node.create_service(Trigger, "/sim/step_simulation", self._handle_step),
         ]
+        self.timers = []   # lock-step's (follow_answers)
         self.subscriptions = [
             node.create_subscription(WrenchStamped, "/sim/ball_wrench", self._on_wrench, 10),
             node.create_subscription(Vector3Stamped, "/sim/push_ball", self._on_push, 10),
@@ -178,14 +179,13 @@ class SimRosIo:
         arrivals, and say every REPORT_PERIOD_S how fast simulated time runs and why."""
         self.subscriptions += [
             self.node.create_subscription(BallState, "/ball_state", lambda msg: answers.on_state(
-                msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 - self.stamp_offset_s), qos_profile_sensor_data),
+                stamp_to_ns(msg.header.stamp) * 1e-9 - self.stamp_offset_s), qos_profile_sensor_data),
             self.node.create_subscription(Vector3Stamped, "/plate_cmd", lambda msg: answers.on_command(), 10),
         ]
         self._pace = PaceReport(answers, camera, self.world, 1.0 / self.params["camera_rate_hz"])
         steady = RosClock(clock_type=ClockType.STEADY_TIME)
-        self._pace_timer = self.node.create_timer(REPORT_PERIOD_S, self._report_pace, clock=steady)
-        self._answers = answers
-        self._hosted_timer = self.node.create_timer(1.0, self._check_hosted_controller, clock=steady)
+        self.timers = [self.node.create_timer(REPORT_PERIOD_S, self._report_pace, clock=steady),
+                       self.node.create_timer(1.0, self._check_hosted_controller, clock=steady)]
 
     def _check_hosted_controller(self) -> None:
         """Whether /plate_cmd comes from this process: a controller hosted in the manager (on a
@@ -195,7 +195,7 @@ class SimRosIo:
         ours = {bytes(info.endpoint_gid[:PARTICIPANT_PREFIX_BYTES])
                 for info in self.node.get_publishers_info_by_topic("/sim/ball_truth")
                 if info.node_name == name and info.node_namespace == namespace}
-        self._answers.answer_on_state = any(
+        self._pace.answers.answer_on_state = any(
             bytes(info.endpoint_gid[:PARTICIPANT_PREFIX_BYTES]) in ours
             for info in self.node.get_publishers_info_by_topic("/plate_cmd"))
 
@@ -270,9 +270,8 @@ class SimRosIo:
                        self.clock_pub, self.detection_pub, self.trace_pub):
             if entity is not None:
                 self.node.destroy_publisher(entity)
-        for timer in (getattr(self, "_pace_timer", None), getattr(self, "_hosted_timer", None)):
-            if timer is not None:
-                self.node.destroy_timer(timer)
+        for timer in self.timers:
+            self.node.destroy_timer(timer)
         for service in self.services:
             self.node.destroy_service(service)
         for subscription in self.subscriptions:
