@@ -46,12 +46,19 @@ CONDITIONS = {   # name: (busy processes, pinned to CPU 0, extra environment, ex
 
 
 def run_condition(name: str, controller: str, duration_s: float, out: Path) -> dict:
+    from ball_balance.benchmark.episode import REFERENCES, demo_spec
+
     busy, pinned, env_extra, extra = CONDITIONS[name]
     folder = out / name
     pin = ["taskset", "-c", "0"] if pinned else []
-    cmd = [*pin, str(ROOT / "scripts" / "sim_balance.sh"), "--controller", controller, "--ball", "0.08", "-0.05",
-           "--reference", "circle", "--radius", "0.10", "--period", "10", "--start-delay", "6",
+    spec = demo_spec(controller, duration_s=duration_s)   # the scenario, as the lock-stepped row runs it
+    reference = REFERENCES[spec.reference]
+    cmd = [*pin, str(ROOT / "scripts" / "sim_balance.sh"), "--controller", controller,
+           "--ball", *(str(v) for v in spec.release_xy_m), "--reference", reference["reference_kind"],
+           "--radius", str(reference["reference_radius_m"]), "--period", str(reference["reference_period_s"]),
            "--duration", str(duration_s), "--out", str(folder), *extra]
+    for param, value in spec.overrides:
+        cmd += ["--param", f"{param}:={value}"]
     # a ROS domain of its own: another graph on the machine must not answer for this one
     env = dict(os.environ, ROS_DOMAIN_ID=str(PRIVATE_DOMAINS.start + os.getpid() % len(PRIVATE_DOMAINS)),
                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", **env_extra)

@@ -29,4 +29,3 @@ realtime_for() {
   export BALL_BALANCE_REALTIME
   ((REALTIME)) && BALL_BALANCE_REALTIME=on || BALL_BALANCE_REALTIME=off   # the scripts it starts agree
 }
-
