@@ -172,8 +172,9 @@ def main(argv=None) -> int:
         references, protocols = ["circle"], ["demo"]
     cells = [(c, r, d, p) for p in protocols for r in references for d in domains for c in controllers]
     total = len(cells) * args.episodes
+    shown = demo_spec(controllers[0]) if args.demo else EpisodeSpec(duration_s=args.duration, mode=args.mode)
     print(f"closed-loop benchmark: {len(cells)} cells x {args.episodes} episodes = {total} episodes of "
-          f"{30.0 if args.demo else args.duration:.0f} s, mode {'vision' if args.demo else args.mode}", flush=True)
+          f"{shown.duration_s:.0f} s, mode {shown.mode}", flush=True)
     results = []
     t_start = time.monotonic()
     for i, (controller, reference, domain, protocol) in enumerate(cells):
