@@ -53,6 +53,7 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(f for f in glob.glob("config/*") if "." in f)),
         (f"share/{PACKAGE}/config/policies", sorted(glob.glob("config/policies/*"))),
+        (f"share/{PACKAGE}/config/paths", sorted(glob.glob("config/paths/*"))),
         (f"share/{PACKAGE}/scripts", sorted(glob.glob("scripts/*.sh"))),
         (f"share/{PACKAGE}/scripts/lib", sorted(glob.glob("scripts/lib/*.sh"))),
     ],

@@ -98,6 +98,8 @@ def run_live(spec: EpisodeSpec, out: Path):
            "--out", str(folder), "--reference", ref["reference_kind"]]
     if "reference_radius_m" in ref:
         cmd += ["--radius", str(ref["reference_radius_m"]), "--period", str(ref["reference_period_s"])]
+    if "reference_csv_path" in ref:
+        cmd += ["--param", f"reference_csv_path:={ref['reference_csv_path']}"]
     for name, value in spec.overrides:
         cmd += ["--param", f"{name}:={value}"]
     env = dict(os.environ)

@@ -31,6 +31,7 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Dict, Optional, Tuple
 
 import numpy as np
@@ -43,10 +44,16 @@ from ball_balance.robot import HOME_POSITIONS_RAD, JOINT_NAMES, robot_descriptio
 from controller_manager_py.controllers.command_ramp import CommandRamp
 from controller_manager_py.parameters import validate
 
+PATHS_DIR = Path(__file__).resolve().parents[2] / "config" / "paths"   # CSV paths of REFERENCES
 REFERENCES = {
     "stationary": dict(reference_kind="stationary"),
     "circle": dict(reference_kind="circle", reference_radius_m=0.10, reference_period_s=10.0),
     "figure_eight": dict(reference_kind="figure_eight", reference_radius_m=0.10, reference_period_s=12.0),
+    # a 0.15 m square (the radius is its half side), one lap in 8 s
+    "square": dict(reference_kind="square", reference_radius_m=0.075, reference_period_s=8.0),
+    # a CSV path: a spiral in and out, r = 0.10 -> 0.03 -> 0.10 m, 2 turns in 16 s, a row every
+    # 0.2 s (config/paths/make_spiral.py writes it); the file from the repository, whatever the cwd
+    "spiral": dict(reference_kind="csv", reference_csv_path=str(PATHS_DIR / "spiral.csv")),
 }
 BALLS = {"": None, "shell": True, "solid": False}   # EpisodeSpec.ball -> DomainKnobs.ball_shell
 
@@ -187,8 +194,6 @@ def controller_schema(controller: str):
 def controller_values(controller: str, reference: str, overrides=()) -> dict:
     """Validated controller parameters: schema defaults + config/<controller>.yaml (its node's
     ros__parameters) + the reference + overrides."""
-    from pathlib import Path
-
     import yaml
 
     path = Path(__file__).resolve().parents[2] / "config" / f"{controller}.yaml"
@@ -204,8 +209,6 @@ def controller_values(controller: str, reference: str, overrides=()) -> dict:
 
 def tracker_values() -> dict:
     """The tracker parameters the graph runs with (config/ball_tracker.yaml), for both modes."""
-    from pathlib import Path
-
     import yaml
 
     path = Path(__file__).resolve().parents[2] / "config" / "ball_tracker.yaml"

@@ -8,11 +8,13 @@ import numpy as np
 import pytest
 
 from ball_balance.benchmark.episode import (
+    REFERENCES,
     EpisodeSpec,
     Exposure,
     Force,
     Occlusion,
     Push,
+    controller_values,
     episode_events,
     episode_knobs,
     reference_protocol,
@@ -20,6 +22,7 @@ from ball_balance.benchmark.episode import (
 )
 from ball_balance.benchmark.metrics import episode_metrics, recovery_times
 from ball_balance.benchmark.report import aggregate, format_table, late_pushes
+from ball_balance.control import config as control_config
 from ball_balance.sim.config import SimConfigError
 
 
@@ -154,3 +157,12 @@ def test_the_ramped_commands_are_written_at_the_managers_update_rate():
 
     manager = yaml.safe_load((ROOT / "config" / "ur_controllers.yaml").read_text())["controller_manager"]
     assert EpisodeSpec().command_write_hz == manager["ros__parameters"]["update_rate"]
+
+
+def test_the_square_and_the_spiral_csv_build_from_any_working_directory(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)   # the spiral's CSV is found from the repository, not the cwd
+    for name, period in (("square", 8.0), ("spiral", 16.0)):
+        assert name in REFERENCES
+        reference = control_config.reference(controller_values("pid", name))
+        assert reference.period_s == pytest.approx(period)
+        assert np.all(np.abs(reference.path_points(50)) <= 0.1 + 1e-9)
