@@ -6,6 +6,7 @@ builds one from the controller's parameters; `path_points` samples one period fo
 """
 from __future__ import annotations
 
+import bisect
 import csv
 import math
 from dataclasses import dataclass
@@ -87,11 +88,42 @@ class FigureEight(Reference):
         return RefSample(self.centre + p, v, a)
 
 
-class Waypoints(Reference):
-    """Piecewise-linear path through timed points (t_i, x_i, y_i), repeating with period_s.
+# Smoothing of waypoint paths (Waypoints, hold=False).
+# The acceleration a turn at a point may ask of the ball: a feed-forward tilt of 0.2 / (0.6 g) =
+# 0.034 rad, under a quarter of the controllers' tilt limit (max_tilt_cmd_rad 0.15), which leaves
+# the rest to the feedback; the benchmark's circle and figure-eight ask 0.04 and 0.055 m/s^2. The
+# tracking error on a corner grows with it and the corner cut shrinks (the PID on the 0.15 m square
+# in 8 s: 0.6 / 0.9 / 1.9 mm RMSE, 14 / 7 / 3.5 mm cut at 0.1 / 0.2 / 0.4 m/s^2).
+ACCEL_MAX_M_S2 = 0.2
+# A turn is spread over a longer time than the bound needs while its path stays this close to the
+# point: a tenth of the ball's radius (plate_geometry.BALL_RADIUS_M), below the controllers'
+# tracking error. It lets a densely drawn path (a CSV every 0.1-0.2 s) turn smoothly along its
+# whole length without moving it.
+CORNER_CUT_M = 0.002
 
-    Used for the square, the CSV path and (with `hold=True`) the step sequence, where each
-    point is held until the next time instead of interpolated.
+
+class Waypoints(Reference):
+    """Path through timed points (t_i, x_i, y_i), repeating with period_s (inf: not looping).
+
+    Used for the square and the CSV path: straight segments at constant velocity between the
+    points, joined at each point by a parabolic blend (constant acceleration) centred on t_i,
+    so the velocity is continuous and the acceleration bounded. At point i the velocity turns
+    by dv_i (from the segment before to the one after; a looping path closes from the last point
+    back to the first, a path that does not loop rests before its first point and after its
+    last), over the blend time
+
+        T_i = min(max(8 CORNER_CUT_M / |dv_i|, |dv_i| / ACCEL_MAX_M_S2), S_prev, S_next)
+
+    the longest turn that passes within CORNER_CUT_M of the point, but no shorter than the
+    acceleration bound needs, and no longer than either neighbouring segment S (so that blends
+    never overlap). The path passes |dv_i| T_i / 8 from point i at t_i, and its acceleration
+    |dv_i| / T_i is at most ACCEL_MAX_M_S2 wherever the neighbouring segments leave room for
+    |dv_i| / ACCEL_MAX_M_S2 (`corner_cut_m` and `accel_max_m_s2` give the path's own figures).
+    A densely sampled path (a CSV drawn every 0.1-0.2 s) gets blends as long as its segments,
+    touching: a piecewise-parabolic path through the segments' midpoints whose acceleration
+    follows the drawn curvature. The times of the points are kept.
+
+    With `hold=True` (the step sequence) each point is held until the next time instead.
     """
 
     def __init__(self, times_s: Sequence[float], points_m: Sequence[Sequence[float]],
@@ -99,31 +131,86 @@ class Waypoints(Reference):
         self.times_s = np.asarray(times_s, dtype=float)
         self.points_m = np.asarray(points_m, dtype=float).reshape(-1, 2)
         self.period_s, self.hold = period_s, hold
+        if not hold:
+            self._build_blends()
+
+    def _build_blends(self) -> None:
+        """Pieces of constant acceleration: start times, anchor time, position and velocity at
+        the anchor and acceleration, so that sample() is one bisection and a quadratic."""
+        times, pts = self.times_s, self.points_m
+        n = len(times)
+        loop = math.isfinite(self.period_s)
+        if loop:   # segment i runs from point i to point i + 1, the last one back to the first
+            ends = np.append(times[1:], self.period_s)
+            nxt = np.roll(pts, -1, axis=0)
+        else:      # the rest before the first point and after the last are segments of infinite length
+            ends, nxt = times[1:], pts[1:]
+        seg_t = ends - times[:len(ends)]
+        seg_v = (nxt - pts[:len(ends)]) / seg_t[:, None]
+        if loop:
+            v_in, v_out = np.roll(seg_v, 1, axis=0), seg_v
+            s_in, s_out = np.roll(seg_t, 1), seg_t
+        else:
+            v_in = np.vstack([np.zeros((1, 2)), seg_v])
+            v_out = np.vstack([seg_v, np.zeros((1, 2))])
+            s_in = np.append(math.inf, seg_t)
+            s_out = np.append(seg_t, math.inf)
+        dv = v_out - v_in
+        turn = np.linalg.norm(dv, axis=1)
+        with np.errstate(divide="ignore"):
+            wanted = np.maximum(8.0 * CORNER_CUT_M / turn, turn / ACCEL_MAX_M_S2)
+        blend = np.minimum(wanted, np.minimum(s_in, s_out))
+        blend = np.where(np.isfinite(blend), blend, 0.0)   # a lone point of a path that does not loop
+        acc = np.divide(dv, blend[:, None], out=np.zeros_like(dv), where=blend[:, None] > 0)
+        self.blend_s = blend
+        self.corner_cut_m = turn * blend / 8.0            # distance from each point at its time
+        self.accel_max_m_s2 = float(np.max(np.linalg.norm(acc, axis=1), initial=0.0))
+        starts, anchors, pos, vel, accs = [], [], [], [], []
+        if not loop:   # at rest on the first point until its blend starts
+            starts.append(-math.inf)
+            anchors.append(0.0)
+            pos.append(pts[0])
+            vel.append(np.zeros(2))
+            accs.append(np.zeros(2))
+        for i in range(n):
+            t0 = times[i] - blend[i] / 2.0
+            starts += [t0, times[i] + blend[i] / 2.0]             # the blend, then the straight segment
+            anchors += [t0, times[i]]
+            pos += [pts[i] - v_in[i] * blend[i] / 2.0, pts[i]]
+            vel += [v_in[i], v_out[i]]
+            accs += [acc[i], np.zeros(2)]
+        # as Python floats: a bisection and a quadratic on floats cost a few microseconds per
+        # sample (the MPC samples its whole horizon every tick), a third of numpy's on scalars
+        self._starts = [float(t) for t in starts]
+        self._pieces = [(float(t), float(p[0]), float(p[1]), float(v[0]), float(v[1]), float(a[0]), float(a[1]))
+                        for t, p, v, a in zip(anchors, pos, vel, accs)]
+        # a looping path's window starts where the first point's blend does
+        self._t_first = self._starts[0] if loop else 0.0
 
     def sample(self, t_s: float) -> RefSample:
+        if self.hold:
+            return self._sample_held(t_s)
+        t = t_s
+        if math.isfinite(self.period_s):
+            t = (t_s - self._t_first) % self.period_s + self._t_first
+        t0, px, py, vx, vy, ax, ay = self._pieces[max(bisect.bisect_right(self._starts, t) - 1, 0)]
+        dt = t - t0
+        h = 0.5 * dt * dt
+        return RefSample(np.array([px + vx * dt + ax * h, py + vy * dt + ay * h]),
+                         np.array([vx + ax * dt, vy + ay * dt]), np.array([ax, ay]))
+
+    def _sample_held(self, t_s: float) -> RefSample:
         t = t_s % self.period_s if math.isfinite(self.period_s) else t_s
-        times, pts = self.times_s, self.points_m
-        i = int(np.searchsorted(times, t, side="right")) - 1
-        if i < 0:
-            return RefSample(pts[0].copy(), _z(), _z())
-        if self.hold or i >= len(times) - 1:
-            j = (i + 1) % len(times)
-            closing = not self.hold and math.isfinite(self.period_s) and i == len(times) - 1
-            if not closing:
-                return RefSample(pts[i].copy(), _z(), _z())
-            t_next, p_next = self.period_s, pts[j]   # close the loop back to the first point
-        else:
-            t_next, p_next = times[i + 1], pts[i + 1]
-        span = t_next - times[i]
-        v = (p_next - pts[i]) / span
-        return RefSample(pts[i] + v * (t - times[i]), v, _z())
+        i = int(np.searchsorted(self.times_s, t, side="right")) - 1
+        return RefSample(self.points_m[max(i, 0)].copy(), _z(), _z())
 
     def path_points(self, n: int = 100) -> np.ndarray:
         return self.points_m.copy() if self.hold else super().path_points(n)
 
 
 def square(half_side_m: float, period_s: float, centre=(0.0, 0.0)) -> Waypoints:
-    """Square of side 2*half_side_m at constant speed, one lap per period_s."""
+    """Square of side 2*half_side_m at constant speed, one lap per period_s, its corners
+    rounded by Waypoints' blends."""
     _positive(radius_m=half_side_m, period_s=period_s)
     c = np.asarray(centre, dtype=float)
     corners = [c + half_side_m * np.array(p) for p in ((1, -1), (1, 1), (-1, 1), (-1, -1))]
@@ -142,7 +229,8 @@ def load_csv_path(path: str | Path, loop: bool = True, max_abs_m: float = 0.2) -
     """Path from a CSV file with rows `t_s,x_m,y_m` (a header line is allowed; '#' comments).
 
     Times must increase strictly; coordinates must be finite and within +-max_abs_m.
-    Raises ReferenceError naming the file and the bad row.
+    Raises ReferenceError naming the file and the bad row. The path passes the rows at their
+    times, smoothed at each one as Waypoints states.
     """
     path = Path(path)
     try:

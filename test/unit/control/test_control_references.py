@@ -1,18 +1,24 @@
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from ball_balance.control.references import (
+    ACCEL_MAX_M_S2,
+    CORNER_CUT_M,
     Circle,
     Delayed,
     FigureEight,
     ReferenceError,
+    Waypoints,
     load_csv_path,
     make_reference,
     square,
     step_sequence,
 )
+
+SPIRAL_CSV = Path(__file__).resolve().parents[3] / "config" / "paths" / "spiral.csv"
 
 
 @pytest.mark.parametrize("ref", [Circle(0.1, 10.0, (0.01, -0.02)), FigureEight(0.08, 12.0), square(0.05, 8.0)])
@@ -38,12 +44,125 @@ def test_figure_eight_crosses_the_centre_twice_per_period():
     assert max(abs(p[0]) for p in ref.path_points(200)) == pytest.approx(0.1, rel=1e-3)
 
 
-def test_square_visits_its_corners_and_closes():
+def test_square_rounds_its_corners_and_closes():
     ref = square(0.05, 8.0)
-    assert [tuple(np.round(ref.sample(t).p, 6)) for t in (0, 2, 4, 6)] == [
-        (0.05, -0.05), (0.05, 0.05), (-0.05, 0.05), (-0.05, -0.05)]
-    np.testing.assert_allclose(ref.sample(7.0).p, (0.0, -0.05), atol=1e-12)
+    corners = [(0.05, -0.05), (0.05, 0.05), (-0.05, 0.05), (-0.05, -0.05)]
+    turn = 0.1 / 2.0 * math.sqrt(2.0)   # 0.05 m/s along x, then along y
+    for t, corner in zip((0, 2, 4, 6), corners):   # at a corner's time, the blend's middle
+        inward = -np.sign(corner) * (turn ** 2 / (8 * ACCEL_MAX_M_S2)) / math.sqrt(2.0)
+        np.testing.assert_allclose(ref.sample(t).p, np.add(corner, inward), atol=1e-12)
+    np.testing.assert_allclose(ref.sample(7.0).p, (0.0, -0.05), atol=1e-12)   # straight between corners
     np.testing.assert_allclose(ref.sample(8.0).p, ref.sample(0.0).p, atol=1e-12)
+
+
+def _paths():
+    """Waypoint paths: the square, the spiral CSV (dense), a path that does not loop, and an
+    irregular loop whose short segments limit its blends."""
+    return {
+        "square": square(0.075, 8.0),
+        "spiral": load_csv_path(SPIRAL_CSV),
+        "open": Waypoints([0.0, 1.0, 2.5], [(0.0, 0.0), (0.1, 0.0), (0.1, 0.08)], math.inf),
+        "irregular": Waypoints([0.0, 0.3, 2.0, 2.4], [(0.0, 0.0), (0.03, 0.01), (0.1, -0.05), (0.08, 0.0)], 4.0),
+    }
+
+
+PATHS = _paths()
+
+
+def _knots(ref):
+    """The times where a blend starts or ends, each point's time, and the loop closure."""
+    t, half = ref.times_s, ref.blend_s / 2
+    knots = np.concatenate([t - half, t, t + half])
+    if math.isfinite(ref.period_s):
+        knots = np.concatenate([knots, knots + ref.period_s, [ref.period_s]])
+    return np.sort(knots)
+
+
+@pytest.mark.parametrize("name", PATHS)
+def test_waypoint_path_passes_within_the_stated_distance_of_each_point(name):
+    ref = PATHS[name]
+    eps = 1e-9
+    for i, (t, point) in enumerate(zip(ref.times_s, ref.points_m)):
+        distance = np.linalg.norm(ref.sample(t).p - point)
+        assert distance == pytest.approx(ref.corner_cut_m[i], abs=1e-12)
+        # the turn, from the velocities either side of the blend; the cut stays within
+        # CORNER_CUT_M unless the acceleration bound needs a longer blend
+        half = ref.blend_s[i] / 2 + eps
+        turn = np.linalg.norm(ref.sample(t + half).v - ref.sample(t - half).v)
+        assert distance <= max(CORNER_CUT_M, turn ** 2 / (8 * ACCEL_MAX_M_S2)) + 1e-12
+
+
+def test_square_and_dense_csv_cut_their_points_as_stated():
+    sq, spiral = PATHS["square"], PATHS["spiral"]
+    np.testing.assert_allclose(sq.corner_cut_m, (0.075 * math.sqrt(2)) ** 2 / (8 * ACCEL_MAX_M_S2))
+    # the dense spiral turns over its whole length: blends as long as its 0.2 s rows, touching
+    np.testing.assert_allclose(spiral.blend_s, 0.2)
+    assert max(spiral.corner_cut_m) < CORNER_CUT_M / 4
+
+
+@pytest.mark.parametrize("name", PATHS)
+def test_waypoint_position_and_velocity_are_continuous(name):
+    ref = PATHS[name]
+    eps = 1e-8
+    for knot in _knots(ref):
+        before, after = ref.sample(knot - eps), ref.sample(knot + eps)
+        np.testing.assert_allclose(after.p, before.p, atol=1e-8, err_msg=f"position jumps at {knot}")
+        np.testing.assert_allclose(after.v, before.v, atol=1e-6, err_msg=f"velocity jumps at {knot}")
+
+
+@pytest.mark.parametrize("name", PATHS)
+def test_waypoint_blends_do_not_overlap(name):
+    ref = PATHS[name]
+    t, half = ref.times_s, ref.blend_s / 2
+    ends, starts = t + half, t - half
+    if math.isfinite(ref.period_s):
+        starts = np.append(starts, starts[0] + ref.period_s)
+    assert np.all(ends[:len(starts) - 1] <= starts[1:] + 1e-12)
+
+
+@pytest.mark.parametrize("name", PATHS)
+def test_waypoint_acceleration_is_bounded(name):
+    ref = PATHS[name]
+    span = ref.period_s if math.isfinite(ref.period_s) else ref.times_s[-1] + 2.0
+    peak = max(np.linalg.norm(ref.sample(t).a) for t in np.linspace(-1.0, span + 1.0, 4001))
+    assert peak <= ref.accel_max_m_s2 + 1e-12
+    if name != "irregular":   # its 0.3 s and 0.4 s segments leave no room for the bound's blends
+        assert ref.accel_max_m_s2 <= ACCEL_MAX_M_S2 + 1e-12
+        assert peak == pytest.approx(ref.accel_max_m_s2)
+
+
+@pytest.mark.parametrize("name", PATHS)
+def test_waypoint_velocity_and_acceleration_are_the_derivatives(name):
+    ref = PATHS[name]
+    h = 1e-5
+    knots = _knots(ref)
+    span = ref.period_s if math.isfinite(ref.period_s) else ref.times_s[-1] + 1.0
+    for t in np.linspace(-0.5, 1.5 * span, 601):
+        if np.min(np.abs(knots - t)) < 3 * h or (math.isfinite(ref.period_s)
+                                                  and np.min(np.abs((knots - t) % ref.period_s)) < 3 * h):
+            continue   # the acceleration steps at a blend's ends
+        s, s1, s0 = ref.sample(t), ref.sample(t + h), ref.sample(t - h)
+        np.testing.assert_allclose((s1.p - s0.p) / (2 * h), s.v, atol=1e-7)
+        np.testing.assert_allclose((s1.v - s0.v) / (2 * h), s.a, atol=1e-6)
+
+
+def test_waypoint_path_that_does_not_loop_rests_at_its_ends():
+    ref = PATHS["open"]
+    for t in (-3.0, -0.01 - ref.blend_s[0] / 2):
+        np.testing.assert_allclose(ref.sample(t).p, (0.0, 0.0))
+        np.testing.assert_allclose(ref.sample(t).v, (0.0, 0.0))
+    end = ref.sample(2.5 + ref.blend_s[-1] / 2 + 0.01)
+    np.testing.assert_allclose(end.p, (0.1, 0.08), atol=1e-12)
+    np.testing.assert_allclose(end.v, (0.0, 0.0), atol=1e-12)
+
+
+def test_spiral_csv_loads_and_follows_its_curve():
+    ref = load_csv_path(SPIRAL_CSV)
+    assert ref.period_s == pytest.approx(16.0)
+    for t in np.linspace(0.0, 16.0, 161):
+        r = 0.065 + 0.035 * math.cos(2 * math.pi * t / 16.0)
+        angle = 2 * math.pi * t / 8.0
+        assert np.linalg.norm(ref.sample(t).p - (r * math.cos(angle), r * math.sin(angle))) < 0.001
 
 
 def test_step_sequence_holds_each_point():
