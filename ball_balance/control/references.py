@@ -93,7 +93,8 @@ class FigureEight(Reference):
 # 0.034 rad, under a quarter of the controllers' tilt limit (max_tilt_cmd_rad 0.15), which leaves
 # the rest to the feedback; the benchmark's circle and figure-eight ask 0.04 and 0.055 m/s^2. The
 # tracking error on a corner grows with it and the corner cut shrinks (the PID on the 0.15 m square
-# in 8 s: 0.6 / 0.9 / 1.9 mm RMSE, 14 / 7 / 3.5 mm cut at 0.1 / 0.2 / 0.4 m/s^2).
+# in 8 s, 3 seeds: RMSE after 5 s 0.5 / 0.7 / 1.1 mm, tilt-rate RMS 0.10 / 0.12 / 0.20 rad/s,
+# corners cut by 16 / 7.9 / 4.0 mm at 0.1 / 0.2 / 0.4 m/s^2).
 ACCEL_MAX_M_S2 = 0.2
 # A turn is spread over a longer time than the bound needs while its path stays this close to the
 # point: a tenth of the ball's radius (plate_geometry.BALL_RADIUS_M), below the controllers'
@@ -106,22 +107,28 @@ class Waypoints(Reference):
     """Path through timed points (t_i, x_i, y_i), repeating with period_s (inf: not looping).
 
     Used for the square and the CSV path: straight segments at constant velocity between the
-    points, joined at each point by a parabolic blend (constant acceleration) centred on t_i,
-    so the velocity is continuous and the acceleration bounded. At point i the velocity turns
-    by dv_i (from the segment before to the one after; a looping path closes from the last point
-    back to the first, a path that does not loop rests before its first point and after its
-    last), over the blend time
+    points, joined at each point by a blend centred on t_i that turns the velocity from the
+    segment before to the one after by dv_i (a looping path closes from the last point back to
+    the first; one that does not loop rests before its first point and after its last). The
+    velocity is continuous and the acceleration bounded. Two kinds of blend (`smooth_blend`):
 
-        T_i = min(max(8 CORNER_CUT_M / |dv_i|, |dv_i| / ACCEL_MAX_M_S2), S_prev, S_next)
+    - A turn with room on both sides (a square's corner) is smooth: v = v_in + dv_i s(tau),
+      s = 3 tau^2 - 2 tau^3, over T_i = max(32 CORNER_CUT_M / (3 |dv_i|), 1.5 |dv_i| /
+      ACCEL_MAX_M_S2), the longest turn that passes within CORNER_CUT_M of the point but no
+      shorter than the acceleration bound needs. Its acceleration 6 tau (1 - tau) dv_i / T_i
+      (at most 1.5 |dv_i| / T_i) starts and ends at zero, so the feed-forward tilt does not
+      step; the path passes 3 |dv_i| T_i / 32 from the point at t_i.
+    - Where that turn is longer than a neighbouring segment S (a densely drawn path), the
+      blend has the constant acceleration dv_i / T_i over T_i = min(max(8 CORNER_CUT_M /
+      |dv_i|, |dv_i| / ACCEL_MAX_M_S2), S_prev, S_next) and passes |dv_i| T_i / 8 from the
+      point. A path drawn every 0.1-0.2 s gets blends as long as its segments, touching: a
+      piecewise-parabolic path through the segments' midpoints whose acceleration follows the
+      drawn curvature, changing from one blend to the next as the curvature does.
 
-    the longest turn that passes within CORNER_CUT_M of the point, but no shorter than the
-    acceleration bound needs, and no longer than either neighbouring segment S (so that blends
-    never overlap). The path passes |dv_i| T_i / 8 from point i at t_i, and its acceleration
-    |dv_i| / T_i is at most ACCEL_MAX_M_S2 wherever the neighbouring segments leave room for
-    |dv_i| / ACCEL_MAX_M_S2 (`corner_cut_m` and `accel_max_m_s2` give the path's own figures).
-    A densely sampled path (a CSV drawn every 0.1-0.2 s) gets blends as long as its segments,
-    touching: a piecewise-parabolic path through the segments' midpoints whose acceleration
-    follows the drawn curvature. The times of the points are kept.
+    No blend is longer than a neighbouring segment, so blends never overlap. The acceleration
+    stays within ACCEL_MAX_M_S2 unless a path's points are too close for its turns
+    (|dv_i| / ACCEL_MAX_M_S2 longer than a neighbouring segment); `blend_s`, `corner_cut_m`
+    and `accel_max_m_s2` give a path's own figures. The points' times are kept.
 
     With `hold=True` (the step sequence) each point is held until the next time instead.
     """
@@ -135,8 +142,9 @@ class Waypoints(Reference):
             self._build_blends()
 
     def _build_blends(self) -> None:
-        """Pieces of constant acceleration: start times, anchor time, position and velocity at
-        the anchor and acceleration, so that sample() is one bisection and a quadratic."""
+        """The pieces (blend, straight segment, blend, ...): their start times and, for each, an
+        anchor time and the coefficients of p = c0 + c1 dt + ... + c4 dt^4 (dt from the anchor),
+        so that sample() is one bisection and a polynomial."""
         times, pts = self.times_s, self.points_m
         n = len(times)
         loop = math.isfinite(self.period_s)
@@ -157,33 +165,38 @@ class Waypoints(Reference):
             s_out = np.append(seg_t, math.inf)
         dv = v_out - v_in
         turn = np.linalg.norm(dv, axis=1)
+        room = np.minimum(s_in, s_out)
         with np.errstate(divide="ignore"):
-            wanted = np.maximum(8.0 * CORNER_CUT_M / turn, turn / ACCEL_MAX_M_S2)
-        blend = np.minimum(wanted, np.minimum(s_in, s_out))
+            smooth_t = np.maximum(32.0 * CORNER_CUT_M / (3.0 * turn), 1.5 * turn / ACCEL_MAX_M_S2)
+            const_t = np.maximum(8.0 * CORNER_CUT_M / turn, turn / ACCEL_MAX_M_S2)
+        smooth = (smooth_t <= room) & (turn > 0)
+        blend = np.where(smooth, smooth_t, np.minimum(const_t, room))
         blend = np.where(np.isfinite(blend), blend, 0.0)   # a lone point of a path that does not loop
-        acc = np.divide(dv, blend[:, None], out=np.zeros_like(dv), where=blend[:, None] > 0)
-        self.blend_s = blend
-        self.corner_cut_m = turn * blend / 8.0            # distance from each point at its time
-        self.accel_max_m_s2 = float(np.max(np.linalg.norm(acc, axis=1), initial=0.0))
-        starts, anchors, pos, vel, accs = [], [], [], [], []
+        safe = np.where(blend > 0, blend, 1.0)
+        self.blend_s, self.smooth_blend = blend, smooth
+        self.corner_cut_m = np.where(smooth, 3.0 / 32.0, 1.0 / 8.0) * turn * blend   # distance at t_i
+        peak = np.where(blend > 0, np.where(smooth, 1.5, 1.0) * turn / safe, 0.0)
+        self.accel_max_m_s2 = float(np.max(peak, initial=0.0))
+        zero = np.zeros(2)
+        starts, pieces = [], []   # pieces: anchor time, then p = c0 + c1 dt + c2 dt^2 + c3 dt^3 + c4 dt^4
         if not loop:   # at rest on the first point until its blend starts
             starts.append(-math.inf)
-            anchors.append(0.0)
-            pos.append(pts[0])
-            vel.append(np.zeros(2))
-            accs.append(np.zeros(2))
+            pieces.append((0.0, pts[0], zero, zero, zero, zero))
         for i in range(n):
-            t0 = times[i] - blend[i] / 2.0
-            starts += [t0, times[i] + blend[i] / 2.0]             # the blend, then the straight segment
-            anchors += [t0, times[i]]
-            pos += [pts[i] - v_in[i] * blend[i] / 2.0, pts[i]]
-            vel += [v_in[i], v_out[i]]
-            accs += [acc[i], np.zeros(2)]
-        # as Python floats: a bisection and a quadratic on floats cost a few microseconds per
+            T = blend[i]
+            t0 = times[i] - T / 2.0
+            p0 = pts[i] - v_in[i] * T / 2.0
+            if smooth[i]:   # v = v_in + dv (3 tau^2 - 2 tau^3): the acceleration 6 tau (1 - tau) dv / T
+                blend_piece = (t0, p0, v_in[i], zero, dv[i] / T ** 2, -dv[i] / (2.0 * T ** 3))
+            else:           # constant acceleration dv / T
+                blend_piece = (t0, p0, v_in[i], dv[i] / (2.0 * safe[i]), zero, zero)
+            starts += [t0, times[i] + T / 2.0]             # the blend, then the straight segment
+            pieces += [blend_piece, (times[i], pts[i], v_out[i], zero, zero, zero)]
+        # as Python floats: a bisection and a polynomial on floats cost a few microseconds per
         # sample (the MPC samples its whole horizon every tick), a third of numpy's on scalars
         self._starts = [float(t) for t in starts]
-        self._pieces = [(float(t), float(p[0]), float(p[1]), float(v[0]), float(v[1]), float(a[0]), float(a[1]))
-                        for t, p, v, a in zip(anchors, pos, vel, accs)]
+        self._pieces = [(float(t),) + tuple(float(c[k]) for c in coeffs for k in (0, 1))
+                        for t, *coeffs in pieces]
         # a looping path's window starts where the first point's blend does
         self._t_first = self._starts[0] if loop else 0.0
 
@@ -193,11 +206,15 @@ class Waypoints(Reference):
         t = t_s
         if math.isfinite(self.period_s):
             t = (t_s - self._t_first) % self.period_s + self._t_first
-        t0, px, py, vx, vy, ax, ay = self._pieces[max(bisect.bisect_right(self._starts, t) - 1, 0)]
-        dt = t - t0
-        h = 0.5 * dt * dt
-        return RefSample(np.array([px + vx * dt + ax * h, py + vy * dt + ay * h]),
-                         np.array([vx + ax * dt, vy + ay * dt]), np.array([ax, ay]))
+        t0, p0x, p0y, c1x, c1y, c2x, c2y, c3x, c3y, c4x, c4y = \
+            self._pieces[max(bisect.bisect_right(self._starts, t) - 1, 0)]
+        d = t - t0
+        return RefSample(np.array([p0x + d * (c1x + d * (c2x + d * (c3x + d * c4x))),
+                                   p0y + d * (c1y + d * (c2y + d * (c3y + d * c4y)))]),
+                         np.array([c1x + d * (2.0 * c2x + d * (3.0 * c3x + d * 4.0 * c4x)),
+                                   c1y + d * (2.0 * c2y + d * (3.0 * c3y + d * 4.0 * c4y))]),
+                         np.array([2.0 * c2x + d * (6.0 * c3x + d * 12.0 * c4x),
+                                   2.0 * c2y + d * (6.0 * c3y + d * 12.0 * c4y)]))
 
     def _sample_held(self, t_s: float) -> RefSample:
         t = t_s % self.period_s if math.isfinite(self.period_s) else t_s

@@ -48,8 +48,10 @@ def test_square_rounds_its_corners_and_closes():
     ref = square(0.05, 8.0)
     corners = [(0.05, -0.05), (0.05, 0.05), (-0.05, 0.05), (-0.05, -0.05)]
     turn = 0.1 / 2.0 * math.sqrt(2.0)   # 0.05 m/s along x, then along y
+    assert all(ref.smooth_blend)
     for t, corner in zip((0, 2, 4, 6), corners):   # at a corner's time, the blend's middle
-        inward = -np.sign(corner) * (turn ** 2 / (8 * ACCEL_MAX_M_S2)) / math.sqrt(2.0)
+        # a smooth turn over 1.5 turn / a_max passes 3 turn T / 32 inside the corner
+        inward = -np.sign(corner) * (9 * turn ** 2 / (64 * ACCEL_MAX_M_S2)) / math.sqrt(2.0)
         np.testing.assert_allclose(ref.sample(t).p, np.add(corner, inward), atol=1e-12)
     np.testing.assert_allclose(ref.sample(7.0).p, (0.0, -0.05), atol=1e-12)   # straight between corners
     np.testing.assert_allclose(ref.sample(8.0).p, ref.sample(0.0).p, atol=1e-12)
@@ -89,15 +91,27 @@ def test_waypoint_path_passes_within_the_stated_distance_of_each_point(name):
         # CORNER_CUT_M unless the acceleration bound needs a longer blend
         half = ref.blend_s[i] / 2 + eps
         turn = np.linalg.norm(ref.sample(t + half).v - ref.sample(t - half).v)
-        assert distance <= max(CORNER_CUT_M, turn ** 2 / (8 * ACCEL_MAX_M_S2)) + 1e-12
+        bound_cut = (9 / 64 if ref.smooth_blend[i] else 1 / 8) * turn ** 2 / ACCEL_MAX_M_S2
+        assert distance <= max(CORNER_CUT_M, bound_cut) + 1e-12
 
 
 def test_square_and_dense_csv_cut_their_points_as_stated():
     sq, spiral = PATHS["square"], PATHS["spiral"]
-    np.testing.assert_allclose(sq.corner_cut_m, (0.075 * math.sqrt(2)) ** 2 / (8 * ACCEL_MAX_M_S2))
+    np.testing.assert_allclose(sq.corner_cut_m, 9 * (0.075 * math.sqrt(2)) ** 2 / (64 * ACCEL_MAX_M_S2))
     # the dense spiral turns over its whole length: blends as long as its 0.2 s rows, touching
+    assert not any(spiral.smooth_blend)
     np.testing.assert_allclose(spiral.blend_s, 0.2)
     assert max(spiral.corner_cut_m) < CORNER_CUT_M / 4
+
+
+@pytest.mark.parametrize("name", ["square", "spiral"])
+def test_the_acceleration_does_not_step_at_a_corner_and_barely_along_a_curve(name):
+    ref = PATHS[name]
+    eps = 1e-8
+    steps = [np.linalg.norm(ref.sample(k + eps).a - ref.sample(k - eps).a) for k in _knots(ref)]
+    # the square's smooth turns start and end at zero acceleration; the spiral's constant-
+    # acceleration blends touch, and change by what its curvature changes over a row
+    assert max(steps) < (1e-6 if name == "square" else 0.1 * ACCEL_MAX_M_S2)
 
 
 @pytest.mark.parametrize("name", PATHS)
@@ -128,7 +142,7 @@ def test_waypoint_acceleration_is_bounded(name):
     assert peak <= ref.accel_max_m_s2 + 1e-12
     if name != "irregular":   # its 0.3 s and 0.4 s segments leave no room for the bound's blends
         assert ref.accel_max_m_s2 <= ACCEL_MAX_M_S2 + 1e-12
-        assert peak == pytest.approx(ref.accel_max_m_s2)
+        assert peak == pytest.approx(ref.accel_max_m_s2, rel=1e-3)
 
 
 @pytest.mark.parametrize("name", PATHS)
