@@ -2,7 +2,8 @@
 advanced in lock-step on simulated time. Everything an episode does is in its EpisodeSpec:
 controller, domain, reference, release (position and rolling speed), ball type, knob
 overrides and timed events (pushes, external forces, a hand over markers, exposure changes,
-camera outages), so a new case never needs a copy of the loop.
+camera outages), so a new case never needs a copy of the loop. The domain adds its own
+(`episode_events`): pushes, hands, and force steps (on at 5 s, turned at 9 s, off at 13 s).
 
 Timeline (simulated seconds): physics at 1 ms; the camera captures at `camera_rate_hz`
 (a frame may be dropped, `frame_drop_prob`, and its stamp may be off the true capture time,
@@ -56,6 +57,8 @@ REFERENCES = {
     "spiral": dict(reference_kind="csv", reference_csv_path=str(PATHS_DIR / "spiral.csv")),
 }
 BALLS = {"": None, "shell": True, "solid": False}   # EpisodeSpec.ball -> DomainKnobs.ball_shell
+# the force steps of a domain's `force_step_deg` (simulated s): on, turned by 90 degrees, off
+FORCE_STEP_ON_S, FORCE_STEP_TURN_S, FORCE_STEP_OFF_S = 5.0, 9.0, 13.0
 
 
 # ---- events (all times in simulated seconds since the release) ---------------------------
@@ -70,12 +73,16 @@ class Push:
 
 @dataclass(frozen=True)
 class Force:
-    """An external force (N, plate axes) on the ball's centre from t_s for duration_s."""
+    """An external force (N, plate axes) on the ball's centre from t_s for duration_s.
+
+    A pulse (`step` False) counts as a push in the recovery figures; a held load (`step`
+    True) has its start and its end counted as steps (step_recover_*, step_steady_m)."""
 
     t_s: float
     duration_s: float
     fx_n: float
     fy_n: float
+    step: bool = False
 
 
 @dataclass(frozen=True)
@@ -233,10 +240,31 @@ def episode_knobs(spec: EpisodeSpec):
     return dataclasses.replace(knobs, **dict(spec.knobs))
 
 
+def force_step_events(mass_kg: float, gravity_m_s2: float, angle_deg: float, direction_deg: float) -> tuple:
+    """A domain's force steps: F = m g sin(angle), the force that accelerates the rolling ball
+    as a plate tilted by `angle` does (both through the same rolling factor), towards
+    `direction_deg` (plate axes) from FORCE_STEP_ON_S, turned by 90 degrees at
+    FORCE_STEP_TURN_S, off at FORCE_STEP_OFF_S. Forces add up in the sim, so the second
+    starts as the first ends."""
+    f_n = mass_kg * gravity_m_s2 * math.sin(math.radians(angle_deg))
+    phi = math.radians(direction_deg)
+    first = (f_n * math.cos(phi), f_n * math.sin(phi))
+    second = (f_n * math.cos(phi + math.pi / 2.0), f_n * math.sin(phi + math.pi / 2.0))
+    return (Force(FORCE_STEP_ON_S, FORCE_STEP_TURN_S - FORCE_STEP_ON_S, *first, step=True),
+            Force(FORCE_STEP_TURN_S, FORCE_STEP_OFF_S - FORCE_STEP_TURN_S, *second, step=True))
+
+
 def episode_events(spec: EpisodeSpec, knobs) -> list:
-    """The spec's events plus the domain's pushes (seeded directions) and hands over markers
-    (seeded markers), in time order."""
+    """The spec's events plus the domain's pushes (seeded directions), hands over markers
+    (seeded markers) and force steps (the knobs' direction) that start before the episode's
+    end, in time order."""
+    from ball_balance.plate_geometry import GRAVITY_M_S2
+
     events = list(spec.events)
+    if knobs.force_step_deg > 0.0:
+        events += [e for e in force_step_events(knobs.ball_mass_kg, GRAVITY_M_S2 * knobs.gravity_scale,
+                                                knobs.force_step_deg, knobs.force_step_dir_deg)
+                   if e.t_s < spec.duration_s]
     if knobs.occlusion_markers > 0:
         rng = np.random.default_rng(spec.seed + 1299709)
         t = knobs.occlusion_interval_s
@@ -252,6 +280,16 @@ def episode_events(spec: EpisodeSpec, knobs) -> list:
             events.append(Push(t, knobs.push_speed_m_s * math.cos(angle), knobs.push_speed_m_s * math.sin(angle)))
             t += knobs.push_interval_s
     return sorted(events, key=lambda e: e.t_s)
+
+
+def step_times(times, tolerance_s: float) -> list:
+    """The distinct step times among the held forces' starts and ends: one force ending as
+    the next starts is one step (a change), not two."""
+    out = []
+    for t in sorted(times):
+        if not out or t - out[-1] > tolerance_s:
+            out.append(t)
+    return out
 
 
 def _observation(x, y, vx, vy, valid, markers, age_s, position_std_m):
@@ -378,7 +416,8 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
     qp_times = []           # MPC solve alone
     u_cmd = (0.0, 0.0)
     gain = knobs.exposure
-    pushes = []             # times of the pushes and forces (push recovery)
+    pushes = []             # times of the pushes and force pulses (push recovery)
+    steps = []              # starts and ends of the held forces (step recovery)
     upcoming = list(events)
     active = []             # Occlusion / CameraGap events in force
     n_ticks = int(round(spec.duration_s / control_dt))
@@ -391,7 +430,10 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
                 pushes.append(t)
             elif isinstance(event, Force):
                 world.apply_force(event.fx_n, event.fy_n, event.duration_s)
-                pushes.append(t)
+                if event.step:
+                    steps += [t, t + event.duration_s]
+                else:
+                    pushes.append(t)
             elif isinstance(event, Exposure):
                 gain = event.gain
             elif isinstance(event, (Occlusion, CameraGap)):
@@ -492,7 +534,9 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
     series["t"] = series["t"] - t_first
     metrics = episode_metrics(series, dropped=world.ball_dropped, duration_s=spec.duration_s,
                               actuation_latency_s=knobs.latency_s,
-                              push_times_s=[tp - t_first for tp in pushes if tp >= t_first])
+                              push_times_s=[tp - t_first for tp in pushes if tp >= t_first],
+                              step_times_s=[ts - t_first for ts in step_times(steps, control_dt / 2.0)
+                                            if t_first <= ts < spec.duration_s - control_dt / 2.0])
     metrics["rmse_release_m"] = rmse_release
     metrics["tick_p50_us"] = float(np.percentile(solve_times, 50) * 1e6)
     metrics["tick_p99_us"] = float(np.percentile(solve_times, 99) * 1e6)

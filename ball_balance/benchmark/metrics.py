@@ -15,6 +15,13 @@
   inf when it never does; absent without pushes.
 - pushes / pushes_late: how many pushes (or forces) there were, and how many of them took longer
   than PUSH_GOAL_S to recover (issue 11's goal: back within 5 mm in at most 1 s).
+- step_recover_s / step_recover_max_s / steps / steps_unrecovered: the same for each step of
+  a held force (Force with step=True: its start, a change, its end), mean and worst, and how
+  many steps were not back within 5 mm (for RECOVER_HOLD_S) before the next; absent without
+  steps.
+- step_steady_m: per step, the mean error over the last STEP_STEADY_WINDOW_S before the next
+  step (or the end), i.e. the error left once settled under (or after) the load; the worst
+  step's. Absent without steps, nan after a drop.
 - rmse_release_m (`release_rmse`): the reference system's figure, RMS error sampled at 30 Hz
   from the release (not the engagement) over the steps before a drop.
 """
@@ -29,6 +36,7 @@ SETTLE_TOL_M = 0.005
 STEADY_AFTER_S = 5.0
 RECOVER_HOLD_S = 0.5
 PUSH_GOAL_S = 1.0
+STEP_STEADY_WINDOW_S = 1.0
 
 
 def release_rmse(s: Dict[str, np.ndarray], rate_hz: float = 30.0) -> float:
@@ -64,8 +72,21 @@ def recovery_times(t: np.ndarray, err: np.ndarray, push_times_s: Sequence[float]
     return out
 
 
+def step_steady_errors(t: np.ndarray, err: np.ndarray, step_times_s: Sequence[float]) -> List[float]:
+    """Per step: the mean error over the last STEP_STEADY_WINDOW_S before the next step (or
+    the series' end); nan where that window holds no sample."""
+    steps = sorted(step_times_s)
+    ends = steps[1:] + [t[-1] + 1e-9]
+    out = []
+    for start, end in zip(steps, ends, strict=True):
+        window = (t >= max(start, end - STEP_STEADY_WINDOW_S)) & (t < end)
+        out.append(float(np.mean(err[window])) if np.any(window) else math.nan)
+    return out
+
+
 def episode_metrics(s: Dict[str, np.ndarray], dropped: bool, duration_s: float,
-                    actuation_latency_s: float = 0.0, push_times_s: Sequence[float] = ()) -> Dict[str, float]:
+                    actuation_latency_s: float = 0.0, push_times_s: Sequence[float] = (),
+                    step_times_s: Sequence[float] = ()) -> Dict[str, float]:
     t = s["t"]
     err = np.hypot(s["x"] - s["rx"], s["y"] - s["ry"])
     steady = t >= STEADY_AFTER_S
@@ -99,4 +120,12 @@ def episode_metrics(s: Dict[str, np.ndarray], dropped: bool, duration_s: float,
         metrics["push_recover_max_s"] = float(max(recoveries))
         metrics["pushes"] = float(len(recoveries))
         metrics["pushes_late"] = float(sum(r > PUSH_GOAL_S for r in recoveries))
+    steps = recovery_times(t, err, step_times_s, dropped) if len(t) else []
+    if steps:
+        finite = [r for r in steps if math.isfinite(r)]
+        metrics["step_recover_s"] = float(np.mean(finite)) if len(finite) == len(steps) else math.inf
+        metrics["step_recover_max_s"] = float(max(steps))
+        metrics["steps"] = float(len(steps))
+        metrics["steps_unrecovered"] = float(sum(not math.isfinite(r) for r in steps))
+        metrics["step_steady_m"] = math.nan if dropped else float(np.max(step_steady_errors(t, err, step_times_s)))
     return metrics

@@ -10,22 +10,27 @@ from typing import Dict, List
 
 import numpy as np
 
+from ball_balance.sim.config import domain_set
+
 # docs/design.md section 7: the reference system's PID (RMSE mm over the steps before a drop, its
 # protocol: released 0-2 cm off centre, 600 steps at 30 Hz), where stated
 REFERENCE_FIGURES = {"standard": "34 mm", "high_gravity": "117 mm, 70 % drops", "gravity_1.5g": "117 mm, 70 % drops",
                      "sticky": "33 % drops"}
 
-COLUMNS = ("controller", "protocol", "reference", "domain", "episodes", "drop_rate", "rmse_steady_mm", "settle_s",
-           "push_recover_s", "push_recover_max_s", "pushes", "pushes_late", "engaged_pct", "rmse_mm",
+COLUMNS = ("controller", "protocol", "reference", "domain", "set", "episodes", "drop_rate", "rmse_steady_mm",
+           "settle_s", "push_recover_s", "push_recover_max_s", "pushes", "pushes_late", "step_recover_s",
+           "step_recover_max_s", "steps", "steps_unrecovered", "step_steady_mm", "engaged_pct", "rmse_mm",
            "rmse_release_mm", "peak_tilt_deg", "smoothness_rad_s", "latency_ms", "tick_p99_us", "qp_p50_us",
            "qp_p99_us", "qp_p99_worst_us", "qp_fallbacks")
 
 # one row per episode (closed_loop_episodes.csv): what the paired comparison needs, and the
 # figures the cell rows summarise (their worst case)
-EPISODE_FIGURES = ("settle_s", "push_recover_max_s", "pushes", "pushes_late", "tick_p99_us", "qp_p99_us")
-EPISODE_COLUMNS = ("controller", "protocol", "reference", "domain", "seed", "drop", "rmse_steady_mm",
-                   *EPISODE_FIGURES)
+EPISODE_FIGURES = ("settle_s", "push_recover_max_s", "pushes", "pushes_late", "step_recover_max_s", "steps",
+                   "steps_unrecovered", "tick_p99_us", "qp_p99_us")
+EPISODE_COLUMNS = ("controller", "protocol", "reference", "domain", "set", "seed", "drop", "rmse_steady_mm",
+                   "step_steady_mm", *EPISODE_FIGURES)
 CELL = ("protocol", "reference", "domain")
+TEXT_COLUMNS = ("controller", "set") + CELL
 
 
 def episode_rows(results) -> List[Dict[str, float]]:
@@ -35,8 +40,10 @@ def episode_rows(results) -> List[Dict[str, float]]:
         m = r.metrics
         rows.append({
             "controller": r.spec.controller, "protocol": getattr(r.spec, "protocol", "ours"),
-            "reference": r.spec.reference, "domain": r.spec.domain, "seed": int(r.spec.seed),
-            "drop": float(m["drop"]), "rmse_steady_mm": 1e3 * m.get("rmse_steady_m", math.nan),
+            "reference": r.spec.reference, "domain": r.spec.domain, "set": domain_set(r.spec.domain),
+            "seed": int(r.spec.seed), "drop": float(m["drop"]),
+            "rmse_steady_mm": 1e3 * m.get("rmse_steady_m", math.nan),
+            "step_steady_mm": 1e3 * m.get("step_steady_m", math.nan),
             **{key: float(m.get(key, math.nan)) for key in EPISODE_FIGURES}})
     return rows
 
@@ -90,14 +97,15 @@ def format_paired_table(rows, metric_label: str = "RMSE>5s") -> str:
     """The paired comparison, one line per controller and cell."""
     if not rows:
         return ""
+    width = max([13] + [len(r["domain"]) for r in rows])
     lines = [f"against {rows[0]['baseline']} on the same seeds ({metric_label}: controller - "
              f"{rows[0]['baseline']}, mean and {100 * rows[0]['confidence']:g} % interval over the seeds both kept "
              f"the ball)",
-             f"{'controller':10} {'reference':12} {'domain':13} {'pairs':>5} {'drops':>7} {'base mm':>8} "
+             f"{'controller':10} {'reference':12} {'domain':{width}} {'pairs':>5} {'drops':>7} {'base mm':>8} "
              f"{'diff mm':>9} {'+/- mm':>8} {'diff %':>7} {'lower':>5} {'higher':>6}  verdict"]
     for r in rows:
         pct = 100.0 * r["mean_diff"] / r["baseline_mean"] if r["baseline_mean"] else math.nan
-        lines.append(f"{r['controller']:10} {r['reference']:12} {r['domain']:13} {r['pairs']:>5} "
+        lines.append(f"{r['controller']:10} {r['reference']:12} {r['domain']:{width}} {r['pairs']:>5} "
                      f"{r['drops']:>3.0f}/{r['baseline_drops']:<3.0f} {r['baseline_mean']:>8.4f} "
                      f"{r['mean_diff']:>+9.4f} {r['ci_half']:>8.4f} {pct:>+7.2f} {r['lower']:>5} {r['higher']:>6}  "
                      f"{verdict(r)}")
@@ -128,7 +136,7 @@ def aggregate(results) -> List[Dict[str, float]]:
         survivors = [m for m in ms if not m["drop"]]
         rows.append({
             "controller": controller, "protocol": protocol, "reference": reference, "domain": domain,
-            "episodes": len(ms),
+            "set": domain_set(domain), "episodes": len(ms),
             "drop_rate": float(np.mean([m["drop"] for m in ms])),
             "rmse_steady_mm": 1e3 * mean("rmse_steady_m", survivors) if survivors else math.nan,
             # settling and push recovery: a survivor that never settled counts as inf (worst)
@@ -138,6 +146,13 @@ def aggregate(results) -> List[Dict[str, float]]:
                 math.isfinite(m.get("push_recover_s", 0.0)) for m in survivors) else math.inf,
             "push_recover_max_s": pooled("push_recover_max_s", survivors),
             **push_counts(ms),
+            # force steps (on, change, off): recovery as the pushes', the error left under each
+            # step (its worst) as the mean over the survivors
+            "step_recover_s": mean("step_recover_s", survivors) if all(
+                math.isfinite(m.get("step_recover_s", 0.0)) for m in survivors) else math.inf,
+            "step_recover_max_s": pooled("step_recover_max_s", survivors),
+            **{key: float(sum(m.get(key, 0.0) for m in ms)) for key in ("steps", "steps_unrecovered")},
+            "step_steady_mm": 1e3 * mean("step_steady_m", survivors),
             "engaged_pct": 100.0 * mean("engaged_frac"),
             "rmse_mm": 1e3 * mean("rmse_m"),
             "rmse_release_mm": 1e3 * mean("rmse_release_m"),
@@ -155,40 +170,102 @@ def aggregate(results) -> List[Dict[str, float]]:
     return sort_rows(rows)
 
 
+SET_TITLES = {"tuning": "tuning set: the defaults are chosen on these domains",
+              "held_out": "held-out set: reported, never tuned on"}
+
+
+def row_set(row) -> str:
+    """The row's domain set ('tuning', 'held_out'; '' for a domain of neither), from the row
+    or, for a CSV written before the column, from the domain."""
+    return row.get("set") or domain_set(row["domain"])
+
+
 def format_table(rows) -> str:
-    """The headline table (our protocol: error after 5 s, settling, drops, push recovery)
-    and, for rows of the reference protocol, its own table beside the published figures."""
+    """The headline table (our protocol: error after 5 s, settling, drops, push recovery and,
+    where a domain has force steps, step recovery and the error left under each step), in
+    two sections, the tuning set's and the held-out set's, each closed by one summary line
+    per controller; for rows of the reference protocol, its own table beside the published
+    figures."""
     ours = [r for r in rows if r["protocol"] != "reference"]
     theirs = [r for r in rows if r["protocol"] == "reference"]
+    width = max([13] + [len(r["domain"]) for r in rows])
     lines = []
     if ours:
+        with_steps = any(math.isfinite(r.get("steps", math.nan)) and r.get("steps") for r in ours)
+        step_head = (f" {'step':>6} {'step':>6}", f" {'max s':>6} {'ss mm':>6}") if with_steps else ("", "")
         lines += [
-            f"{'controller':10} {'reference':12} {'domain':13} {'n':>3} {'drop':>5} {'RMSE>5s':>8} {'settle':>7} "
-            f"{'push':>6} {'push':>6} {'push':>7} {'engaged':>7} {'RMSE':>7} {'peak':>6} {'du/dt':>6} {'lat':>6} "
-            f"{'QP p50':>7} {'QP p99':>7}",
-            f"{'':10} {'':12} {'':13} {'':>3} {'%':>5} {'mm':>8} {'s':>7} {'rec s':>6} {'max s':>6} {'>1 s':>7} "
-            f"{'%':>7} {'all mm':>7} {'deg':>6} {'rad/s':>6} {'ms':>6} {'us':>7} {'us':>7}"]
-        for r in ours:
-            lines.append(
-                f"{r['controller']:10} {r['reference']:12} {r['domain']:13} {r['episodes']:>3} "
-                f"{100 * r['drop_rate']:>5.0f} {r['rmse_steady_mm']:>8.1f} {r['settle_s']:>7.2f} "
-                f"{_fix(r['push_recover_s'], 2):>6} {_fix(r['push_recover_max_s'], 2):>6} {late_pushes(r):>7} "
-                f"{r['engaged_pct']:>7.1f} "
-                f"{r['rmse_mm']:>7.1f} {r['peak_tilt_deg']:>6.1f} {r['smoothness_rad_s']:>6.2f} "
-                f"{r['latency_ms']:>6.0f} {_num(r['qp_p50_us']):>7} {_num(r['qp_p99_us']):>7}")
+            f"{'controller':10} {'reference':12} {'domain':{width}} {'n':>3} {'drop':>5} {'RMSE>5s':>8} "
+            f"{'settle':>7} {'push':>6} {'push':>6} {'push':>7}{step_head[0]} {'engaged':>7} {'RMSE':>7} {'peak':>6} "
+            f"{'du/dt':>6} {'lat':>6} {'QP p50':>7} {'QP p99':>7}",
+            f"{'':10} {'':12} {'':{width}} {'':>3} {'%':>5} {'mm':>8} {'s':>7} {'rec s':>6} {'max s':>6} "
+            f"{'>1 s':>7}{step_head[1]} {'%':>7} {'all mm':>7} {'deg':>6} {'rad/s':>6} {'ms':>6} {'us':>7} {'us':>7}"]
+        order = list(SET_TITLES)
+        sets = sorted({row_set(r) for r in ours}, key=lambda k: (order.index(k) if k in order else len(order), k))
+        for key in sets:
+            section = [r for r in ours if row_set(r) == key]
+            lines.append(f"-- {SET_TITLES.get(key, 'other domains')}")
+            for r in section:
+                steps = (f" {_fix(r.get('step_recover_max_s', math.nan), 2):>6} "
+                         f"{_fix(r.get('step_steady_mm', math.nan), 1):>6}") if with_steps else ""
+                lines.append(
+                    f"{r['controller']:10} {r['reference']:12} {r['domain']:{width}} {r['episodes']:>3} "
+                    f"{100 * r['drop_rate']:>5.0f} {r['rmse_steady_mm']:>8.1f} {r['settle_s']:>7.2f} "
+                    f"{_fix(r['push_recover_s'], 2):>6} {_fix(r['push_recover_max_s'], 2):>6} {late_pushes(r):>7}"
+                    f"{steps} {r['engaged_pct']:>7.1f} "
+                    f"{r['rmse_mm']:>7.1f} {r['peak_tilt_deg']:>6.1f} {r['smoothness_rad_s']:>6.2f} "
+                    f"{r['latency_ms']:>6.0f} {_num(r['qp_p50_us']):>7} {_num(r['qp_p99_us']):>7}")
+            lines += [summary_line(key, controller, [r for r in section if r["controller"] == controller])
+                      for controller in dict.fromkeys(r["controller"] for r in section)]
     if theirs:
         if lines:
             lines.append("")
         lines += ["reference system's protocol: released 0-2 cm off centre at rest, 20 s, RMSE at 30 Hz from the "
                   "release over the steps before a drop",
-                  f"{'controller':10} {'reference':12} {'domain':13} {'n':>3} {'drop':>5} {'RMSE':>7}  "
+                  f"{'controller':10} {'reference':12} {'domain':{width}} {'n':>3} {'drop':>5} {'RMSE':>7}  "
                   f"reference system's PID",
-                  f"{'':10} {'':12} {'':13} {'':>3} {'%':>5} {'mm':>7}"]
+                  f"{'':10} {'':12} {'':{width}} {'':>3} {'%':>5} {'mm':>7}"]
         for r in theirs:
-            lines.append(f"{r['controller']:10} {r['reference']:12} {r['domain']:13} {r['episodes']:>3} "
+            lines.append(f"{r['controller']:10} {r['reference']:12} {r['domain']:{width}} {r['episodes']:>3} "
                          f"{100 * r['drop_rate']:>5.0f} {r['rmse_release_mm']:>7.1f}  "
                          f"{REFERENCE_FIGURES.get(r['domain'], '')}")
     return "\n".join(lines)
+
+
+def summarise(rows) -> Dict[str, float]:
+    """One controller's figures over a set's cells: episodes and drops (all cells), the mean
+    and the worst cell of the RMSE after 5 s, the worst push and step recovery, late pushes
+    and steps not recovered before the next."""
+    episodes = sum(r["episodes"] for r in rows)
+    drops = sum(r["drop_rate"] * r["episodes"] for r in rows)
+    rmse = [(r["rmse_steady_mm"], r) for r in rows if math.isfinite(r["rmse_steady_mm"])]
+    worst = max(rmse, key=lambda v: v[0]) if rmse else (math.nan, None)
+
+    def worst_of(key):
+        values = [r[key] for r in rows if key in r and not math.isnan(r[key])]
+        return max(values) if values else math.nan
+
+    return {"cells": len(rows), "episodes": episodes, "drops": drops,
+            "rmse_steady_mean_mm": float(np.mean([v for v, _ in rmse])) if rmse else math.nan,
+            "rmse_steady_worst_mm": worst[0],
+            "rmse_steady_worst_cell": f"{worst[1]['reference']}/{worst[1]['domain']}" if worst[1] else "-",
+            "push_recover_max_s": worst_of("push_recover_max_s"), "step_recover_max_s": worst_of("step_recover_max_s"),
+            **{key: float(sum(r.get(key, 0.0) for r in rows if math.isfinite(r.get(key, 0.0))))
+               for key in ("pushes", "pushes_late", "steps", "steps_unrecovered")}}
+
+
+def summary_line(key: str, controller: str, rows) -> str:
+    """`summarise` as one line of the table."""
+    s = summarise(rows)
+    pct = 100.0 * s["drops"] / s["episodes"] if s["episodes"] else math.nan
+    text = (f"   {key or 'other'} {controller}: {s['cells']} cells, {s['episodes']} episodes, drops {s['drops']:.0f} "
+            f"({pct:.0f} %), RMSE>5s mean {s['rmse_steady_mean_mm']:.1f} mm, worst {s['rmse_steady_worst_mm']:.1f} mm "
+            f"({s['rmse_steady_worst_cell']})")
+    if s["pushes"]:
+        text += f", pushes late {s['pushes_late']:.0f}/{s['pushes']:.0f}, worst {_fix(s['push_recover_max_s'], 2)} s"
+    if s["steps"]:
+        text += (f", steps not back within 5 mm {s['steps_unrecovered']:.0f}/{s['steps']:.0f}, "
+                 f"worst {_fix(s['step_recover_max_s'], 2)} s")
+    return text
 
 
 def push_counts(metrics) -> Dict[str, float]:
@@ -230,7 +307,7 @@ def read_csv(path: Path) -> List[Dict[str, float]]:
     with Path(path).open(newline="") as f:
         rows = []
         for raw in csv.DictReader(f):
-            row = {k: (v if k in ("controller",) + CELL else float(v)) for k, v in raw.items()}
+            row = {k: (v if k in TEXT_COLUMNS else float(v) if v != "" else math.nan) for k, v in raw.items()}
             for key in ("episodes", "seed"):
                 if key in row:
                     row[key] = int(row[key])

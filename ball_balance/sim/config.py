@@ -4,6 +4,13 @@
 docs/design.md section 7 (ball mass and type, friction, gravity, detection noise, latency,
 lighting, camera impairments, pushes), drawn reproducibly from a seed by
 `DomainKnobs.sample(domain, seed)`; DOMAIN_DESCRIPTIONS says what each domain changes.
+
+The domains come in two sets (DOMAIN_SETS): the tuning set (TUNING_DOMAINS), on which every
+default (controller gains, tracker settings, the policy's training ranges) is chosen, and
+the held-out set (HELD_OUT_DOMAINS: constant force steps, a plate mounted off level,
+stronger pushes and combinations of faults), which the benchmark reports and nobody tunes
+on. A change chosen because it helps a held-out domain makes that domain a tuning domain:
+move it to the tuning set and add a new held-out one.
 No ROS import.
 """
 from __future__ import annotations
@@ -90,7 +97,12 @@ class DomainKnobs:
     jitter). Disturbances: a push of `push_speed_m_s` in a seeded direction every
     `push_interval_s`, a hand over `occlusion_markers` seeded markers for
     `occlusion_duration_s` every `occlusion_interval_s` (the benchmark episode turns these
-    into Push and Occlusion events; the hosted simulation applies the pushes).
+    into Push and Occlusion events; the hosted simulation applies the pushes), constant
+    force steps on the ball's centre of `force_step_deg` equivalent plate tilt (F = m g
+    sin(angle)) in the direction `force_step_dir_deg`, on at 5 s, turned by 90 degrees at
+    9 s, off at 13 s (benchmark episodes: Force events). Mounting: the plate fixed to the
+    tool flange tilted by `plate_mount_tilt_deg` about the horizontal plate axis at
+    `plate_mount_axis_deg` from +x (built into the model, so every simulation has it).
     """
 
     ball_mass_kg: float = BALL_MASS_KG
@@ -110,6 +122,10 @@ class DomainKnobs:
     occlusion_markers: int = 0          # a hand over this many markers (benchmark episodes) ...
     occlusion_interval_s: float = 0.0   # ... every this long (the first at this time) ...
     occlusion_duration_s: float = 0.0   # ... for this long
+    force_step_deg: float = 0.0         # force steps of this equivalent plate tilt (0: none) ...
+    force_step_dir_deg: float = 0.0     # ... the first in this direction (plate axes, from +x)
+    plate_mount_tilt_deg: float = 0.0   # plate mounted this far off level on the flange ...
+    plate_mount_axis_deg: float = 0.0   # ... about this horizontal plate axis (from +x)
 
     def __post_init__(self):
         _check_range("ball_mass_kg", self.ball_mass_kg, 1e-4, 1.0)
@@ -135,6 +151,10 @@ class DomainKnobs:
         _check_range("occlusion_duration_s", self.occlusion_duration_s, 0.0, 600.0)
         if self.occlusion_markers and not 0.0 < self.occlusion_duration_s <= self.occlusion_interval_s:
             raise SimConfigError("occlusion needs 0 < occlusion_duration_s <= occlusion_interval_s")
+        _check_range("force_step_deg", self.force_step_deg, 0.0, 10.0)
+        _check_range("force_step_dir_deg", self.force_step_dir_deg, 0.0, 360.0)
+        _check_range("plate_mount_tilt_deg", self.plate_mount_tilt_deg, 0.0, 10.0)
+        _check_range("plate_mount_axis_deg", self.plate_mount_axis_deg, 0.0, 360.0)
 
     @staticmethod
     def sample(domain: str, seed: int) -> DomainKnobs:
@@ -194,7 +214,26 @@ DOMAINS = {
     "hand_1": {"occlusion_markers": 1, "occlusion_interval_s": 3.0, "occlusion_duration_s": 1.0},
     "hand_2": {"occlusion_markers": 2, "occlusion_interval_s": 3.0, "occlusion_duration_s": 1.0},
     "hand_3": {"occlusion_markers": 3, "occlusion_interval_s": 3.0, "occlusion_duration_s": 1.0},
+    # held out (HELD_OUT_DOMAINS): reported, never tuned on
+    "force_1deg": {"force_step_deg": 1.0, "force_step_dir_deg": (0.0, 360.0)},
+    "force_2deg": {"force_step_deg": 2.0, "force_step_dir_deg": (0.0, 360.0)},
+    "force_3deg": {"force_step_deg": 3.0, "force_step_dir_deg": (0.0, 360.0)},
+    "off_level_2deg": {"plate_mount_tilt_deg": 2.0, "plate_mount_axis_deg": (0.0, 360.0)},
+    "pushes_0.3": {"push_speed_m_s": 0.3, "push_interval_s": 4.0},
+    "off_level_pushes_noise": {"plate_mount_tilt_deg": 2.0, "plate_mount_axis_deg": (0.0, 360.0),
+                               "push_speed_m_s": 0.15, "push_interval_s": 4.0, "detection_noise_m": 0.003},
+    "force_2deg_hand_2": {"force_step_deg": 2.0, "force_step_dir_deg": (0.0, 360.0), "occlusion_markers": 2,
+                          "occlusion_interval_s": 3.0, "occlusion_duration_s": 1.0},
+    "latency_off_level_heavy": {"latency_s": (0.03, 0.15), "plate_mount_tilt_deg": 2.0,
+                                "plate_mount_axis_deg": (0.0, 360.0), "ball_mass_kg": 0.0050},
 }
+TUNING_DOMAINS = ("standard", "slippery", "sticky", "heavy_ball", "low_gravity", "high_gravity", "noisy_vision",
+                  "high_latency", "full_dr", "noise_5mm", "latency_200ms", "extreme_dr", "solid_ball", "pushes",
+                  "hand_1", "hand_2", "hand_3")
+HELD_OUT_DOMAINS = ("force_1deg", "force_2deg", "force_3deg", "off_level_2deg", "pushes_0.3",
+                    "off_level_pushes_noise", "force_2deg_hand_2", "latency_off_level_heavy")
+# defaults are chosen on the tuning set only; the held-out set is reported, never tuned on
+DOMAIN_SETS = {"tuning": TUNING_DOMAINS, "held_out": HELD_OUT_DOMAINS}
 DOMAIN_ALIASES = {"gravity_0.5g": "low_gravity", "gravity_1.5g": "high_gravity"}
 DOMAIN_DESCRIPTIONS = {
     "standard": "nominal: 2.7 g thin-shell ball, friction 0.4, 1 g, no detection noise or added latency",
@@ -215,7 +254,28 @@ DOMAIN_DESCRIPTIONS = {
     "hand_1": "a hand over 1 marker (seeded) for 1 s every 3 s (benchmark episodes)",
     "hand_2": "a hand over 2 markers (seeded) for 1 s every 3 s (benchmark episodes)",
     "hand_3": "a hand over 3 markers (seeded) for 1 s every 3 s (benchmark episodes)",
+    "force_1deg": "held out: constant force on the ball's centre equal to a plate 1 deg off level "
+                  "(F = m g sin 1 deg, 0.46 mN for the 2.7 g ball at 1 g), seeded direction; on at 5 s, turned "
+                  "by 90 deg at 9 s, off at 13 s (benchmark episodes)",
+    "force_2deg": "held out: as force_1deg at 2 deg (0.92 mN for the 2.7 g ball at 1 g)",
+    "force_3deg": "held out: as force_1deg at 3 deg (1.39 mN for the 2.7 g ball at 1 g)",
+    "off_level_2deg": "held out: the plate mounted 2 deg off level on the tool flange, about a seeded "
+                      "horizontal plate axis, for the whole episode (built into the MuJoCo model)",
+    "pushes_0.3": "held out: the ball pushed at 0.3 m/s (twice pushes) in a seeded direction every 4 s",
+    "off_level_pushes_noise": "held out: off_level_2deg + pushes (0.15 m/s every 4 s) + detection noise "
+                              "3 mm (noisy_vision)",
+    "force_2deg_hand_2": "held out: force_2deg's steps + a hand over 2 seeded markers for 1 s every 3 s "
+                         "(hand_2)",
+    "latency_off_level_heavy": "held out: latency 30-150 ms (high_latency) + off_level_2deg + a 5 g ball "
+                               "(heavy_ball)",
 }
+
+
+def domain_set(domain: str) -> str:
+    """'tuning' or 'held_out': the set of DOMAIN_SETS that `domain` (or the domain an alias
+    names) belongs to; '' for a name that is no domain."""
+    name = DOMAIN_ALIASES.get(domain, domain)
+    return next((key for key, names in DOMAIN_SETS.items() if name in names), "")
 
 
 def _check_range(name: str, value: float, low: float, high: float) -> None:

@@ -5,6 +5,9 @@ hand-written MJCF) and adds, through mujoco.MjSpec: the floor, lights, the marke
 on the plate's top face, the ball (thin shell, rolling/torsional friction), the fixed
 overhead camera, gravity compensation for the arm (as the UR controller does) and a
 position servo per joint (gains from the arm's inertia at home for the requested lag).
+A domain's `plate_mount_tilt_deg` turns the plate body on the tool flange (about its own
+centre and a horizontal plate axis), as a plate mounted off level would be: the controllers'
+kinematics (the URDF) do not know it.
 No ROS import.
 """
 from __future__ import annotations
@@ -94,6 +97,7 @@ def build_model(urdf_text: str, config: SimConfig = SimConfig(),
 
     home = _home_plate_pose(urdf_text)
     _add_arm_dynamics(spec, urdf_text)
+    _tilt_plate_mount(spec, knobs)
     _add_floor_and_lights(spec, home, knobs)
     _add_plate_texture(spec)
     _add_ball(spec, config, knobs, home)
@@ -133,6 +137,23 @@ def _add_arm_dynamics(spec: mujoco.MjSpec, urdf_text: str) -> None:
         effort = limits[name].effort
         actuator.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
         actuator.forcerange = [-effort, effort]
+
+
+def plate_mount_quat(tilt_deg: float, axis_deg: float) -> np.ndarray:
+    """(w, x, y, z): a turn by `tilt_deg` about the plate axis (cos a, sin a, 0), a = axis_deg."""
+    half, a = np.radians(tilt_deg) / 2.0, np.radians(axis_deg)
+    return np.array([np.cos(half), np.sin(half) * np.cos(a), np.sin(half) * np.sin(a), 0.0])
+
+
+def _tilt_plate_mount(spec: mujoco.MjSpec, knobs: DomainKnobs) -> None:
+    """The plate body turned on its mount (relative to the flange) by the domain's tilt."""
+    if knobs.plate_mount_tilt_deg == 0.0:
+        return
+    body = spec.body(PLATE_FRAME)
+    quat = np.zeros(4)
+    mujoco.mju_mulQuat(quat, np.asarray(body.quat, dtype=float),
+                       plate_mount_quat(knobs.plate_mount_tilt_deg, knobs.plate_mount_axis_deg))
+    body.quat = quat.tolist()
 
 
 def _add_floor_and_lights(spec: mujoco.MjSpec, home: np.ndarray, knobs: DomainKnobs) -> None:

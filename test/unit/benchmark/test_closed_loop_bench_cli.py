@@ -25,3 +25,13 @@ def test_unknown_names_are_refused_naming_them():
 def test_the_controller_list_comes_from_the_pipeline():
     known = bench.known_controllers()
     assert known is None or {"pid", "mpc"} <= known
+
+
+def test_tuning_and_held_out_groups_cover_every_domain_once_and_all_runs_both():
+    from ball_balance.sim.config import DOMAIN_SETS
+
+    tuning = bench.names("tuning", set(bench.DOMAINS), "domain", bench.DOMAIN_GROUPS)
+    held_out = bench.names("held_out", set(bench.DOMAINS), "domain", bench.DOMAIN_GROUPS)
+    assert tuning == list(DOMAIN_SETS["tuning"]) and len(tuning) == 17
+    assert held_out == list(DOMAIN_SETS["held_out"]) and not set(tuning) & set(held_out)
+    assert sorted(bench.names("all", set(bench.DOMAINS), "domain", bench.DOMAIN_GROUPS)) == sorted(tuning + held_out)
