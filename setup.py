@@ -1,4 +1,4 @@
-"""ament_python package ball_balance: the application and controller_manager_py."""
+"""ament_python package ball_balance: the application (controller_manager_py is its own package)."""
 import glob
 
 from setuptools import find_packages, setup
@@ -13,32 +13,17 @@ EXECUTABLES = {
     "ball_balance_policy": "ball_balance.nodes.policy_node:main",
     "ball_balance_visualizer": "ball_balance.nodes.visualizer_node:main",
     "robot_state_publisher": "ball_balance.nodes.robot_state_publisher_node:main",
-    "ros2_control_node": "controller_manager_py.ros2_control_node:main",
-    "spawner": "controller_manager_py.spawner:main",
     "ros2py": "ball_balance.cli.main:main",
     "camera_snapshot": "ball_balance.nodes.camera_snapshot_node:main",
 }
 
-# controller_manager_py plugins (hardware components and controllers), by plugin string.
+# Our plugins for controller_manager_py (hardware components and controllers), by plugin string.
+# controller_manager_py's own (mock_components/GenericSystem, the standard controllers) are
+# registered by its own setup.py, under the same entry-point groups.
 CMPY_HARDWARE = {
-    "mock_components/GenericSystem": "controller_manager_py.hardware_interface.mock_components:GenericSystem",
     "ball_balance/MujocoSystem": "ball_balance.hardware.mujoco_system:MujocoSystem",
 }
 CMPY_CONTROLLERS = {
-    "joint_state_broadcaster/JointStateBroadcaster":
-        "controller_manager_py.controllers.joint_state_broadcaster:JointStateBroadcaster",
-    "position_controllers/JointGroupPositionController":
-        "controller_manager_py.controllers.forward_command:JointGroupPositionController",
-    "forward_command_controller/ForwardCommandController":
-        "controller_manager_py.controllers.forward_command:ForwardCommandController",
-    "joint_trajectory_controller/JointTrajectoryController":
-        "controller_manager_py.controllers.joint_trajectory:JointTrajectoryController",
-    "onnx_policy_controller/OnnxPolicyController":
-        "controller_manager_py.controllers.onnx_policy:OnnxPolicyController",
-    "chained_controllers/PassthroughController":
-        "controller_manager_py.controllers.passthrough:PassthroughController",
-    "ur_controllers/ScaledJointTrajectoryController":
-        "controller_manager_py.controllers.joint_trajectory:ScaledJointTrajectoryController",
     "ball_balance_controllers/BallBalanceController":
         "ball_balance.controllers.ball_balance_controller:BallBalanceController",
 }
@@ -46,8 +31,7 @@ CMPY_CONTROLLERS = {
 setup(
     name=PACKAGE,
     version="0.1.0",
-    packages=find_packages(include=["ball_balance", "ball_balance.*",
-                                    "controller_manager_py", "controller_manager_py.*"]),
+    packages=find_packages(include=["ball_balance", "ball_balance.*"]),
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -25,6 +25,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "controller_manager_py"))  # its own package folder
 
 from ball_balance.hardware.camera_process import CameraProcess  # noqa: E402
 from ball_balance.hardware.sim_ros import stamp  # noqa: E402

@@ -38,6 +38,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "controller_manager_py"))  # its own package folder
 
 from ball_balance.benchmark.episode import (  # noqa: E402
     REFERENCES,

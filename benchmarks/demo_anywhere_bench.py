@@ -31,6 +31,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "controller_manager_py"))  # its own package folder
 
 PRIVATE_DOMAINS = range(150, 230)
 BUSY = [sys.executable, "-c", "while True: pass"]

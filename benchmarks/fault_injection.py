@@ -23,6 +23,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "controller_manager_py"))  # its own package folder
 sys.path.insert(0, str(ROOT / "test"))   # the process launcher and graph node the tests use
 
 from ball_balance.benchmark.faults import CASES, format_rows, graph_commands, run_case  # noqa: E402

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "controller_manager_py"))  # its own package folder
 
 from ball_balance.control.mpc import MpcConfig, PlateMpc, preview  # noqa: E402
 from ball_balance.control.references import Circle, FigureEight, Stationary  # noqa: E402

@@ -19,6 +19,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "controller_manager_py"))  # its own package folder
 
 from ball_balance.control.references import RefSample  # noqa: E402
 from ball_balance.policy.observation import AXES, flat_names, layout  # noqa: E402

@@ -37,6 +37,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "controller_manager_py"))  # its own package folder
 
 from ball_balance import robot  # noqa: E402
 from ball_balance.sim.config import SimConfig  # noqa: E402

@@ -9,8 +9,9 @@ order the component declares them. The schemas are imported, no ROS node is star
     python scripts/gen_param_docs.py            # (re)write docs/parameters.md
     python scripts/gen_param_docs.py --check    # exit 1 when docs/parameters.md is stale
 
-Every executable and plugin of setup.py must be listed in COMPONENTS or in WITHOUT_SCHEMA
-(else this script fails): a new node or plugin cannot be left out of the file unnoticed.
+Every executable and plugin of both setup.py files (the root one and controller_manager_py's)
+must be listed in COMPONENTS or in WITHOUT_SCHEMA (else this script fails): a new node or
+plugin cannot be left out of the file unnoticed.
 test/unit/test_parameter_docs.py runs the check.
 """
 from __future__ import annotations
@@ -25,8 +26,9 @@ from pathlib import Path
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))  # document the working tree, not an installed copy
+for _folder in (ROOT, ROOT / "controller_manager_py"):  # ball_balance, and controller_manager_py's package folder
+    if str(_folder) not in sys.path:
+        sys.path.insert(0, str(_folder))  # document the working tree, not an installed copy
 
 from controller_manager_py.parameters import Param  # noqa: E402
 
@@ -41,7 +43,8 @@ class Component:
     name: str           # node name or plugin string
     target: str         # "module:attribute" of the node class / module, or of the plugin class
     schema: Callable[[], Sequence[Param]]
-    executable: str = ""  # `ros2 run ball_balance <executable>` for a node
+    executable: str = ""  # `ros2 run <package> <executable>` for a node
+    package: str = "ball_balance"
 
 
 def _attr(target: str):
@@ -103,15 +106,29 @@ WITHOUT_SCHEMA = {
 }
 
 
+# the two packages' setup.py files: (package, path, {its dict name: the merged name})
+SETUPS = (
+    ("controller_manager_py", ROOT / "controller_manager_py" / "setup.py",
+     {"EXECUTABLES": "EXECUTABLES", "HARDWARE": "CMPY_HARDWARE", "CONTROLLERS": "CMPY_CONTROLLERS"}),
+    ("ball_balance", ROOT / "setup.py",
+     {"EXECUTABLES": "EXECUTABLES", "CMPY_HARDWARE": "CMPY_HARDWARE", "CMPY_CONTROLLERS": "CMPY_CONTROLLERS"}),
+)
+
+
 def _setup_dicts() -> Dict[str, Dict[str, str]]:
-    """setup.py's EXECUTABLES, CMPY_HARDWARE and CMPY_CONTROLLERS (read, not run)."""
-    tree = ast.parse((ROOT / "setup.py").read_text())
-    found = {}
-    for node in tree.body:
-        if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
-            name = node.targets[0].id
-            if name in ("EXECUTABLES", "CMPY_HARDWARE", "CMPY_CONTROLLERS"):
-                found[name] = ast.literal_eval(node.value)
+    """EXECUTABLES, CMPY_HARDWARE and CMPY_CONTROLLERS of both setup.py files (read, not run),
+    controller_manager_py's first; PACKAGES maps each executable to its package."""
+    found: Dict[str, Dict[str, str]] = {"EXECUTABLES": {}, "CMPY_HARDWARE": {}, "CMPY_CONTROLLERS": {},
+                                        "PACKAGES": {}}
+    for package, path, names in SETUPS:
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name):
+                name = node.targets[0].id
+                if name in names:
+                    values = ast.literal_eval(node.value)
+                    found[names[name]].update(values)
+                    if name == "EXECUTABLES":
+                        found["PACKAGES"].update({executable: package for executable in values})
     return found
 
 
@@ -122,7 +139,7 @@ def components() -> List[Component]:
     for executable, name, target, schema in NODES:
         if executable not in setup["EXECUTABLES"]:
             raise SystemExit(f"gen_param_docs: no executable '{executable}' in setup.py (NODES is stale)")
-        result.append(Component("node", name, target, schema, executable))
+        result.append(Component("node", name, target, schema, executable, setup["PACKAGES"][executable]))
     for plugin, target in setup["CMPY_HARDWARE"].items():
         if plugin not in WITHOUT_SCHEMA:
             result.append(Component("hardware plugin", plugin, target, _hardware_schema(target)))
@@ -248,7 +265,7 @@ def _section(component: Component, params: Sequence[Param], by_id: Dict[int, str
         counts[where] = counts.get(where, 0) + 1
     lines = [f'<a id="{_anchor(component)}"></a>', f"## {component.kind.capitalize()} `{component.name}`", ""]
     if component.kind == "node":
-        lines.append(f"`ros2 run ball_balance {component.executable}`; declared by `{cls}` in `{declared_in}`.")
+        lines.append(f"`ros2 run {component.package} {component.executable}`; declared by `{cls}` in `{declared_in}`.")
     elif component.kind == "hardware plugin":
         lines.append(f"Class `{cls}` in `{declared_in}`; set as `<param name=...>` in the URDF's `<hardware>` "
                      "tag, not as ROS parameters.")
@@ -289,8 +306,9 @@ def render() -> str:
         "(name, default, unit, bounds, description), in the order below. `ros2 param describe` shows the same "
         "descriptions (with the unit and range); a value out of range or of the wrong type stops the component "
         "at start-up with one line naming the parameter. A read-only parameter is set at start-up only "
-        "(parameter file or `-p`). Besides these, every node above (run by `ball_balance.ros.node_main`) and the "
-        "node of every controller declare `unknown_parameters` (last section), and rclpy declares "
+        "(parameter file or `-p`). Besides these, every node above (run by "
+        "`controller_manager_py.ros.node_main`) and the node of every controller declare "
+        "`unknown_parameters` (last section), and rclpy declares "
         "`use_sim_time`.",
         "",
         "| component | kind | parameters |",

@@ -20,6 +20,8 @@ from typing import Callable, List, Optional, Sequence
 
 ROOT = Path(__file__).resolve().parents[1]
 INSTALL_BIN = ROOT / "install" / "lib" / "ball_balance"
+# ros2_control_node and spawner: `ros2 run controller_manager_py <name>`
+CM_INSTALL_BIN = ROOT / "install" / "lib" / "controller_manager_py"
 LOCK_DIR = Path("/tmp/ball_balance_ros_domains")
 DOMAIN_RANGE = range(30, 230)
 # The project's DDS settings (docs/transport.md) for every process a test starts and for the
@@ -64,11 +66,12 @@ def ros_env(domain_id: int, **extra: str) -> dict:
 
 
 def executable(name: str) -> str:
-    """Path of one of our installed executables (`ros2 run ball_balance <name>`)."""
-    path = INSTALL_BIN / name
-    if not path.exists():
-        raise FileNotFoundError(f"{path} missing: run scripts/setup.sh")
-    return str(path)
+    """Path of one of our installed executables (`ros2 run ball_balance <name>`, or
+    `ros2 run controller_manager_py <name>` for ros2_control_node and spawner)."""
+    for folder in (INSTALL_BIN, CM_INSTALL_BIN):
+        if (folder / name).exists():
+            return str(folder / name)
+    raise FileNotFoundError(f"{INSTALL_BIN / name} missing: run scripts/setup.sh")
 
 
 class Process:

@@ -537,7 +537,7 @@ def main(argv=None) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
-    from ball_balance.ros.node_main import ignore_stop_signals
+    from controller_manager_py.ros.node_main import ignore_stop_signals
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--duration", type=float, default=0.0,

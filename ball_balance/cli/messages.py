@@ -117,7 +117,7 @@ def get_field(msg: Any, path: str) -> Any:
 # --- dict -> message -------------------------------------------------------------------
 def parse_yaml_values(text: str, what: str = "message values") -> Any:
     """YAML text -> Python value; a CliError with the parser's first line when malformed."""
-    from ball_balance.ros.params_files import ParamsFileError, load_yaml_text
+    from controller_manager_py.ros.params_files import ParamsFileError, load_yaml_text
 
     try:
         return load_yaml_text(text, what)

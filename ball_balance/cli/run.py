@@ -5,7 +5,7 @@ import os
 from typing import List, Optional
 
 from ball_balance.cli.errors import CliError
-from ball_balance.ros.params_files import ParamsFileError, check_params_files
+from controller_manager_py.ros.params_files import ParamsFileError, check_params_files
 
 
 def prefixes() -> List[str]:

@@ -21,7 +21,7 @@ own triggering (control_trigger, peer_timeout_s: joint states never go missing h
     target to the six command interfaces, moved towards it within the URDF joint velocity
     limits for that update's period (manager/joint_limits.JointLimiter). With `command_ramp`
     (default) the written command runs from the last one to the target in a straight line
-    over one control period (controller_manager_py/controllers/command_ramp.CommandRamp): a target jumping once per step
+    over one control period (controller_manager_py.controllers.command_ramp.CommandRamp): a target jumping once per step
     shook the plate at the control rate and threw the ball off it after a push. Why every update: the
     manager's limits stage writes the saturated value back into the command interface (as
     ros2_control's does), so a target written only once per step was cut to one manager

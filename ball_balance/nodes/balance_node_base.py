@@ -71,10 +71,10 @@ from ball_balance.control.references import ReferenceError
 from ball_balance.control.safety import BallObservation, Mode
 from ball_balance.plate_geometry import PLATE_FRAME, PLATE_SIDE_M
 from ball_balance.robot import JOINT_NAMES, RobotDescriptionError, robot_description_path
-from ball_balance.ros.node_main import StartupError
 from ball_balance.vision.pose_quality import ball_position_std_m
 from controller_manager_py.parameters import Param, ParameterError, declare_parameters
 from controller_manager_py.realtime import set_process_realtime_priority
+from controller_manager_py.ros.node_main import StartupError
 
 NEWEST_ONLY_SENSOR = QoSProfile(depth=1, reliability=qos_profile_sensor_data.reliability,
                                 durability=qos_profile_sensor_data.durability)

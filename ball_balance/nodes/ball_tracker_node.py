@@ -65,7 +65,6 @@ from sensor_msgs.msg import CameraInfo, Image
 
 from ball_balance.plate_geometry import PLATE_FRAME
 from ball_balance.ros.images import decode_image, encode_image, image_from_cdr
-from ball_balance.ros.node_main import StartupError, main_for
 from ball_balance.rotations import matrix_to_quaternion
 from ball_balance.vision.camera import CalibrationError, CameraModel, load_calibration
 from ball_balance.vision.config import SOURCE_SCHEMA, TRACKER_SCHEMA, TrackerConfig
@@ -75,6 +74,7 @@ from ball_balance.vision.sources import CaptureSource, SourceError
 from ball_balance.vision.tracker import STAGES, BallTracker, TrackerResult
 from controller_manager_py.parameters import Param, declare_parameters
 from controller_manager_py.realtime import reuse_freed_memory, set_process_realtime_priority
+from controller_manager_py.ros.node_main import StartupError, main_for
 from controller_manager_py.ros.statistics_publisher import StatisticsRegistry
 
 NODE_SCHEMA = (

@@ -12,8 +12,8 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 
 from ball_balance.ros.images import decode_image
-from ball_balance.ros.node_main import StartupError, main_for
 from controller_manager_py.parameters import Param, declare_parameters
+from controller_manager_py.ros.node_main import StartupError, main_for
 
 SCHEMA = [
     Param("png", "", "write the first frame here (empty: no still)", read_only=True),

@@ -16,8 +16,8 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from ball_balance.control.config import MPC_NODE_SCHEMA
 from ball_balance.nodes.balance_node_base import BalanceControllerNode
 from ball_balance.robot import JOINT_NAMES
-from ball_balance.ros.node_main import main_for
 from controller_manager_py.parameters import Param
+from controller_manager_py.ros.node_main import main_for
 
 SCHEMA = MPC_NODE_SCHEMA + [
     Param("trajectory_point_time_s", 0.0, "time_from_start of the single trajectory point; 0: one control "

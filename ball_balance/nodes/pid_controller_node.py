@@ -10,7 +10,7 @@ from std_msgs.msg import Float64MultiArray
 
 from ball_balance.control.config import PID_SCHEMA
 from ball_balance.nodes.balance_node_base import BalanceControllerNode
-from ball_balance.ros.node_main import main_for
+from controller_manager_py.ros.node_main import main_for
 
 
 class PidControllerNode(BalanceControllerNode):

@@ -20,8 +20,8 @@ from std_msgs.msg import Float64MultiArray
 from ball_balance.control.config import PID_GAINS_SCHEMA, POLICY_SCHEMA
 from ball_balance.control.pipeline import ControlPipeline
 from ball_balance.nodes.balance_node_base import BalanceControllerNode
-from ball_balance.ros.node_main import StartupError, main_for
 from controller_manager_py.controllers.policy_model import PolicyModelError
+from controller_manager_py.ros.node_main import StartupError, main_for
 
 PID_GAINS = {p.name for p in PID_GAINS_SCHEMA}
 

@@ -23,10 +23,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from ball_balance import robot
-from ball_balance.ros.node_main import StartupError, main_for
 from ball_balance.tf.ros import StaticTransformBroadcaster, TransformBroadcaster, transform_to_msg
 from ball_balance.tf.transform import Transform, quat_multiply
 from controller_manager_py.parameters import Param, declare_parameters
+from controller_manager_py.ros.node_main import StartupError, main_for
 
 SCHEMA = [
     Param("robot_description", "", "URDF text (empty: read robot_description_file)", read_only=True),

@@ -34,8 +34,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 from ball_balance.control import config as control_config
 from ball_balance.control.references import ReferenceError
 from ball_balance.plate_geometry import BALL_RADIUS_M, PLATE_FRAME, PLATE_SIDE_M, PLATE_THICKNESS_M
-from ball_balance.ros.node_main import StartupError, main_for
 from controller_manager_py.parameters import Param, declare_parameters
+from controller_manager_py.ros.node_main import StartupError, main_for
 
 SCHEMA = [
     Param("rate_hz", 20.0, "marker publishing rate", "Hz", 1.0, 100.0, read_only=True),

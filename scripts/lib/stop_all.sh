@@ -3,7 +3,7 @@
 # one (background jobs of a script ignore SIGINT; every node shuts down cleanly on SIGTERM),
 # waits up to 6 s for each, SIGKILLs what is left, then runs the script's `on_stopped` if
 # it defines one. A second Ctrl-C while it stops does not cut the stop short (the nodes
-# ignore further signals while they shut down, ball_balance/ros/node_main.py): it is
+# ignore further signals while they shut down, controller_manager_py/controller_manager_py/ros/node_main.py): it is
 # answered with one line, and whatever has not stopped 6 s after the first is killed.
 #
 # What the started processes have started in turn (a helper's `ros2py service call`, the

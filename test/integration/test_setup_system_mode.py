@@ -107,7 +107,7 @@ def test_setup_takes_the_system_mode_on_a_jazzy_installation_and_nodes_run_the_r
     assert numpy_version.startswith("1.26") and cv2_version.startswith("4.10")
 
     manager = subprocess.Popen(
-        ["bash", "-c", shell + "exec ros2 run ball_balance ros2_control_node --ros-args --params-file "
+        ["bash", "-c", shell + "exec ros2 run controller_manager_py ros2_control_node --ros-args --params-file "
          "config/ur_controllers.yaml -p robot_description_file:=config/mock_ur.urdf"],
         cwd=ws, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
     try:

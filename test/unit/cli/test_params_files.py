@@ -1,8 +1,8 @@
 """Parameter files checked before a node starts, and unknown parameter names named."""
 import pytest
 
-from ball_balance.ros.params_files import ParamsFileError, check_params_files, params_files_in
 from controller_manager_py.parameters import describe_unknown, unknown_parameter_names
+from controller_manager_py.ros.params_files import ParamsFileError, check_params_files, params_files_in
 
 
 def test_only_params_files_inside_ros_args_are_checked():

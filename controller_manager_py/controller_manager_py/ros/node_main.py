@@ -24,7 +24,7 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
     import rclpy
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 
-    from ball_balance.ros.params_files import ParamsFileError, check_params_files
+    from controller_manager_py.ros.params_files import ParamsFileError, check_params_files
 
     name = os.path.basename(sys.argv[0]) or getattr(make_node, "__name__", "node")
     try:  # before rcl, which would log its own error line for a malformed file

@@ -93,8 +93,8 @@ def parse(props: dict, where: str) -> PolicyMetadata:
     """PolicyMetadata from a model's metadata_props (PolicyModelError names what is wrong)."""
     missing = [k for k in REQUIRED_KEYS if k not in props]
     if missing:
-        raise PolicyModelError(f"policy model {where}: metadata lacks {missing} (is it a policy exported by "
-                               "ball_balance.policy.train?)")
+        raise PolicyModelError(f"policy model {where}: metadata lacks {missing} (is it a policy exported with "
+                               "policy_model.make_metadata?)")
     if props["policy_format"] != FORMAT:
         raise PolicyModelError(f"policy model {where}: policy_format {props['policy_format']!r}, this runtime "
                                f"reads {FORMAT!r}")

@@ -22,5 +22,6 @@ Rooms (as ros2_control's packages):
   (entry name = the plugin string, e.g. `mock_components/GenericSystem`).
 - `parameters.py`: the Param schema shared by nodes and controllers.
 
-Usage, parameters and the differences from ros2_control: README.md in this folder.
+Installation, usage, parameters, plugins from other packages and the differences from
+ros2_control: README.md in the package folder (next to package.xml and setup.py).
 """

@@ -3,9 +3,8 @@
     ros2_control_node --ros-args --params-file config/ur_controllers.yaml \
         -p robot_description_file:=config/mock_ur.urdf
 """
-from ball_balance.ros.node_main import main_for
-
 from .ros.node import ControllerManagerNode
+from .ros.node_main import main_for
 
 main = main_for(ControllerManagerNode)
 

@@ -2,8 +2,9 @@
 
 rcl reports a missing or malformed parameter file with its own error line (and the C
 source location) and the node then adds another; checking the files first gives one line
-naming the file and the problem. Used by every node's main (ball_balance/ros/node_main.py)
-and by `ros2py run`. No rclpy import: the check runs before rclpy is initialised.
+naming the file and the problem. Used by every node's main (node_main.py, next to this file)
+and by command-line tools that start nodes. No rclpy import: the check runs before rclpy is
+initialised.
 """
 from __future__ import annotations
 

@@ -1,11 +1,12 @@
 """Our pluginlib: plugin classes found through Python entry points.
 
-Groups (declared in setup.py's entry_points, name = the plugin string):
+Groups (declared in a package's setup.py entry_points, name = the plugin string):
   controller_manager_py.hardware     e.g. `mock_components/GenericSystem`
   controller_manager_py.controllers  e.g. `joint_state_broadcaster/JointStateBroadcaster`
-The built-in plugins are declared there too (setup.py CMPY_HARDWARE / CMPY_CONTROLLERS):
-re-run scripts/setup.sh after adding one. A `module.path:ClassName` string is accepted as
-well (tests, quick experiments).
+Our own plugins are declared in this package's setup.py (HARDWARE / CONTROLLERS); any other
+installed package adds its own the same way (README.md, "Plugins from another package").
+Rebuild (colcon) after adding one. A `module.path:ClassName` string is accepted as well
+(tests, quick experiments).
 """
 from __future__ import annotations
 
