@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "test" / "unit" / "controller_manager"))
+sys.path.insert(0, str(ROOT / "controller_manager_py"))
+sys.path.insert(0, str(ROOT / "controller_manager_py" / "test"))
 
 from builtin_interfaces.msg import Duration  # noqa: E402
 from cm_helpers import HOME, JOINTS, MOCK_UR, make_manager  # noqa: E402

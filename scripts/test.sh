@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Set up the workspace (fast when up to date) and run the whole test suite:
-# lint, unit tests, then integration tests over DDS. Extra arguments go to pytest.
+# lint, controller_manager_py's tests on their own, unit tests, then integration tests over DDS.
+# Extra arguments go to pytest (which then runs controller_manager_py's tests in the suite).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$ROOT/scripts/setup.sh"
@@ -8,5 +9,13 @@ source "$ROOT/env.sh"
 cd "$ROOT"
 echo "[test] ruff check"
 ruff check --quiet ball_balance controller_manager_py test scripts
+if (($# == 0)); then
+  # controller_manager_py's own tests, without ball_balance on the path (it is a package of
+  # its own); the pytest run below then leaves them out
+  echo "[test] controller_manager_py alone"
+  controller_manager_py/test/run_standalone.sh -q
+  echo "[test] pytest"
+  exec python -m pytest --ignore=controller_manager_py/test
+fi
 echo "[test] pytest"
 exec python -m pytest "$@"

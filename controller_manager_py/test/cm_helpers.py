@@ -8,8 +8,7 @@ from controller_manager_py.controller_interface import ControllerInterface
 from controller_manager_py.hardware_interface import CallbackReturn, SystemInterface, return_type
 from controller_manager_py.manager.controller_manager import ControllerManager
 
-ROOT = Path(__file__).resolve().parents[3]
-MOCK_UR = (ROOT / "config" / "mock_ur.urdf").read_text()
+MOCK_UR = (Path(__file__).resolve().parent / "mock_ur.urdf").read_text()  # a 6-joint UR on GenericSystem
 JOINTS = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint",
           "wrist_3_joint"]
 HOME = [0.0, -1.5707963267948966, 1.5707963267948966, -1.5707963267948966, 1.5707963267948966, 0.0]
