@@ -11,11 +11,11 @@ echo "[test] ruff check"
 ruff check --quiet ball_balance controller_manager_py test scripts
 if (($# == 0)); then
   # controller_manager_py's own tests, without ball_balance on the path (it is a package of
-  # its own); the pytest run below then leaves them out
+  # its own); the pytest run below is then the rest (test/ only)
   echo "[test] controller_manager_py alone"
   controller_manager_py/test/run_standalone.sh -q
   echo "[test] pytest"
-  exec python -m pytest --ignore=controller_manager_py/test
+  exec python -m pytest test
 fi
 echo "[test] pytest"
 exec python -m pytest "$@"
