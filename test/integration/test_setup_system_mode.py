@@ -4,8 +4,8 @@ scripts/tools/standin_jazzy.sh installs the pinned Jazzy packages into a prefix 
 setup.bash, for the system Python, as /opt/ros/jazzy would hold them. A copy of this
 repository then runs scripts/setup.sh with that setup.bash sourced (system mode: a venv with
 system site packages, numpy 1.26 and OpenCV 4.10, only the interface packages the
-installation lacks built), and nodes are started as `ros2 run` starts them. The README's
-"Set-up with a ROS installation" says what this does and does not prove.
+installation lacks built), and nodes are started as `ros2 run` starts them. docs/setup.md,
+"How system mode is tested", says what this does and does not prove.
 
 Slow the first time (about 10 min at load 17 on 2 cores, colcon 8 min of it), so both the
 stand-in and the workspace's venv, build and install folders are kept between runs, each
