@@ -491,9 +491,9 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
         u_cmd = result.u
         # /plate_cmd as the tracker receives it
         if tracker is not None:
-            tracker.set_plate_cmd(u_cmd[0], u_cmd[1], t)
+            tracker.set_plate_cmd(*result.plate_cmd, t)
         elif kalman is not None:
-            plate_cmds.add(u_cmd[0], u_cmd[1], t)
+            plate_cmds.add(*result.plate_cmd, t)
         if ramp is None:
             world.set_joint_targets(result.q_cmd)
             world.step(steps_per_tick)

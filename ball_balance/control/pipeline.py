@@ -171,6 +171,12 @@ class TickResult:
     # after an engagement, so that errors measured against it are the benchmark's (None when
     # not engaged)
     target_m: Optional[tuple] = None
+    # what /plate_cmd carries for the tracker's Kalman feed-forward: the commanded tilt less the
+    # estimated disturbance's level offset asin(d / k_g), the tilt that gives the ball the
+    # acceleration the plant estimate expects (-k_g u + d). A commanded tilt that cancels a
+    # disturbance barely moves the ball; fed that tilt, the tracker's filter expects the ball
+    # to run off and reports it short of where it is. None: `u`
+    plate_cmd: Optional[tuple] = None
 
 
 class ControlPipeline:
@@ -284,7 +290,10 @@ class ControlPipeline:
             self.plant.add_tilt(now_s, tilt_measured)   # the tilt the ball really felt
         else:
             self.plant.add_tilt(now_s + self.actuation_delay_s, tilt_cmd)
-        return TickResult(q_new.copy(), (float(self.u[0]), float(self.u[1])), mode, ref, predicted, refused, target)
+        level = np.arcsin(np.clip(self.plant.offset / self.plant.k_g, -1.0, 1.0))
+        plate_cmd = (float(self.u[0] - level[0]), float(self.u[1] - level[1]))
+        return TickResult(q_new.copy(), (float(self.u[0]), float(self.u[1])), mode, ref, predicted, refused, target,
+                          plate_cmd)
 
     def _brake(self, now_s: float):
         """(tilt, predicted state) that decelerates the last good state's motion, dead-reckoned
