@@ -63,13 +63,17 @@ class EstimatorConfig:
         return self.adapt_gain or self.adapt_offset
 
 
-def level_offset_deg(accel_offset_m_s2, k_g: float) -> np.ndarray:
-    """The disturbance d as a plate-level offset per axis [deg]: the plate tilt (in the command's
+def level_offset_rad(accel_offset_m_s2, k_g: float) -> np.ndarray:
+    """The disturbance d as a plate-level offset per axis [rad]: the plate tilt (in the command's
     sign convention, u) at which the ball stays still, asin(d / k_g) with k_g = k g (a plate
     tilted by u accelerates the ball by -k g sin(u); a plate mounted off level by -u, or a force
     F = m g sin(u) on the ball's centre, gives d = k g sin(u))."""
-    ratio = np.clip(np.asarray(accel_offset_m_s2, dtype=float) / k_g, -1.0, 1.0)
-    return np.degrees(np.arcsin(ratio))
+    return np.arcsin(np.clip(np.asarray(accel_offset_m_s2, dtype=float) / k_g, -1.0, 1.0))
+
+
+def level_offset_deg(accel_offset_m_s2, k_g: float) -> np.ndarray:
+    """`level_offset_rad` in degrees, as the statistics report it."""
+    return np.degrees(level_offset_rad(accel_offset_m_s2, k_g))
 
 
 def plant_statistics(plant_of) -> list:
