@@ -160,15 +160,21 @@ class Graph:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
 
-    def wait_until(self, condition: Callable[[], bool], timeout: float) -> bool:
-        """Spin until condition() holds (True) or timeout passes (False)."""
+    def wait_until(self, condition: Callable[[], bool], timeout: float, poll_s: float = 0.02) -> bool:
+        """Spin until condition() holds (True) or timeout passes (False).
+
+        condition() runs at most every poll_s: a condition that calls a service would otherwise flood
+        it, and a server with real-time threads on the same CPU then starves everything else there.
+        """
         deadline = time.monotonic() + timeout
-        while not condition():
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return False
-            self.executor.spin_once(timeout_sec=min(0.05, remaining))
-        return True
+        while True:
+            if condition():
+                return True
+            next_check = time.monotonic() + poll_s
+            while (now := time.monotonic()) < next_check:
+                if now >= deadline:
+                    return False
+                self.executor.spin_once(timeout_sec=min(next_check, deadline) - now)
 
     def spin_until(self, condition: Callable[[], bool], timeout: float, what: str = "condition") -> None:
         if not self.wait_until(condition, timeout):

@@ -41,11 +41,13 @@ from ball_balance.control import config as control_config
 from ball_balance.control.kinematics import Chain, PlateKinematics
 from ball_balance.control.pipeline import ControlPipeline
 from ball_balance.control.safety import BallObservation, Mode
+from ball_balance.plate_geometry import GRAVITY_M_S2
 from ball_balance.robot import HOME_POSITIONS_RAD, JOINT_NAMES, robot_description
 from controller_manager_py.controllers.command_ramp import CommandRamp
 from controller_manager_py.parameters import validate
 
-PATHS_DIR = Path(__file__).resolve().parents[2] / "config" / "paths"   # CSV paths of REFERENCES
+CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
+PATHS_DIR = CONFIG_DIR / "paths"   # CSV paths of REFERENCES
 REFERENCES = {
     "stationary": dict(reference_kind="stationary"),
     "circle": dict(reference_kind="circle", reference_radius_m=0.10, reference_period_s=10.0),
@@ -203,7 +205,7 @@ def controller_values(controller: str, reference: str, overrides=()) -> dict:
     ros__parameters) + the reference + overrides."""
     import yaml
 
-    path = Path(__file__).resolve().parents[2] / "config" / f"{controller}.yaml"
+    path = CONFIG_DIR / f"{controller}.yaml"
     values = {}
     if path.exists():
         loaded = yaml.safe_load(path.read_text()) or {}
@@ -218,7 +220,7 @@ def tracker_values() -> dict:
     """The tracker parameters the graph runs with (config/ball_tracker.yaml), for both modes."""
     import yaml
 
-    path = Path(__file__).resolve().parents[2] / "config" / "ball_tracker.yaml"
+    path = CONFIG_DIR / "ball_tracker.yaml"
     if not path.exists():
         return {}
     return dict(yaml.safe_load(path.read_text())["ball_tracker"]["ros__parameters"])
@@ -258,8 +260,6 @@ def episode_events(spec: EpisodeSpec, knobs) -> list:
     """The spec's events plus the domain's pushes (seeded directions), hands over markers
     (seeded markers) and force steps (the knobs' direction) that start before the episode's
     end, in time order."""
-    from ball_balance.plate_geometry import GRAVITY_M_S2
-
     events = list(spec.events)
     if knobs.force_step_deg > 0.0:
         events += [e for e in force_step_events(knobs.ball_mass_kg, GRAVITY_M_S2 * knobs.gravity_scale,
@@ -491,9 +491,9 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
         u_cmd = result.u
         # /plate_cmd as the tracker receives it
         if tracker is not None:
-            tracker.set_plate_cmd(u_cmd[0], u_cmd[1], t)
+            tracker.set_plate_cmd(*result.plate_cmd, t)
         elif kalman is not None:
-            plate_cmds.add(u_cmd[0], u_cmd[1], t)
+            plate_cmds.add(*result.plate_cmd, t)
         if ramp is None:
             world.set_joint_targets(result.q_cmd)
             world.step(steps_per_tick)

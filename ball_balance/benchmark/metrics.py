@@ -72,6 +72,13 @@ def recovery_times(t: np.ndarray, err: np.ndarray, push_times_s: Sequence[float]
     return out
 
 
+def recovery_summary(recoveries: Sequence[float]) -> tuple:
+    """(mean, worst) of per-event recovery times; the mean is inf when any event never recovered."""
+    finite = [r for r in recoveries if math.isfinite(r)]
+    mean_s = float(np.mean(finite)) if len(finite) == len(recoveries) else math.inf
+    return mean_s, float(max(recoveries))
+
+
 def step_steady_errors(t: np.ndarray, err: np.ndarray, step_times_s: Sequence[float]) -> List[float]:
     """Per step: the mean error over the last STEP_STEADY_WINDOW_S before the next step (or
     the series' end); nan where that window holds no sample."""
@@ -115,16 +122,12 @@ def episode_metrics(s: Dict[str, np.ndarray], dropped: bool, duration_s: float,
     }
     recoveries = recovery_times(t, err, push_times_s, dropped) if len(t) else []
     if recoveries:
-        finite = [r for r in recoveries if math.isfinite(r)]
-        metrics["push_recover_s"] = float(np.mean(finite)) if len(finite) == len(recoveries) else math.inf
-        metrics["push_recover_max_s"] = float(max(recoveries))
+        metrics["push_recover_s"], metrics["push_recover_max_s"] = recovery_summary(recoveries)
         metrics["pushes"] = float(len(recoveries))
         metrics["pushes_late"] = float(sum(r > PUSH_GOAL_S for r in recoveries))
     steps = recovery_times(t, err, step_times_s, dropped) if len(t) else []
     if steps:
-        finite = [r for r in steps if math.isfinite(r)]
-        metrics["step_recover_s"] = float(np.mean(finite)) if len(finite) == len(steps) else math.inf
-        metrics["step_recover_max_s"] = float(max(steps))
+        metrics["step_recover_s"], metrics["step_recover_max_s"] = recovery_summary(steps)
         metrics["steps"] = float(len(steps))
         metrics["steps_unrecovered"] = float(sum(not math.isfinite(r) for r in steps))
         metrics["step_steady_m"] = math.nan if dropped else float(np.max(step_steady_errors(t, err, step_times_s)))

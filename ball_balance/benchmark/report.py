@@ -134,6 +134,13 @@ def aggregate(results) -> List[Dict[str, float]]:
             return float(np.median(values)) if values else math.nan
 
         survivors = [m for m in ms if not m["drop"]]
+
+        def recovered_mean(key, survivors=survivors):
+            """The survivors' mean recovery; inf when one of them did not recover."""
+            if all(math.isfinite(m.get(key, 0.0)) for m in survivors):
+                return mean(key, survivors)
+            return math.inf
+
         rows.append({
             "controller": controller, "protocol": protocol, "reference": reference, "domain": domain,
             "set": domain_set(domain), "episodes": len(ms),
@@ -142,14 +149,12 @@ def aggregate(results) -> List[Dict[str, float]]:
             # settling and push recovery: a survivor that never settled counts as inf (worst)
             "settle_s": pooled("settle_s", survivors) if survivors and any(
                 not math.isfinite(m["settle_s"]) for m in survivors) else mean("settle_s", survivors),
-            "push_recover_s": mean("push_recover_s", survivors) if all(
-                math.isfinite(m.get("push_recover_s", 0.0)) for m in survivors) else math.inf,
+            "push_recover_s": recovered_mean("push_recover_s"),
             "push_recover_max_s": pooled("push_recover_max_s", survivors),
             **push_counts(ms),
             # force steps (on, change, off): recovery as the pushes', the error left under each
             # step (its worst) as the mean over the survivors
-            "step_recover_s": mean("step_recover_s", survivors) if all(
-                math.isfinite(m.get("step_recover_s", 0.0)) for m in survivors) else math.inf,
+            "step_recover_s": recovered_mean("step_recover_s"),
             "step_recover_max_s": pooled("step_recover_max_s", survivors),
             **{key: float(sum(m.get(key, 0.0) for m in ms)) for key in ("steps", "steps_unrecovered")},
             "step_steady_mm": 1e3 * mean("step_steady_m", survivors),

@@ -63,6 +63,31 @@ class EstimatorConfig:
         return self.adapt_gain or self.adapt_offset
 
 
+def level_offset_rad(accel_offset_m_s2, k_g: float) -> np.ndarray:
+    """The disturbance d as a plate-level offset per axis [rad]: the plate tilt (in the command's
+    sign convention, u) at which the ball stays still, asin(d / k_g) with k_g = k g (a plate
+    tilted by u accelerates the ball by -k g sin(u); a plate mounted off level by -u, or a force
+    F = m g sin(u) on the ball's centre, gives d = k g sin(u))."""
+    return np.arcsin(np.clip(np.asarray(accel_offset_m_s2, dtype=float) / k_g, -1.0, 1.0))
+
+
+def level_offset_deg(accel_offset_m_s2, k_g: float) -> np.ndarray:
+    """`level_offset_rad` in degrees, as the statistics report it."""
+    return np.degrees(level_offset_rad(accel_offset_m_s2, k_g))
+
+
+def plant_statistics(plant_of) -> list:
+    """(name, getter) entries that report the estimate of the PlantEstimator `plant_of()` returns
+    (statistics, introspection): the disturbance as a plate-level offset [deg] per axis and the
+    gain ratio (estimated k g / configured)."""
+    def offset_deg(axis: int) -> float:
+        plant = plant_of()
+        return float(level_offset_deg(plant.offset, plant.k_g)[axis])
+
+    return [("disturbance_tilt_x_deg", lambda: offset_deg(0)), ("disturbance_tilt_y_deg", lambda: offset_deg(1)),
+            ("plant_gain_ratio", lambda: plant_of().k_g / plant_of().k_g_nominal)]
+
+
 class PlantEstimator:
     """Sliding-window least-squares estimate of k_g and d (both axes) from ball positions and
     the plate tilt history. Feed `add_tilt` every tick and `add_state` with each new ball state."""

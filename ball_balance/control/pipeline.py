@@ -23,7 +23,7 @@ from typing import Any, Callable, Dict, Mapping, Optional, Protocol, Tuple, Unio
 
 import numpy as np
 
-from ball_balance.control.estimation import EstimatorConfig, PlantEstimator
+from ball_balance.control.estimation import EstimatorConfig, PlantEstimator, level_offset_rad
 from ball_balance.control.kinematics import PlateKinematics
 from ball_balance.control.mpc import MpcConfig, PlateMpc, preview
 from ball_balance.control.pid import PidGains, PlatePid
@@ -171,6 +171,12 @@ class TickResult:
     # after an engagement, so that errors measured against it are the benchmark's (None when
     # not engaged)
     target_m: Optional[tuple] = None
+    # what /plate_cmd carries for the tracker's Kalman feed-forward: the commanded tilt less the
+    # estimated disturbance's level offset asin(d / k_g), the tilt that gives the ball the
+    # acceleration the plant estimate expects (-k_g u + d). A commanded tilt that cancels a
+    # disturbance barely moves the ball; fed that tilt, the tracker's filter expects the ball
+    # to run off and reports it short of where it is. Always set by ControlPipeline.step
+    plate_cmd: Optional[tuple] = None
 
 
 class ControlPipeline:
@@ -284,7 +290,10 @@ class ControlPipeline:
             self.plant.add_tilt(now_s, tilt_measured)   # the tilt the ball really felt
         else:
             self.plant.add_tilt(now_s + self.actuation_delay_s, tilt_cmd)
-        return TickResult(q_new.copy(), (float(self.u[0]), float(self.u[1])), mode, ref, predicted, refused, target)
+        level = level_offset_rad(self.plant.offset, self.plant.k_g)
+        plate_cmd = (float(self.u[0] - level[0]), float(self.u[1] - level[1]))
+        return TickResult(q_new.copy(), (float(self.u[0]), float(self.u[1])), mode, ref, predicted, refused, target,
+                          plate_cmd)
 
     def _brake(self, now_s: float):
         """(tilt, predicted state) that decelerates the last good state's motion, dead-reckoned

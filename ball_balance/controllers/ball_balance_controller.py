@@ -52,7 +52,8 @@ Inputs (controller node, non-real-time executor):
 Outputs:
   six `<joint>/position` command interfaces (config/ur_controllers_policy.yaml lists none: the
   joints are the robot's, ball_balance.robot.JOINT_NAMES);
-  /plate_cmd  geometry_msgs/Vector3Stamped (plate_center, x = u_x, y = u_y [rad]) for the
+  /plate_cmd  geometry_msgs/Vector3Stamped (plate_center, x = u_x, y = u_y [rad]; the pipeline's
+              TickResult.plate_cmd: the tilt less the disturbance's level offset) for the
               tracker's feed-forward, and /ball_reference geometry_msgs/PointStamped (the
               target while engaged), as the nodes publish them, by a timer of the controller
               node (executor thread) from the newest step update() left in a slot: update()
@@ -62,7 +63,9 @@ refusals), `refused_commands` (the pipeline's guard: non-finite/out-of-limit joi
 held), `refused_policy_ticks` (policy: non-finite observation or output, last tilt held),
 `missed_steps` (a step due while the previous one still ran),
 `mode` (0 homing, 1 ready, 2 engaged, 3 holding, 4 returning), `tilt_x_rad`, `tilt_y_rad`,
-`step_time_us`; the refused_* and missed_* counters also show in /diagnostics (WARN while they grow).
+`step_time_us`, and the plant estimate `disturbance_tilt_x_deg`, `disturbance_tilt_y_deg` (the
+disturbance as a plate-level offset, asin(d / (k g))) and `plant_gain_ratio` (as the nodes'
+~/statistics); the refused_* and missed_* counters also show in /diagnostics (WARN while they grow).
 """
 from __future__ import annotations
 
@@ -75,6 +78,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from ball_balance.control import config as control_config
+from ball_balance.control.estimation import plant_statistics
 from ball_balance.control.kinematics import Chain, KinematicsError
 from ball_balance.control.pipeline import CONTROLLERS, ControlPipeline
 from ball_balance.control.plausibility import BallStateGate, gate_config
@@ -206,6 +210,8 @@ class BallBalanceController(ControllerInterface):
         self.register_introspection("tilt_x_rad", lambda: self.u[0])
         self.register_introspection("tilt_y_rad", lambda: self.u[1])
         self.register_introspection("step_time_us", lambda: self.step_time_us)
+        for name, getter in plant_statistics(lambda: self.pipeline.plant):
+            self.register_introspection(name, getter)
         self._create_ros_entities(control_hz)
         self.get_logger().info(f"{self.name}: {values['tilt_law']} tilt law, a step at {control_hz:g} Hz"
                                f"{' (worker thread)' if values['async_step'] else ''}, joint targets written at "
@@ -396,7 +402,7 @@ class BallBalanceController(ControllerInterface):
         self._fresh = False
         self._target = result.q_cmd                    # one reference assignment, for update()
         self.u = result.u
-        self._tilt_out = (time, result.u, result.target_m)
+        self._tilt_out = (time, result.plate_cmd, result.target_m)
         if result.mode != self.mode:
             self.mode = result.mode
             if self.throttle.due(f"mode {result.mode.value}"):

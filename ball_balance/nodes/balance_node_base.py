@@ -13,10 +13,17 @@ Inputs
   /joint_states  sensor_msgs/JointState (newest only): the arm's current joint positions.
 Outputs
   /plate_cmd      geometry_msgs/Vector3Stamped, frame plate_center: x = u_x, y = u_y [rad]
-                  (z = 0), the commanded tilt, for the tracker's Kalman feed-forward.
+                  (z = 0), for the tracker's Kalman feed-forward: the commanded tilt less the
+                  estimated disturbance's level offset (the tilt as the ball feels it;
+                  control/pipeline.py TickResult.plate_cmd).
   /ball_reference geometry_msgs/PointStamped, frame plate_center: the target at the message's
                   stamp (z = 0; the control itself aims at it a latency ahead) while engaged;
                   not published otherwise.
+  ~/statistics/{full,names,values} (pal_statistics_msgs, every 0.1 s): the plant estimate,
+                  `disturbance_tilt_x_deg`, `disturbance_tilt_y_deg` (the disturbance d as a
+                  plate-level offset: the tilt at which the ball stays still, asin(d / (k g)),
+                  control/estimation.py `level_offset_deg`; a plate mounted 2 degrees off level
+                  shows as 2 degrees) and `plant_gain_ratio` (estimated k g / configured).
 
 Every /ball_state is judged on arrival (control/plausibility.py) and only a plausible one
 from the publisher the node locked onto replaces the state in use: stamps in the future or
@@ -64,6 +71,7 @@ from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 
 from ball_balance.control import config as control_config
+from ball_balance.control.estimation import plant_statistics
 from ball_balance.control.kinematics import Chain, KinematicsError
 from ball_balance.control.pipeline import ControlPipeline
 from ball_balance.control.plausibility import BallStateGate, Heartbeat, SourceLock, gate_config
@@ -75,6 +83,7 @@ from ball_balance.vision.pose_quality import ball_position_std_m
 from controller_manager_py.parameters import Param, ParameterError, declare_parameters
 from controller_manager_py.realtime import set_process_realtime_priority
 from controller_manager_py.ros.node_main import StartupError
+from controller_manager_py.ros.statistics_publisher import StatisticsRegistry
 
 NEWEST_ONLY_SENSOR = QoSProfile(depth=1, reliability=qos_profile_sensor_data.reliability,
                                 durability=qos_profile_sensor_data.durability)
@@ -154,6 +163,8 @@ class BalanceControllerNode(Node):
         self.create_subscription(JointState, "/joint_states", self.on_joint_states, NEWEST_ONLY)
         self.plate_cmd_pub = self.create_publisher(Vector3Stamped, "/plate_cmd", 10)
         self.reference_pub = self.create_publisher(PointStamped, "/ball_reference", 10)
+        self.statistics = StatisticsRegistry(self, "~/statistics")
+        self.statistics.set_entries(plant_statistics(lambda: self.pipeline.plant))
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.timer = self.create_timer(self._period_s, self.on_tick)
         self.watchdog = self.create_timer(WATCHDOG_PERIOD_S, self.on_watchdog,
@@ -315,6 +326,7 @@ class BalanceControllerNode(Node):
         if steady >= self._next_report_s:
             self._next_report_s = steady + STATS_PERIOD_S
             self.log_statistics()
+        self.statistics.publish()   # values are read only when someone subscribes
         if self._sim_time:
             now_ns = self.get_clock().now().nanoseconds
             if now_ns != self._clock_seen_ns:
@@ -410,7 +422,7 @@ class BalanceControllerNode(Node):
         self.publish_joints(result.q_cmd, stamp)
         cmd = Vector3Stamped()
         cmd.header.stamp, cmd.header.frame_id = stamp, PLATE_FRAME
-        cmd.vector.x, cmd.vector.y = result.u
+        cmd.vector.x, cmd.vector.y = result.plate_cmd
         self.plate_cmd_pub.publish(cmd)
         if result.target_m is not None:
             ref = PointStamped()

@@ -229,7 +229,7 @@ def main(argv=None) -> int:
                         "the held-out pushes episodes showed the correction costing at every output gain. Off by "
                         "default: at 5 mm the training chose gain 0.15, worse than the shipped model in the MuJoCo "
                         "benchmark (summed RMSE after 5 s 24.56 against 24.47 mm), and at gain 0.05 it ties it "
-                        "(24.46) with a worst push recovery of 1.65 s against 1.12 (docs/policy.md, Results)")
+                        "(24.46) with a worst push recovery of 1.65 s against 1.12 (measured on an earlier model)")
     parser.add_argument("--correction-onset-mm", type=float, default=8.0,
                         help="no correction within this distance of the reference, all of it beyond twice it "
                         "(observation.correction_weight; recorded in the model, the runtime applies the same; 0: "

@@ -8,6 +8,11 @@ Same command line as ros2_control's spawner (the common options):
 Exits 0 when every controller reached the requested state, 1 otherwise (one line why).
 With --unload-on-kill it then waits; Ctrl-C/SIGTERM, then or while spawning, deactivates and unloads
 them and exits 0.
+
+A signal only sets a flag, checked between service calls and while one is awaited: raising from the
+handler could land inside rclpy's C code, which turns the interrupt into a SystemError. Without
+--unload-on-kill an awaited call is abandoned at once; with it the call finishes (within its timeout)
+so that the unload sees the manager's true state.
 """
 from __future__ import annotations
 
@@ -33,6 +38,10 @@ class SpawnError(RuntimeError):
     pass
 
 
+class Interrupted(Exception):
+    """Ctrl-C or SIGTERM, seen at a point where stopping is safe."""
+
+
 def parse_args(argv):
     parser = argparse.ArgumentParser(prog="spawner", description=__doc__.splitlines()[0])
     parser.add_argument("controller_names", nargs="+")
@@ -56,17 +65,37 @@ class Spawner:
     def __init__(self, node, args):
         self.node, self.args = node, args
         self.cm = args.controller_manager.rstrip("/") or "/controller_manager"
+        self.stop_requested = False
+        self.spawning = True
+
+    def request_stop(self, signum=None, frame=None) -> None:
+        self.stop_requested = True
+
+    def _stop_now(self, in_call: bool) -> bool:
+        """Whether a stop request interrupts here: never during the unload, and inside a call only
+        when no unload follows."""
+        return self.stop_requested and self.spawning and not (in_call and self.args.unload_on_kill)
 
     def call(self, srv_type, name: str, request, timeout: float):
+        if self._stop_now(in_call=False):
+            raise Interrupted
         client = self.node.create_client(srv_type, f"{self.cm}/{name}")
         try:
-            if not client.wait_for_service(timeout_sec=timeout):
-                raise SpawnError(f"controller manager {self.cm} not available ({self.cm}/{name} missing "
-                                 f"after {timeout:g} s)")
+            deadline = time.monotonic() + timeout
+            while not client.wait_for_service(timeout_sec=0.1):
+                if self._stop_now(in_call=True):
+                    raise Interrupted
+                if time.monotonic() > deadline:
+                    raise SpawnError(f"controller manager {self.cm} not available ({self.cm}/{name} missing "
+                                     f"after {timeout:g} s)")
             future = client.call_async(request)
-            rclpy.spin_until_future_complete(self.node, future, timeout_sec=self.args.service_call_timeout)
-            if not future.done():
-                raise SpawnError(f"{self.cm}/{name} did not answer within {self.args.service_call_timeout:g} s")
+            deadline = time.monotonic() + self.args.service_call_timeout
+            while not future.done():
+                if self._stop_now(in_call=True):
+                    raise Interrupted
+                if time.monotonic() > deadline:
+                    raise SpawnError(f"{self.cm}/{name} did not answer within {self.args.service_call_timeout:g} s")
+                rclpy.spin_once(self.node, timeout_sec=0.1)
             return future.result()
         finally:
             self.node.destroy_client(client)
@@ -126,8 +155,13 @@ class Spawner:
             self.switch(to_activate)
             print(f"[spawner] configured and activated {', '.join(to_activate)}")
 
+    def wait_for_stop(self) -> None:
+        while not self.stop_requested:
+            time.sleep(0.1)
+
     def unload(self) -> None:
         """Deactivate (best effort) and unload this spawner's controllers."""
+        self.spawning = False
         loaded = self.loaded()
         names = [n for n in self.args.controller_names if n in loaded]  # Ctrl-C may come before all were loaded
         request = SwitchController.Request(deactivate_controllers=[n for n in names if loaded[n] == "active"],
@@ -145,34 +179,31 @@ def main(args=None):
     options = parse_args(argv)
     # no rclpy signal handler: Ctrl-C must leave the context usable for --unload-on-kill
     rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
-    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
     node = rclpy.create_node("spawner_" + options.controller_names[0].replace("/", "_"))
-    code = 0
     spawner = Spawner(node, options)
+    signal.signal(signal.SIGINT, spawner.request_stop)
+    signal.signal(signal.SIGTERM, spawner.request_stop)
+    code = 0
     try:
-        if options.unload_on_kill:
-            # Ctrl-C while still spawning unloads too: the controllers live only as long as this process
-            try:
-                spawner.run()
-                while True:
-                    time.sleep(1.0)
-            except KeyboardInterrupt:
-                spawner.unload()
-        else:
+        try:
             spawner.run()
+            if options.unload_on_kill:
+                spawner.wait_for_stop()
+        except Interrupted:
+            code = 0 if options.unload_on_kill else 130
+        except SpawnError as error:
+            print(f"spawner: {error}", file=sys.stderr)
+            code = 1
+        if options.unload_on_kill:
+            # the controllers live only as long as this process, also when spawning failed or was cut short
+            spawner.unload()
     except SpawnError as error:
         print(f"spawner: {error}", file=sys.stderr)
         code = 1
-    except KeyboardInterrupt:
-        code = 130
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
     sys.exit(code)
-
-
-def _raise_keyboard_interrupt(signum, frame):
-    raise KeyboardInterrupt
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 import math
 import os
 import signal
+import time
 from pathlib import Path
 
 import pytest
@@ -175,17 +176,27 @@ def test_description_from_topic_and_the_spawner(launcher, graph, tmp_path):
     # --unload-on-kill: the controller lives as long as the spawner
     spawner = launcher.start([executable("spawner"), "jsb_tmp", "-t", "joint_state_broadcaster/JointStateBroadcaster",
                               "--unload-on-kill"], name="spawner_u")
-    graph.spin_until(lambda: getattr(controllers(graph).get("jsb_tmp"), "state", "") == "active", 20, "jsb_tmp")
+    graph.spin_until(lambda: getattr(controllers(graph).get("jsb_tmp"), "state", "") == "active", 60, "jsb_tmp")
     os.killpg(spawner.popen.pid, signal.SIGINT)
-    assert spawner.wait(timeout=20) == 0, spawner.output()
+    assert spawner.wait(timeout=30) == 0, spawner.output()
     assert "jsb_tmp" not in controllers(graph)
     # Ctrl-C while it is still spawning (loaded, perhaps not yet active) unloads as well
     spawner = launcher.start([executable("spawner"), "jsb_tmp2", "-t", "joint_state_broadcaster/JointStateBroadcaster",
                               "--unload-on-kill"], name="spawner_u2")
-    graph.spin_until(lambda: "jsb_tmp2" in controllers(graph), 20, "jsb_tmp2 loaded")
+    graph.spin_until(lambda: "jsb_tmp2" in controllers(graph), 60, "jsb_tmp2 loaded")
     os.killpg(spawner.popen.pid, signal.SIGINT)
-    assert spawner.wait(timeout=20) == 0, spawner.output()
+    assert spawner.wait(timeout=30) == 0, spawner.output()
     assert "jsb_tmp2" not in controllers(graph)
+    # ... at any instant of configuring and activating: a signal inside a service call is no SystemError
+    for delay_s in (0.0, 0.05, 0.15, 0.3):
+        spawner = launcher.start([executable("spawner"), "jsb_tmp3", "-t",
+                                  "joint_state_broadcaster/JointStateBroadcaster", "--unload-on-kill"],
+                                 name=f"spawner_u3_{delay_s}")
+        graph.spin_until(lambda: "jsb_tmp3" in controllers(graph), 60, "jsb_tmp3 loaded")
+        time.sleep(delay_s)
+        os.killpg(spawner.popen.pid, signal.SIGINT)
+        assert spawner.wait(timeout=30) == 0, spawner.output()
+        assert "jsb_tmp3" not in controllers(graph)
     run = launcher.run([executable("spawner"), "nonexistent_controller"], timeout=30)
     assert run.returncode == 1 and "failed loading controller 'nonexistent_controller'" in run.stderr
 

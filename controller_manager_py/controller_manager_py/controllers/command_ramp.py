@@ -4,7 +4,7 @@ A target that jumps once per control step (a staircase at 50-60 Hz) is taken by 
 servo within a few milliseconds: at every step the driven link's angular acceleration
 spikes. On the ball-balancing plate, its surface under the ball (distance from the axis times
 that acceleration) then drops faster than gravity, and after a large step the ball leaves the
-plate (the project's docs/control.md, "The staircase and the hop"). Spread over the period,
+plate (the project's docs/control.md, "The command ramp"). Spread over the period,
 the same motion stays smooth, at the price of half a period of delay on average.
 
     q(t) = q_from + (q_to - q_from) min(1, (t - t_from) / T)

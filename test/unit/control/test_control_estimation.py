@@ -4,7 +4,7 @@ import math
 import numpy as np
 from control_plant import K_G, DelayedPlant
 
-from ball_balance.control.estimation import EstimatorConfig, PlantEstimator
+from ball_balance.control.estimation import EstimatorConfig, PlantEstimator, level_offset_deg, plant_statistics
 
 DT = 0.02          # control tick: the tilt is recorded every tick
 FRAME = 1.0 / 30   # camera: a ball position every frame
@@ -97,3 +97,15 @@ def test_half_gravity_is_found_while_a_pid_tracks_a_circle_in_closed_loop():
     assert ratio_at[8.0] < 0.65
     assert abs(ratio_at[16.0] - 0.5) < 0.04     # and there, not biased by the noise in the loop
     assert min(ratio_at.values()) > 0.45        # without overshooting
+
+
+def test_the_disturbance_reads_as_the_plate_level_offset_that_causes_it():
+    # a plate mounted 2 degrees off level (or a force m g sin 2deg on the ball) is d = k g sin(2 deg)
+    d = K_G * np.sin(np.radians([2.0, -1.0]))
+    np.testing.assert_allclose(level_offset_deg(d, K_G), [2.0, -1.0], atol=1e-12)
+    assert level_offset_deg([10.0 * K_G, 0.0], K_G)[0] == 90.0   # clipped, never NaN
+    est = PlantEstimator(EstimatorConfig(adapt_gain=True, adapt_offset=True), K_G)
+    est.offset = d
+    names = dict(plant_statistics(lambda: est))
+    assert list(names) == ["disturbance_tilt_x_deg", "disturbance_tilt_y_deg", "plant_gain_ratio"]
+    assert math.isclose(names["disturbance_tilt_x_deg"](), 2.0) and math.isclose(names["plant_gain_ratio"](), 1.0)

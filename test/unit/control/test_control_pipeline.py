@@ -249,3 +249,20 @@ def test_a_strong_plant_with_a_long_unknown_delay_is_not_thrown_at_engagement(co
     assert farthest <= np.hypot(0.07, -0.05) + 1e-3 and first_tilt < 0.12 and final < 0.003
     farthest_at_once, first_tilt_at_once, _ = run(0.0)
     assert farthest_at_once > farthest + 0.02 and first_tilt_at_once == pytest.approx(0.15)
+
+
+def test_plate_cmd_is_the_tilt_the_ball_feels_under_the_estimated_disturbance():
+    # the tracker predicts the ball from /plate_cmd: under a disturbance d the ball accelerates
+    # as under the tilt u - asin(d / k_g), not u
+    pipe = _pipeline("pid")
+    plant = DelayedPlant(x0=(0.02, 0.0))
+    q_prev = np.array(LEVEL_HOME)
+    result = None
+    for i in range(25):
+        result = pipe.step(i * DT, _observe(plant), q_prev)
+        q_prev = result.q_cmd
+    assert result.plate_cmd == result.u                 # no disturbance estimated
+    pipe.plant.offset = np.array([0.1, -0.05])
+    result = pipe.step(25 * DT, _observe(plant), q_prev)
+    level = np.arcsin(pipe.plant.offset / pipe.plant.k_g)
+    np.testing.assert_allclose(result.plate_cmd, np.array(result.u) - level, atol=1e-12)
