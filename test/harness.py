@@ -20,6 +20,8 @@ from typing import Callable, List, Optional, Sequence
 
 ROOT = Path(__file__).resolve().parents[1]
 INSTALL_BIN = ROOT / "install" / "lib" / "ball_balance"
+# ROS domain ids are the machine's, not this run's: their locks stay in /tmp whatever TMPDIR is,
+# so that test runs with different TMPDIRs do not share a domain
 LOCK_DIR = Path("/tmp/ball_balance_ros_domains")
 DOMAIN_RANGE = range(30, 230)
 # The project's DDS settings (docs/transport.md) for every process a test starts and for the
