@@ -19,8 +19,10 @@ STAMPS="$VENV/.ball_balance_stamps"
 FORCE=0
 [[ "${1:-}" == "--force" ]] && FORCE=1
 
-# One set-up at a time per checkout (parallel runs would race in colcon's build folder).
-exec 9>"/tmp/ball_balance_setup_$(printf '%s' "$ROOT" | sha256sum | cut -c1-12).lock"
+# One set-up at a time per checkout (parallel runs would race in colcon's build folder); the
+# lock lives in the checkout, so runs with different TMPDIRs still exclude each other.
+mkdir -p "$ROOT/build"
+exec 9>"$ROOT/build/.setup.lock"
 flock 9
 
 say() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }

@@ -41,7 +41,7 @@ while (($#)); do
 done
 [[ -f "$SIM_CONFIG" ]] || { echo "sim_arm.sh: no such sim config: $SIM_CONFIG" >&2; exit 2; }
 
-WORK="$(mktemp -d /tmp/ball_balance_sim.XXXXXX)"
+WORK="$(mktemp -d "${TMPDIR:-/tmp}/ball_balance_sim.XXXXXX")"
 URDF="$WORK/ur5e_ball_balance_sim.urdf"
 # the description with the MuJoCo hardware selected and its parameters (the world is built
 # from this same file: robot_description_file points at it)

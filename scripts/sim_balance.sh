@@ -84,7 +84,7 @@ VIS_PARAMS=()
 
 SIM_CONFIG="$ROOT/config/sim.yaml"
 ((TRUTH_FED)) && SIM_CONFIG="$ROOT/config/sim_truth_fed.yaml"
-LOGS="$(mktemp -d /tmp/ball_balance_graph.XXXXXX)"
+LOGS="$(mktemp -d "${TMPDIR:-/tmp}/ball_balance_graph.XXXXXX")"
 source "$ROOT/scripts/lib/stop_all.sh"
 source "$ROOT/scripts/lib/graph.sh"
 source "$ROOT/scripts/lib/realtime.sh"

@@ -62,7 +62,7 @@ esac
 
 SIM_CONFIG="$ROOT/config/sim.yaml"
 ((TRUTH_FED)) && SIM_CONFIG="$ROOT/config/sim_truth_fed.yaml"
-LOGS="$(mktemp -d /tmp/ball_balance_graph.XXXXXX)"
+LOGS="$(mktemp -d "${TMPDIR:-/tmp}/ball_balance_graph.XXXXXX")"
 source "$ROOT/scripts/lib/realtime.sh"
 realtime_for 2   # the controller manager (with the controller in it), the tracker
 RT_OFF=()

@@ -22,6 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 INSTALL_BIN = ROOT / "install" / "lib" / "ball_balance"
 # ros2_control_node and spawner: `ros2 run controller_manager_py <name>`
 CM_INSTALL_BIN = ROOT / "install" / "lib" / "controller_manager_py"
+# ROS domain ids are the machine's, not this run's: their locks stay in /tmp whatever TMPDIR is,
+# so that test runs with different TMPDIRs do not share a domain
 LOCK_DIR = Path("/tmp/ball_balance_ros_domains")
 DOMAIN_RANGE = range(30, 230)
 # The project's DDS settings (docs/transport.md) for every process a test starts and for the

@@ -37,7 +37,7 @@ def wait_for(condition, timeout: float, what: str, describe=lambda: "") -> None:
 
 
 def graph_logs(output: str) -> str:
-    match = re.search(r"logs in (/tmp/ball_balance_graph\.\w+)", output)
+    match = re.search(r"logs in (\S*/ball_balance_graph\.\w+)", output)
     return "".join(p.read_text(errors="replace") for p in Path(match.group(1)).glob("*.log")) if match else ""
 
 

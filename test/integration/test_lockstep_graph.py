@@ -47,5 +47,5 @@ def test_slower_rendering_changes_how_long_the_run_takes_not_its_figures(tmp_pat
 
 
 def sim_log(script_output: str) -> str:
-    match = re.search(r"logs in (/tmp/ball_balance_graph\.\w+)", script_output)
+    match = re.search(r"logs in (\S*/ball_balance_graph\.\w+)", script_output)
     return (Path(match.group(1)) / "sim.log").read_text(errors="replace") if match else ""
