@@ -104,39 +104,39 @@ WITNESS_LATE_S = 0.5e-3
 WITNESS_PRIORITY_ABOVE_LOOP = 10
 
 # Python's own defaults: what a plain rclpy loop thread gets
-PLAIN = {"thread_priority": 0, "executor_thread_priority": 0, "gil_switch_interval": 0.005,
-         "gc_mode": "automatic", "wake_tail": 0.0, "spin_tail": 0.0, "hold_interpreter": False,
-         "executor_on_loop_cpu": False}
+PLAIN = {"thread_priority": 0, "loop.executor_thread_priority": 0, "loop.gil_switch_interval": 0.005,
+         "loop.gc_mode": "automatic", "loop.wake_tail": 0.0, "loop.spin_tail": 0.0, "loop.hold_interpreter": False,
+         "loop.executor_on_loop_cpu": False}
 CAUSES = [
     ("plain Python thread (no RT knob)", PLAIN, True),
-    ("+ SCHED_FIFO loop 50 / executor 40", {**PLAIN, "thread_priority": 50, "executor_thread_priority": 40}, True),
-    ("+ switch interval 100 us", {**PLAIN, "thread_priority": 50, "executor_thread_priority": 40,
-                                  "gil_switch_interval": 1e-4}, True),
-    ("+ gc in the loop's slack", {**PLAIN, "thread_priority": 50, "executor_thread_priority": 40,
-                                  "gil_switch_interval": 1e-4, "gc_mode": "idle"}, True),
-    ("+ interpreter held through the cycle", {**PLAIN, "thread_priority": 50, "executor_thread_priority": 40,
-                                              "gil_switch_interval": 1e-4, "gc_mode": "idle",
-                                              "hold_interpreter": True}, True),
-    ("+ spin tail 100 us", {"executor_on_loop_cpu": False, "wake_tail": 0.0}, True),
-    ("+ executor on the loop's CPU", {"wake_tail": 0.0}, True),
+    ("+ SCHED_FIFO loop 50 / executor 40", {**PLAIN, "thread_priority": 50, "loop.executor_thread_priority": 40}, True),
+    ("+ switch interval 100 us", {**PLAIN, "thread_priority": 50, "loop.executor_thread_priority": 40,
+                                  "loop.gil_switch_interval": 1e-4}, True),
+    ("+ gc in the loop's slack", {**PLAIN, "thread_priority": 50, "loop.executor_thread_priority": 40,
+                                  "loop.gil_switch_interval": 1e-4, "loop.gc_mode": "idle"}, True),
+    ("+ interpreter held through the cycle", {**PLAIN, "thread_priority": 50, "loop.executor_thread_priority": 40,
+                                              "loop.gil_switch_interval": 1e-4, "loop.gc_mode": "idle",
+                                              "loop.hold_interpreter": True}, True),
+    ("+ spin tail 100 us", {"loop.executor_on_loop_cpu": False, "loop.wake_tail": 0.0}, True),
+    ("+ executor on the loop's CPU", {"loop.wake_tail": 0.0}, True),
     ("+ held sleep 300 us before the spin (defaults)", {}, True),
-    ("defaults, held sleep 200 us", {"wake_tail": 2e-4}, True),
-    ("defaults, switch interval 20 us", {"gil_switch_interval": 2e-5}, True),
-    ("defaults, interpreter not held in the cycle", {"hold_interpreter": False}, True),
-    ("defaults, executor normal priority", {"executor_thread_priority": 0}, True),
-    ("defaults, gc automatic", {"gc_mode": "automatic"}, True),
-    ("defaults, no spin", {"spin_tail": 0.0}, True),
+    ("defaults, held sleep 200 us", {"loop.wake_tail": 2e-4}, True),
+    ("defaults, switch interval 20 us", {"loop.gil_switch_interval": 2e-5}, True),
+    ("defaults, interpreter not held in the cycle", {"loop.hold_interpreter": False}, True),
+    ("defaults, executor normal priority", {"loop.executor_thread_priority": 0}, True),
+    ("defaults, gc automatic", {"loop.gc_mode": "automatic"}, True),
+    ("defaults, no spin", {"loop.spin_tail": 0.0}, True),
     ("defaults, statistics not subscribed", {}, False),
 ]
 
 TAILS = [
-    ("no tail", {"wake_tail": 0.0, "spin_tail": 0.0}),
-    ("spin 100 us", {"wake_tail": 0.0}),
-    ("spin 200 us", {"wake_tail": 0.0, "spin_tail": 2e-4}),
+    ("no tail", {"loop.wake_tail": 0.0, "loop.spin_tail": 0.0}),
+    ("spin 100 us", {"loop.wake_tail": 0.0}),
+    ("spin 200 us", {"loop.wake_tail": 0.0, "loop.spin_tail": 2e-4}),
     ("held 300 + spin 100 us (defaults)", {}),
-    ("held 200 + spin 100 us", {"wake_tail": 2e-4}),
-    ("held 200 + spin 100 us, switch 20 us", {"wake_tail": 2e-4, "gil_switch_interval": 2e-5}),
-    ("spin 100 us, switch 20 us (former defaults)", {"wake_tail": 0.0, "gil_switch_interval": 2e-5}),
+    ("held 200 + spin 100 us", {"loop.wake_tail": 2e-4}),
+    ("held 200 + spin 100 us, switch 20 us", {"loop.wake_tail": 2e-4, "loop.gil_switch_interval": 2e-5}),
+    ("spin 100 us, switch 20 us (former defaults)", {"loop.wake_tail": 0.0, "loop.gil_switch_interval": 2e-5}),
 ]
 
 
@@ -203,7 +203,7 @@ def run_manager(params_yaml: str, overrides: dict, drive_with, witness: bool = F
     (tmp / "params.yaml").write_text(params_yaml)
     cycle_log = tmp / "cycles.npz"
     arguments = []
-    for key, value in {**overrides, "cycle_log_file": str(cycle_log)}.items():
+    for key, value in {**overrides, "loop.cycle_log_file": str(cycle_log)}.items():
         arguments += ["-p", f"{key}:={value}"]
     log = open(tmp / "node.log", "wb")
     if machine is not None:
@@ -326,7 +326,7 @@ def loop_defaults() -> tuple:
 
     defaults = {p.name: p.default for p in SCHEMA}
     cpu = shared_loop_cpu([c for c in defaults["cpu_affinity"] if c >= 0])
-    return defaults["thread_priority"], cpu, defaults["spin_tail"]
+    return defaults["thread_priority"], cpu, defaults["loop.spin_tail"]
 
 
 def kernel_baseline(rate: int, seconds: float) -> dict:
@@ -501,7 +501,8 @@ def interpreter_cost() -> list:
     ros_args = ["--ros-args", "--params-file", str(tmp / "params.yaml")]
     sys.argv = [sys.argv[0], *ros_args]  # the controllers' nodes take the manager's parameter files from here
     rclpy.init(context=context, domain_id=lease.domain_id, args=[
-        *ros_args, "-p", "gc_mode:=automatic", "-p", f"robot_description_file:={ROOT / 'config' / 'mock_ur.urdf'}"])
+        *ros_args, "-p", "loop.gc_mode:=automatic",
+        "-p", f"robot_description_file:={ROOT / 'config' / 'mock_ur.urdf'}"])
     rows = []
     node = ControllerManagerNode(context=context)
     executor = SingleThreadedExecutor(context=context)

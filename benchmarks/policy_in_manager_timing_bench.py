@@ -56,8 +56,8 @@ CASES = [
     ("same, worker on any CPU", POLICY, {"step_thread_on_loop_cpu": False}, {}),
     ("same, worker at normal priority", POLICY, {"step_thread_priority": 0}, {}),
     ("ball_balance_controller, step inline", POLICY, {"async_step": False}, {}),
-    ("same as async_step, former loop defaults", POLICY, {}, {"gil_switch_interval": 2e-5, "wake_tail": 0.0}),
-    ("same as async_step, held sleep 200 us", POLICY, {}, {"wake_tail": 2e-4}),
+    ("same as async_step, former loop defaults", POLICY, {}, {"loop.gil_switch_interval": 2e-5, "loop.wake_tail": 0.0}),
+    ("same as async_step, held sleep 200 us", POLICY, {}, {"loop.wake_tail": 2e-4}),
 ]
 
 

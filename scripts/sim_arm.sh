@@ -62,7 +62,7 @@ source "$ROOT/scripts/lib/stop_all.sh"
 source "$ROOT/scripts/lib/realtime.sh"
 realtime_for 1   # the controller manager
 MANAGER_RT=()
-((REALTIME)) || MANAGER_RT=(-p thread_priority:=0 -p executor_thread_priority:=0)
+((REALTIME)) || MANAGER_RT=(-p thread_priority:=0 -p loop.executor_thread_priority:=0)
 on_stopped() { rm -rf "$WORK"; }
 trap stop_all INT TERM EXIT
 

@@ -78,34 +78,34 @@ SCHEMA = (
     Param("diagnostics.period", 1.0, "period of /diagnostics (statistics windows restart after each)", unit="s",
           min=0.05),
     Param("thread_priority", 50, "SCHED_FIFO priority of the loop thread (0 = normal scheduling)", min=0, max=99),
-    Param("cpu_affinity", [-1], "CPUs the loop thread may run on ([-1]: any); with executor_on_loop_cpu only "
+    Param("cpu_affinity", [-1], "CPUs the loop thread may run on ([-1]: any); with loop.executor_on_loop_cpu only "
           "the first (with [-1]: the last CPU the process may use)"),
-    Param("executor_on_loop_cpu", True, "the executor thread and the loop thread share one CPU (the first of "
+    Param("loop.executor_on_loop_cpu", True, "the executor thread and the loop thread share one CPU (the first of "
           "cpu_affinity; with [-1] the last CPU the process may use): at its lower priority the executor cannot "
           "run, so cannot take Python's interpreter lock, while a cycle runs"),
-    Param("executor_thread_priority", 40, "SCHED_FIFO priority of the executor thread and of the threads "
+    Param("loop.executor_thread_priority", 40, "SCHED_FIFO priority of the executor thread and of the threads "
           "started before it, the middleware's receive threads among them (0 = normal): a preempted thread "
           "holding Python's interpreter lock would stall the loop, and a starved receive thread delays "
           "commands", min=0, max=99),
-    Param("gil_switch_interval", 1e-4, "Python's thread switch interval: how long a thread waiting for the "
+    Param("loop.gil_switch_interval", 1e-4, "Python's thread switch interval: how long a thread waiting for the "
           "interpreter sleeps before it asks the holder to give it up, and again between such requests (shorter: "
           "the loop's polling can starve a holder on its own CPU, see manager/loop.py)", unit="s",
           min=1e-6, max=0.01),
-    Param("hold_interpreter", True, "the loop keeps Python's interpreter lock from its wake-up until it "
+    Param("loop.hold_interpreter", True, "the loop keeps Python's interpreter lock from its wake-up until it "
           "sleeps (the switch interval is raised meanwhile), so no other thread interrupts a cycle"),
-    Param("wake_tail", 3e-4, "before the spin tail, this part of the wait is slept holding the interpreter: "
+    Param("loop.wake_tail", 3e-4, "before the spin tail, this part of the wait is slept holding the interpreter: "
           "the loop takes the lock back this long before the deadline, so waiting for a thread that holds it "
           f"does not delay the cycle (0: off; at most {WAKE_TAIL_MAX_FRACTION:.0%} of the period)", unit="s",
           min=0.0, max=0.01),
-    Param("spin_tail", 1e-4, "the last part before a deadline is a busy wait holding the interpreter (beats the "
+    Param("loop.spin_tail", 1e-4, "the last part before a deadline is a busy wait holding the interpreter (beats the "
           "kernel's wake-up "
           "latency; costs that much CPU per cycle)", unit="s", min=0.0, max=0.01),
-    Param("gc_mode", "idle", "Python garbage collection: idle (objects at start frozen, collections run in "
+    Param("loop.gc_mode", "idle", "Python garbage collection: idle (objects at start frozen, collections run in "
           "the loop's slack), freeze (frozen at start, automatic), automatic (Python's default)",
           choices=("idle", "freeze", "automatic")),
     Param("lock_memory", False, "mlockall the process at start so no page fault delays a cycle "
           "(needs RLIMIT_MEMLOCK)"),
-    Param("cycle_log_file", "", "write the last 65536 cycles' deadline, start and end times (monotonic s) "
+    Param("loop.cycle_log_file", "", "write the last 65536 cycles' deadline, start and end times (monotonic s) "
           "to this .npz file at exit (timing analysis; empty: off)"),
     *THRESHOLD_PARAMS,
 )
@@ -117,7 +117,7 @@ class ControllerManagerNode(Node):
         """node_kwargs: rclpy Node's (e.g. `context`)."""
         super().__init__(node_name, allow_undeclared_parameters=True, **node_kwargs)
         self.params = declare_parameters(self, SCHEMA)
-        sys.setswitchinterval(self.params["gil_switch_interval"])
+        sys.setswitchinterval(self.params["loop.gil_switch_interval"])
         if self.params["lock_memory"]:
             problem = lock_memory()
             if problem is not None:
@@ -271,29 +271,31 @@ class ControllerManagerNode(Node):
             self.cm.switch_controller(started, [], STRICT)
         except SwitchError as error:
             self.get_logger().error(f"cannot activate {activate}: {error}")
-        if self.params["executor_thread_priority"] > 0:
+        if self.params["loop.executor_thread_priority"] > 0:
             # this callback runs in the executor thread; the middleware's threads, started with
             # the node, receive what the executor runs (command topics, services) and answer
             # discovery: normally scheduled beside a SCHED_FIFO camera chain that filled both
             # cores of a slow machine, they left the joint commands seconds late and a new
             # subscriber (a bag recorder) unmatched for its whole recording. The loop thread,
             # started below, sets its own priority.
-            set_process_realtime_priority(self.params["executor_thread_priority"])
+            set_process_realtime_priority(self.params["loop.executor_thread_priority"])
         loop_cpus = [cpu for cpu in self.params["cpu_affinity"] if cpu >= 0]
-        if self.params["executor_on_loop_cpu"]:
+        if self.params["loop.executor_on_loop_cpu"]:
             loop_cpus = [shared_loop_cpu(loop_cpus)]
             if not set_cpu_affinity(loop_cpus):
-                self.get_logger().warning(f"executor_on_loop_cpu: cannot pin the executor thread to CPU {loop_cpus[0]}")
+                self.get_logger().warning("loop.executor_on_loop_cpu: cannot pin the executor thread to CPU "
+                                          f"{loop_cpus[0]}")
         blocking = self.params["hardware_synchronization.expect_blocking_read_write"]
         self.loop = ControlLoop(self.cm, blocking, self.params["hardware_synchronization.minimum_cycle_time"],
                                 self.params["thread_priority"],
                                 loop_cpus,
-                                wake_tail=self.params["wake_tail"], spin_tail=self.params["spin_tail"],
-                                gc_mode=self.params["gc_mode"], hold_interpreter=self.params["hold_interpreter"],
-                                cycle_log=self.params["cycle_log_file"])
+                                wake_tail=self.params["loop.wake_tail"], spin_tail=self.params["loop.spin_tail"],
+                                gc_mode=self.params["loop.gc_mode"],
+                                hold_interpreter=self.params["loop.hold_interpreter"],
+                                cycle_log=self.params["loop.cycle_log_file"])
         self.loop.idle_hook = self.on_loop_idle
-        if self.loop.wake_tail < self.params["wake_tail"]:
-            self.get_logger().info(f"wake_tail: {self.params['wake_tail'] * 1e6:.0f} us is more than "
+        if self.loop.wake_tail < self.params["loop.wake_tail"]:
+            self.get_logger().info(f"loop.wake_tail: {self.params['loop.wake_tail'] * 1e6:.0f} us is more than "
                                    f"{WAKE_TAIL_MAX_FRACTION:.0%} of the {self.loop.period * 1e3:g} ms period; "
                                    f"{self.loop.wake_tail * 1e6:.0f} us used")
         self.on_registry_change()
