@@ -275,11 +275,16 @@ def _section(component: Component, params: Sequence[Param], by_id: Dict[int, str
     lines.append("Parameters defined in " + ", ".join(f"`{f}` ({n})" for f, n in counts.items()) + ".")
     if any(JOINT in p.name for p in params):
         lines.append(f"`{JOINT}` stands for each joint listed in `joints`.")
-    lines += ["", "| name | default | unit | range | description |", "|---|---|---|---|---|"]
-    for p in params:
-        name = _code(p.name) + (" (read-only)" if p.read_only else "")
-        lines.append(f"| {name} | {_code(_value(p.default))} | {_text(p.unit)} | {_range(p)} | "
-                     f"{_text(p.description)} |")
+    user = [p for p in params if p.user_facing]
+    groups = [("User-facing:", user), ("Advanced:", [p for p in params if not p.user_facing])] if user \
+        else [("", params)]
+    for title, group in groups:
+        lines += ["", title, ""] if title else [""]
+        lines += ["| name | default | unit | range | description |", "|---|---|---|---|---|"]
+        for p in group:
+            name = _code(p.name) + (" (read-only)" if p.read_only else "")
+            lines.append(f"| {name} | {_code(_value(p.default))} | {_text(p.unit)} | {_range(p)} | "
+                         f"{_text(p.description)} |")
     lines.append("")
     return lines
 
@@ -311,11 +316,16 @@ def render() -> str:
         "`unknown_parameters` (last section), and rclpy declares "
         "`use_sim_time`.",
         "",
-        "| component | kind | parameters |",
-        "|---|---|---|",
+        "Each section lists the user-facing parameters first: those a user sets for their own camera, "
+        "plate, robot or task. The advanced ones have defaults that suit every setup the project "
+        "tests; change them to tune or to investigate.",
+        "",
+        "| component | kind | user-facing | all |",
+        "|---|---|---|---|",
     ]
     for component, params in zip(comps, schemas):
-        lines.append(f"| [`{component.name}`](#{_anchor(component)}) | {component.kind} | {len(params)} |")
+        user = sum(p.user_facing for p in params)
+        lines.append(f"| [`{component.name}`](#{_anchor(component)}) | {component.kind} | {user} | {len(params)} |")
     lines.append("")
     for component, params in zip(comps, schemas):
         lines += _section(component, params, by_id, by_name)

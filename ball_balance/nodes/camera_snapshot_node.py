@@ -16,11 +16,11 @@ from controller_manager_py.parameters import Param, declare_parameters
 from controller_manager_py.ros.node_main import StartupError, main_for
 
 SCHEMA = [
-    Param("png", "", "write the first frame here (empty: no still)", read_only=True),
-    Param("mp4", "", "record a video here (empty: no video)", read_only=True),
-    Param("duration_s", 5.0, "video length (by image stamps)", "s", 0.1, 3600.0, read_only=True),
-    Param("fps", 30.0, "video frame rate", "Hz", 1.0, 240.0, read_only=True),
-    Param("topic", "/camera/image_raw", "sensor_msgs/Image topic (bgr8 or rgb8)", read_only=True),
+    Param("png", "", "write the first frame here (empty: no still)", read_only=True, user_facing=True),
+    Param("mp4", "", "record a video here (empty: no video)", read_only=True, user_facing=True),
+    Param("duration_s", 5.0, "video length (by image stamps)", "s", 0.1, 3600.0, read_only=True, user_facing=True),
+    Param("fps", 30.0, "video frame rate", "Hz", 1.0, 240.0, read_only=True, user_facing=True),
+    Param("topic", "/camera/image_raw", "sensor_msgs/Image topic (bgr8 or rgb8)", read_only=True, user_facing=True),
 ]
 
 

@@ -29,9 +29,10 @@ from controller_manager_py.parameters import Param, declare_parameters
 from controller_manager_py.ros.node_main import StartupError, main_for
 
 SCHEMA = [
-    Param("robot_description", "", "URDF text (empty: read robot_description_file)", read_only=True),
-    Param("robot_description_file", "", "URDF file (empty: config/ur5e_ball_balance.urdf)", read_only=True),
-    Param("frame_prefix", "", "prefix for every published frame id", read_only=True),
+    Param("robot_description", "", "URDF text (empty: read robot_description_file)", read_only=True, user_facing=True),
+    Param("robot_description_file", "", "URDF file (empty: config/ur5e_ball_balance.urdf)", read_only=True,
+          user_facing=True),
+    Param("frame_prefix", "", "prefix for every published frame id", read_only=True, user_facing=True),
 ]
 DESCRIPTION_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)

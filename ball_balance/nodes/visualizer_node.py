@@ -38,11 +38,11 @@ from controller_manager_py.parameters import Param, declare_parameters
 from controller_manager_py.ros.node_main import StartupError, main_for
 
 SCHEMA = [
-    Param("rate_hz", 20.0, "marker publishing rate", "Hz", 1.0, 100.0, read_only=True),
+    Param("rate_hz", 20.0, "marker publishing rate", "Hz", 1.0, 100.0, read_only=True, user_facing=True),
     Param("trail_length", 150, "ball positions kept in the trail", "", 2, 5000, read_only=True),
     Param("velocity_scale_s", 0.5, "arrow length per unit speed", "m/(m/s)", 0.0, 10.0, read_only=True),
     Param("reference_kind", "", "draw this reference's path ('' = the recent /ball_reference targets)",
-          choices=("",) + tuple(control_config.REFERENCE_SCHEMA[0].choices), read_only=True),
+          choices=("",) + tuple(control_config.REFERENCE_SCHEMA[0].choices), read_only=True, user_facing=True),
 ] + [p for p in control_config.REFERENCE_SCHEMA if p.name != "reference_kind"]
 
 Z_TOP = PLATE_THICKNESS_M / 2.0

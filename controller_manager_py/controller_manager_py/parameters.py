@@ -36,6 +36,9 @@ class Param:
     max: Optional[float] = None
     choices: Optional[Sequence[Any]] = None
     read_only: bool = False
+    user_facing: bool = False
+    """A setting a user sets for their own setup (device, geometry, task, main gains); the others are
+    advanced: their defaults suit every setup tested, docs list them after the user-facing ones."""
     check: Optional[Callable[[Any], Optional[str]]] = field(default=None, compare=False)
     """Extra check: returns an error message, or None when the value is fine."""
 

@@ -47,7 +47,7 @@ class InterfaceConfiguration:
 
 
 COMMON_PARAMS = (
-    Param("update_rate", 0, "controller rate; 0 = the manager's rate", unit="Hz", min=0),
+    Param("update_rate", 0, "controller rate; 0 = the manager's rate", unit="Hz", min=0, user_facing=True),
     Param("is_async", False, "run update() in a worker thread (triggers while busy are skipped)"),
 )
 

@@ -40,8 +40,9 @@ _RAMP_PARAMS = (
 
 class ForwardCommandController(ControllerInterface):
     PARAMS = (
-        Param("joints", [""], "joints commanded, in the order of the command array", check=_non_empty),
-        Param("interface_name", "position", "command interface written for every joint"),
+        Param("joints", [""], "joints commanded, in the order of the command array", check=_non_empty,
+              user_facing=True),
+        Param("interface_name", "position", "command interface written for every joint", user_facing=True),
         *_RAMP_PARAMS,
     )
 

@@ -22,9 +22,9 @@ JOINT_STATE_INTERFACES = ("position", "velocity", "effort")
 
 class JointStateBroadcaster(ControllerInterface):
     PARAMS = (
-        Param("joints", [""], "joints to publish; empty = all joints with position/velocity/effort"),
-        Param("interfaces", list(JOINT_STATE_INTERFACES), "state interfaces published"),
-        Param("use_local_topics", False, "publish on ~/joint_states instead of /joint_states"),
+        Param("joints", [""], "joints to publish; empty = all joints with position/velocity/effort", user_facing=True),
+        Param("interfaces", list(JOINT_STATE_INTERFACES), "state interfaces published", user_facing=True),
+        Param("use_local_topics", False, "publish on ~/joint_states instead of /joint_states", user_facing=True),
     )
 
     def on_configure(self, previous_state: State) -> CallbackReturn:

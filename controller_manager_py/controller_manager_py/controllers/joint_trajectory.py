@@ -133,21 +133,22 @@ def check_trajectory(msg, joints: List[str], allow_partial: bool) -> Goal:
     return Goal(times, positions, velocities if has_velocities else None, stamp, [i >= 0 for i in index])
 
 
-JOINTS = Param("joints", [""], "controlled joints", check=_non_empty)
+JOINTS = Param("joints", [""], "controlled joints", check=_non_empty, user_facing=True)
 
 
 class JointTrajectoryController(ControllerInterface):
     PARAMS = (
         JOINTS,
         Param("command_interfaces", ["position"], "command interfaces (position supported)",
-              check=lambda v: None if list(v) == ["position"] else "only [position] is supported"),
-        Param("state_interfaces", ["position", "velocity"], "state interfaces read"),
-        Param("allow_partial_joints_goal", False, "accept trajectories naming only some joints"),
-        Param("speed_scaling_interface_name", "", "state interface scaling trajectory time (scaled JTC)"),
+              check=lambda v: None if list(v) == ["position"] else "only [position] is supported", user_facing=True),
+        Param("state_interfaces", ["position", "velocity"], "state interfaces read", user_facing=True),
+        Param("allow_partial_joints_goal", False, "accept trajectories naming only some joints", user_facing=True),
+        Param("speed_scaling_interface_name", "", "state interface scaling trajectory time (scaled JTC)",
+              user_facing=True),
         Param("interpolate_from_desired_state", False,
               "start a new trajectory from the desired state instead of the measured one"),
         Param("state_publish_rate", 50.0, "rate of ~/controller_state (0 = not published)", unit="Hz",
-              min=0.0, max=1000.0),
+              min=0.0, max=1000.0, user_facing=True),
         Param("action_monitor_rate", 20.0, "rate at which action goals get feedback and results", unit="Hz",
               min=1.0, max=1000.0),
     )

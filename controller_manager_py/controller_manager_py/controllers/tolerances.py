@@ -55,18 +55,22 @@ def constraint_params(joints: Sequence[str]) -> List[Param]:
     """The `constraints.*` parameters of a trajectory controller with these joints."""
     params = [
         Param("constraints.stopped_velocity_tolerance", 0.01,
-              "goal velocity tolerance of every joint: the arm counts as stopped below it", unit="rad/s", min=0.0),
+              "goal velocity tolerance of every joint: the arm counts as stopped below it", unit="rad/s", min=0.0,
+              user_facing=True),
         Param("constraints.goal_time", 0.0,
-              "time after the last point by which the goal tolerance must hold (0 = no limit)", unit="s", min=0.0),
+              "time after the last point by which the goal tolerance must hold (0 = no limit)", unit="s", min=0.0,
+              user_facing=True),
         Param("constraints.decelerate_on_cancel", False,
               "on a cancel or an abort, decelerate to a stop at each joint's max_deceleration_on_cancel "
               "instead of holding where the arm is (needs every joint's, and velocity states)", read_only=True),
     ]
     for joint in joints:
         params.append(Param(f"constraints.{joint}.trajectory", 0.0,
-                            f"path position tolerance of {joint} (0 = not checked)", unit="rad", min=0.0))
+                            f"path position tolerance of {joint} (0 = not checked)", unit="rad", min=0.0,
+                            user_facing=True))
         params.append(Param(f"constraints.{joint}.goal", 0.0,
-                            f"goal position tolerance of {joint} (0 = not checked)", unit="rad", min=0.0))
+                            f"goal position tolerance of {joint} (0 = not checked)", unit="rad", min=0.0,
+                            user_facing=True))
         params.append(Param(f"constraints.{joint}.max_deceleration_on_cancel", 0.0,
                             f"deceleration of {joint} when stopping with decelerate_on_cancel (0 = not set)",
                             unit="rad/s^2", min=0.0, read_only=True))

@@ -58,12 +58,15 @@ from .statistics_publisher import StatisticsRegistry
 _NONE = [""]  # an empty string array parameter (rclpy cannot type an empty list)
 
 SCHEMA = (
-    Param("update_rate", 100, "rate of the read-update-write loop", unit="Hz", min=1, max=10000, read_only=True),
-    Param("robot_description", "", "URDF text with <ros2_control> tags (empty: file or topic)"),
-    Param("robot_description_file", "", "path of a URDF file (used when robot_description is empty)"),
-    Param("robot_description_topic", "/robot_description", "topic (transient local) when no parameter is set"),
-    Param("hardware_components_initial_state.unconfigured", _NONE, "components only loaded at start"),
-    Param("hardware_components_initial_state.inactive", _NONE, "components configured but not activated"),
+    Param("update_rate", 100, "rate of the read-update-write loop", unit="Hz", min=1, max=10000, read_only=True,
+          user_facing=True),
+    Param("robot_description", "", "URDF text with <ros2_control> tags (empty: file or topic)", user_facing=True),
+    Param("robot_description_file", "", "path of a URDF file (used when robot_description is empty)", user_facing=True),
+    Param("robot_description_topic", "/robot_description", "topic (transient local) when no parameter is set",
+          user_facing=True),
+    Param("hardware_components_initial_state.unconfigured", _NONE, "components only loaded at start", user_facing=True),
+    Param("hardware_components_initial_state.inactive", _NONE, "components configured but not activated",
+          user_facing=True),
     Param("hardware_synchronization.expect_blocking_read_write", False,
           "hardware read() blocks and sets the pace: the loop does not sleep"),
     Param("hardware_synchronization.minimum_cycle_time", 0.0, "with blocking read/write: least time per cycle",
@@ -71,15 +74,17 @@ SCHEMA = (
     Param("enforce_command_limits", True, "clamp commands to the URDF joint limits before write()"),
     Param("allow_joints_without_limits", False, "accept revolute/prismatic joints that have no URDF <limit> "
           "(their commands are then not limited)"),
-    Param("activate_controllers", _NONE, "controllers loaded, configured and activated at start (in order)"),
-    Param("inactive_controllers", _NONE, "controllers loaded and configured at start"),
+    Param("activate_controllers", _NONE, "controllers loaded, configured and activated at start (in order)",
+          user_facing=True),
+    Param("inactive_controllers", _NONE, "controllers loaded and configured at start", user_facing=True),
     Param("statistics.publish_rate", 20.0, "rate of ~/statistics and ~/introspection_data", unit="Hz",
-          min=0.1, max=1000.0),
+          min=0.1, max=1000.0, user_facing=True),
     Param("diagnostics.period", 1.0, "period of /diagnostics (statistics windows restart after each)", unit="s",
-          min=0.05),
-    Param("thread_priority", 50, "SCHED_FIFO priority of the loop thread (0 = normal scheduling)", min=0, max=99),
+          min=0.05, user_facing=True),
+    Param("thread_priority", 50, "SCHED_FIFO priority of the loop thread (0 = normal scheduling)", min=0, max=99,
+          user_facing=True),
     Param("cpu_affinity", [-1], "CPUs the loop thread may run on ([-1]: any); with loop.executor_on_loop_cpu only "
-          "the first (with [-1]: the last CPU the process may use)"),
+          "the first (with [-1]: the last CPU the process may use)", user_facing=True),
     Param("loop.executor_on_loop_cpu", True, "the executor thread and the loop thread share one CPU (the first of "
           "cpu_affinity; with [-1] the last CPU the process may use): at its lower priority the executor cannot "
           "run, so cannot take Python's interpreter lock, while a cycle runs"),
