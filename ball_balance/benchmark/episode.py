@@ -356,7 +356,13 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
     from ball_balance.sim.world import SimWorld
     from ball_balance.vision.camera import CameraModel
     from ball_balance.vision.config import TrackerConfig
-    from ball_balance.vision.kalman import BallKalman, CommandDelayFromTilt, PlateCommandInput, plate_tilt_rad
+    from ball_balance.vision.kalman import (
+        BallKalman,
+        CommandDelayFromTilt,
+        KalmanConfig,
+        PlateCommandInput,
+        plate_tilt_rad,
+    )
     from ball_balance.vision.tracker import BallTracker
 
     values = controller_values(spec.controller, spec.reference, spec.overrides)
@@ -384,9 +390,10 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
         # the tracker's own filter; a fixed measurement noise stands in for one tuned to this
         # domain's noise, an adaptive one starts from the configured value as the live tracker does
         noise = max(knobs.detection_noise_m, spec.fast_noise_floor_m)
-        kalman_cfg = tracker_cfg if tracker_cfg.adaptive_meas_noise else \
-            dataclasses.replace(tracker_cfg, meas_noise_m=max(tracker_cfg.meas_noise_m, noise))
-        kalman = BallKalman.from_config(kalman_cfg)
+        kalman_cfg = KalmanConfig.from_tracker(tracker_cfg)
+        if not kalman_cfg.adaptive_meas_noise:
+            kalman_cfg = dataclasses.replace(kalman_cfg, meas_noise_m=max(kalman_cfg.meas_noise_m, noise))
+        kalman = BallKalman(kalman_cfg)
         plate_cmds = PlateCommandInput(values["rolling_factor"] * values["gravity_m_s2"],
                                        tracker_cfg.plate_cmd_delay_s, tracker_cfg.plate_cmd_timeout_s,
                                        lever_m=tracker_cfg.tilt_lever_m)

@@ -1,7 +1,7 @@
 """The tracker's Kalman filter (ball_balance/vision/kalman.py BallKalman) over a batch of balls,
 for the vectorised training plant: the same model and the same adaptations, numpy, all balls
-at once. Built from the same TrackerConfig (`BatchBallKalman.from_config`), so the plant
-follows whatever config/ball_tracker.yaml and the tracker's schema set.
+at once. Built from the same settings (KalmanConfig.from_tracker of the tracker's config), so
+the plant follows whatever config/ball_tracker.yaml and the tracker's schema set.
 
 Per ball: state [x, y, vx, vy, s] (s the input gain; held at 1 with zero variance when
 `estimate_input_gain` is off, which is then the plain known-acceleration model), the commanded
@@ -13,11 +13,9 @@ batch against BallKalman on the same detections.
 """
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
-from ball_balance.vision.kalman import CHI2_1_MEDIAN, MANEUVER_MAX_NIS
+from ball_balance.vision.kalman import CHI2_1_MEDIAN, MANEUVER_MAX_NIS, KalmanConfig
 
 DIM = 5
 
@@ -25,7 +23,7 @@ DIM = 5
 class BatchBallKalman:
     """`step(t, z, arrived, accel)` once per frame (one stamp for the whole batch)."""
 
-    def __init__(self, batch: int, cfg, fixed_meas_noise_m=None, window_max_span_s: float = 0.25,
+    def __init__(self, batch: int, cfg: KalmanConfig, fixed_meas_noise_m=None, window_max_span_s: float = 0.25,
                  noise_min_samples: int = 10):
         self.b, self.cfg = batch, cfg
         # a detection beyond maneuver_sigma widens its frame's prediction
@@ -40,9 +38,7 @@ class BatchBallKalman:
         self.excess_nis = np.ones(batch)
         self.fast = None
         if cfg.maneuver_hold_s > 0.0 and cfg.maneuver_sigma > 0.0:
-            self.fast = BatchBallKalman(batch, dataclasses.replace(
-                cfg, use_plate_cmd=False, estimate_input_gain=False, adaptive_meas_noise=False, consistency_time_s=0.0,
-                maneuver_sigma=0.0, cmd_accel_noise_m_s2=cfg.accel_noise_m_s2))
+            self.fast = BatchBallKalman(batch, cfg.constant_velocity())
         self.last_dt = np.zeros(batch)                 # (dt, q) of each ball's last prediction
         self.last_q = np.zeros(batch)
         self.sigma_a = cfg.accel_noise_m_s2

@@ -33,6 +33,7 @@ from ball_balance.control.estimation import EstimatorConfig
 from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
 from ball_balance.policy.batch_kalman import BatchBallKalman
 from ball_balance.policy.observation import ObservationBuilder, correction_weight, low_gain_share
+from ball_balance.vision.kalman import KalmanConfig
 
 # the control tick: the PID node's rate (config/pid.yaml, 60 Hz); config/policy.yaml's
 # control_rate_hz must equal it (checked here) and the model records it (rate_hz, checked at run time)
@@ -486,7 +487,7 @@ class PlateBatch:
         self.u_law = np.zeros((b, 2))          # last law output
         # the tracker's filter; a fixed measurement noise stands in for one tuned to the
         # episode's noise (as the benchmark's fast mode does), an adaptive one starts from the config
-        self.kalman = BatchBallKalman(b, self.tracker_cfg, fixed_meas_noise_m=self.noise)
+        self.kalman = BatchBallKalman(b, KalmanConfig.from_tracker(self.tracker_cfg), fixed_meas_noise_m=self.noise)
         self.pending = []                      # (visible_at, est x, est v, stamp, valid mask)
         self.obs_x = np.zeros((b, 2))
         self.obs_v = np.zeros((b, 2))

@@ -77,6 +77,7 @@ from filterpy.kalman import KalmanFilter
 
 from ball_balance.control.prediction import StampedDelayEstimator
 from ball_balance.rotations import matrix_to_rotvec
+from ball_balance.vision.config import TRACKER_SCHEMA
 
 CHI2_1_MEDIAN = 0.45493642311957283   # median of a chi-square variable with one degree of freedom
 # a detection beyond maneuver_sigma starts the maneuver hold only while the running innovation
@@ -84,6 +85,7 @@ CHI2_1_MEDIAN = 0.45493642311957283   # median of a chi-square variable with one
 # while (a long delay, a wrong gain) is not seeing a push, and the constant-velocity filter's
 # velocity cost 1 mm in extreme_dr when it took over there too
 MANEUVER_MAX_NIS = 1.0
+_TRACKER_DEFAULTS = {p.name: p.default for p in TRACKER_SCHEMA}   # KalmanConfig's defaults
 
 
 @dataclass(frozen=True)
@@ -257,76 +259,95 @@ class CommandDelayFromTilt:
         return self.delay_s
 
 
-class BallKalman:
-    """Tracks one ball; `step()` once per frame with the frame's stamp."""
+@dataclass(frozen=True)
+class KalmanConfig:
+    """BallKalman's settings: the tracker parameters of the same names, whose schema
+    (TRACKER_SCHEMA, ball_balance/vision/config.py) describes them and gives the defaults.
+    `from_tracker` takes them from a TrackerConfig; `dataclasses.replace` changes some."""
 
-    def __init__(self, meas_noise_m: float = 0.001, accel_noise_m_s2: float = 1.0, init_vel_std_m_s: float = 0.5,
-                 gate_sigma: float = 6.0, max_coast_frames: int = 5, max_dt_s: float = 0.5, *,
-                 cmd_accel_noise_m_s2: Optional[float] = None, adaptive_meas_noise: bool = False,
-                 meas_noise_max_m: float = 0.02, meas_noise_window: int = 60,
-                 estimate_input_gain: bool = False, input_gain_bounds: Tuple[float, float] = (0.3, 2.5),
-                 input_gain_std: float = 0.3, input_gain_rate_per_s: float = 0.05,
-                 consistency_time_s: float = 0.0, maneuver_sigma: float = 0.0, maneuver_hold_s: float = 0.0,
-                 maneuver_accel_noise_m_s2: float = 0.0, maneuver_confirm_frames: int = 1,
-                 maneuver_confirm_sigma: float = 0.0, maneuver_confirm_noise_m: float = 0.0):
-        self.sigma_a = accel_noise_m_s2
-        self.sigma_a_cmd = accel_noise_m_s2 if cmd_accel_noise_m_s2 is None else cmd_accel_noise_m_s2
-        self.init_vel_std = init_vel_std_m_s
-        self.gate_sigma = gate_sigma
-        self.max_coast_frames = max_coast_frames
-        self.max_dt_s = max_dt_s
-        self.meas_noise_min_m = meas_noise_m
-        self.meas_noise_max_m = max(meas_noise_max_m, meas_noise_m)
-        self.noise = DetectionNoiseEstimator(meas_noise_window) if adaptive_meas_noise else None
-        self.gain_state = estimate_input_gain
-        self.gain_bounds = input_gain_bounds
-        self.gain_rate = input_gain_rate_per_s
-        self.dim = 5 if estimate_input_gain else 4
-        self.consistency_time_s = consistency_time_s
+    meas_noise_m: float = _TRACKER_DEFAULTS["meas_noise_m"]
+    accel_noise_m_s2: float = _TRACKER_DEFAULTS["accel_noise_m_s2"]
+    init_vel_std_m_s: float = _TRACKER_DEFAULTS["init_vel_std_m_s"]
+    gate_sigma: float = _TRACKER_DEFAULTS["gate_sigma"]
+    max_coast_frames: int = _TRACKER_DEFAULTS["max_coast_frames"]
+    max_dt_s: float = _TRACKER_DEFAULTS["max_dt_s"]
+    cmd_accel_noise_m_s2: float = _TRACKER_DEFAULTS["cmd_accel_noise_m_s2"]
+    estimate_input_gain: bool = _TRACKER_DEFAULTS["estimate_input_gain"]
+    input_gain_bounds: Tuple[float, float] = _TRACKER_DEFAULTS["input_gain_bounds"]
+    input_gain_std: float = _TRACKER_DEFAULTS["input_gain_std"]
+    input_gain_rate_per_s: float = _TRACKER_DEFAULTS["input_gain_rate_per_s"]
+    consistency_time_s: float = _TRACKER_DEFAULTS["consistency_time_s"]
+    maneuver_sigma: float = _TRACKER_DEFAULTS["maneuver_sigma"]
+    maneuver_hold_s: float = _TRACKER_DEFAULTS["maneuver_hold_s"]
+    maneuver_accel_noise_m_s2: float = _TRACKER_DEFAULTS["maneuver_accel_noise_m_s2"]
+    maneuver_confirm_frames: int = _TRACKER_DEFAULTS["maneuver_confirm_frames"]
+    maneuver_confirm_sigma: float = _TRACKER_DEFAULTS["maneuver_confirm_sigma"]
+    maneuver_confirm_noise_m: float = _TRACKER_DEFAULTS["maneuver_confirm_noise_m"]
+    adaptive_meas_noise: bool = _TRACKER_DEFAULTS["adaptive_meas_noise"]
+    meas_noise_max_m: float = _TRACKER_DEFAULTS["meas_noise_max_m"]
+    meas_noise_window_frames: int = _TRACKER_DEFAULTS["meas_noise_window_frames"]
+
+    @classmethod
+    def from_tracker(cls, cfg) -> KalmanConfig:
+        """The filter settings of a TrackerConfig (ball_balance.vision.config)."""
+        values = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cls)}
+        return cls(**{**values, "input_gain_bounds": tuple(cfg.input_gain_bounds)})
+
+    def constant_velocity(self) -> KalmanConfig:
+        """These settings for a plain constant-velocity filter (BallKalman.fast): the same
+        noises, gate and coasting, no adaptation, no push detection; without a known
+        acceleration its process noise is accel_noise_m_s2 anyway."""
+        return dataclasses.replace(self, cmd_accel_noise_m_s2=self.accel_noise_m_s2, estimate_input_gain=False,
+                                   adaptive_meas_noise=False, consistency_time_s=0.0, maneuver_sigma=0.0)
+
+
+class BallKalman:
+    """Tracks one ball with the settings `cfg`; `step()` once per frame with the frame's stamp."""
+
+    def __init__(self, cfg: KalmanConfig):
+        self.cfg = cfg
+        self.sigma_a = cfg.accel_noise_m_s2
+        self.sigma_a_cmd = cfg.cmd_accel_noise_m_s2
+        self.init_vel_std = cfg.init_vel_std_m_s
+        self.gate_sigma = cfg.gate_sigma
+        self.max_coast_frames = cfg.max_coast_frames
+        self.max_dt_s = cfg.max_dt_s
+        self.meas_noise_min_m = cfg.meas_noise_m
+        self.meas_noise_max_m = max(cfg.meas_noise_max_m, cfg.meas_noise_m)
+        self.noise = DetectionNoiseEstimator(cfg.meas_noise_window_frames) if cfg.adaptive_meas_noise else None
+        self.gain_state = cfg.estimate_input_gain
+        self.gain_bounds = cfg.input_gain_bounds
+        self.gain_rate = cfg.input_gain_rate_per_s
+        self.dim = 5 if cfg.estimate_input_gain else 4
+        self.consistency_time_s = cfg.consistency_time_s
         self.nis = 1.0                # running mean of the normalised innovation squared (per axis)
-        self.maneuver_sigma = maneuver_sigma
+        self.maneuver_sigma = cfg.maneuver_sigma
         self.maneuver_count = 0       # detections that re-predicted with accel_noise_m_s2 (total)
-        self.maneuver_confirm_frames = maneuver_confirm_frames
-        self.maneuver_confirm_sigma = maneuver_confirm_sigma
-        self.maneuver_confirm_noise_m = maneuver_confirm_noise_m
+        self.maneuver_confirm_frames = cfg.maneuver_confirm_frames
+        self.maneuver_confirm_sigma = cfg.maneuver_confirm_sigma
+        self.maneuver_confirm_noise_m = cfg.maneuver_confirm_noise_m
         # detections in the current run that may be a push, the last one's innovation, and the
         # running innovation consistency before the run began (the first one raised it)
         self._excess = (0, np.zeros(2), 1.0)
         # after a push: the velocity of a plain constant-velocity filter run alongside
-        self.maneuver_hold_s = maneuver_hold_s
+        self.maneuver_hold_s = cfg.maneuver_hold_s
         self._hold_until = -np.inf
         # ... during which the model's process noise is at least this
-        self.sigma_a_maneuver = maneuver_accel_noise_m_s2
+        self.sigma_a_maneuver = cfg.maneuver_accel_noise_m_s2
         self.fast: Optional[BallKalman] = None
-        if maneuver_hold_s > 0.0 and maneuver_sigma > 0.0:
-            self.fast = BallKalman(meas_noise_m, accel_noise_m_s2, init_vel_std_m_s, gate_sigma, max_coast_frames,
-                                   max_dt_s)
+        if cfg.maneuver_hold_s > 0.0 and cfg.maneuver_sigma > 0.0:
+            self.fast = BallKalman(cfg.constant_velocity())
         self._last_prediction = (0.0, 0.0)   # (dt, q) of the last prediction
         kf = KalmanFilter(dim_x=self.dim, dim_z=2, dim_u=2)
         kf.H = np.eye(2, self.dim)                                           # z = H x
-        kf.R = np.eye(2) * meas_noise_m ** 2                                 # measurement noise
+        kf.R = np.eye(2) * cfg.meas_noise_m ** 2                             # measurement noise
         self.kf = kf
-        self._gain = (1.0, input_gain_std ** 2)   # s and its variance, kept over dropped tracks
+        self._gain = (1.0, cfg.input_gain_std ** 2)   # s and its variance, kept over dropped tracks
         self.initialised = False
         self.coasted = 0              # frames predicted without a detection since the last one
         self.t_last: Optional[float] = None
         self.gated_count = 0          # detections rejected as outliers (total)
         self.reset_count = 0          # tracks dropped (total)
-
-    @classmethod
-    def from_config(cls, cfg) -> BallKalman:
-        """The filter a TrackerConfig (ball_balance.vision.config) describes."""
-        return cls(cfg.meas_noise_m, cfg.accel_noise_m_s2, cfg.init_vel_std_m_s, cfg.gate_sigma,
-                   cfg.max_coast_frames, cfg.max_dt_s, cmd_accel_noise_m_s2=cfg.cmd_accel_noise_m_s2,
-                   adaptive_meas_noise=cfg.adaptive_meas_noise, meas_noise_max_m=cfg.meas_noise_max_m,
-                   meas_noise_window=cfg.meas_noise_window_frames, estimate_input_gain=cfg.estimate_input_gain,
-                   input_gain_bounds=tuple(cfg.input_gain_bounds), input_gain_std=cfg.input_gain_std,
-                   input_gain_rate_per_s=cfg.input_gain_rate_per_s, consistency_time_s=cfg.consistency_time_s,
-                   maneuver_sigma=cfg.maneuver_sigma, maneuver_hold_s=cfg.maneuver_hold_s,
-                   maneuver_accel_noise_m_s2=cfg.maneuver_accel_noise_m_s2,
-                   maneuver_confirm_frames=cfg.maneuver_confirm_frames,
-                   maneuver_confirm_sigma=cfg.maneuver_confirm_sigma,
-                   maneuver_confirm_noise_m=cfg.maneuver_confirm_noise_m)
 
     @property
     def meas_noise_m(self) -> float:

@@ -33,7 +33,7 @@ from ball_balance.plate_geometry import GRAVITY_M_S2
 from ball_balance.vision.ball_segmentation import BallBlob, BallSegmenter
 from ball_balance.vision.camera import CameraModel, Undistorter
 from ball_balance.vision.config import TrackerConfig
-from ball_balance.vision.kalman import BallKalman, CommandDelayFromTilt, PlateCommandInput
+from ball_balance.vision.kalman import BallKalman, CommandDelayFromTilt, KalmanConfig, PlateCommandInput
 from ball_balance.vision.plate import (
     FULL_FIT_MIN_MARKERS,
     PIVOT_PRIOR_SIGMA_ROT_RAD,
@@ -93,7 +93,7 @@ class BallTracker:
         self.plate = PlateLocator(cfg.geometry, cfg.startup_frames, cfg.startup_max_motion_px, cfg.plate_hold_s,
                                   cfg.marker_roi_margin, cfg.full_scan_period)
         self.segmenter = BallSegmenter(cfg.hsv_lower, cfg.hsv_upper, cfg.morph_kernel_px, cfg.min_circularity)
-        self.kalman = BallKalman.from_config(cfg)
+        self.kalman = BallKalman(KalmanConfig.from_tracker(cfg))
         self.undistort_mode = undistort_mode
         self.camera: Optional[CameraModel] = None
         self.undistorter: Optional[Undistorter] = None

@@ -5,14 +5,15 @@ import numpy as np
 
 from ball_balance.policy.batch_kalman import BatchBallKalman
 from ball_balance.vision.config import TrackerConfig
-from ball_balance.vision.kalman import BallKalman
+from ball_balance.vision.kalman import BallKalman, KalmanConfig
 
 
 def test_batch_kalman_with_the_tilt_lever_is_the_trackers_filter():
-    cfg = TrackerConfig.from_values({})
-    b, dt, k_g, c = 4, 1 / 30, 5.886, cfg.tilt_lever_m
+    tracker_cfg = TrackerConfig.from_values({})
+    cfg = KalmanConfig.from_tracker(tracker_cfg)
+    b, dt, k_g, c = 4, 1 / 30, 5.886, tracker_cfg.tilt_lever_m
     batch = BatchBallKalman(b, cfg)
-    single = [BallKalman.from_config(cfg) for _ in range(b)]
+    single = [BallKalman(cfg) for _ in range(b)]
     rng = np.random.default_rng(3)
     x, v = rng.normal(0, 0.03, (b, 2)), np.zeros((b, 2))
     worst = 0.0

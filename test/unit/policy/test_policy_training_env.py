@@ -270,14 +270,15 @@ def test_batch_kalman_is_the_trackers_filter(overrides):
     (maneuver_sigma)."""
     from ball_balance.policy.batch_kalman import BatchBallKalman
     from ball_balance.policy.env import tracker_config
-    from ball_balance.vision.kalman import BallKalman
+    from ball_balance.vision.kalman import BallKalman, KalmanConfig
 
-    cfg = dataclasses.replace(tracker_config(), **overrides)
+    tracker_cfg = dataclasses.replace(tracker_config(), **overrides)
+    cfg = KalmanConfig.from_tracker(tracker_cfg)
     b, dt = 6, 1 / 30
     noise = np.array([0.0005, 0.001, 0.003, 0.006, 0.002, 0.004])
     batch = BatchBallKalman(b, cfg, fixed_meas_noise_m=noise)
-    single = [BallKalman.from_config(cfg if cfg.adaptive_meas_noise else
-                                     dataclasses.replace(cfg, meas_noise_m=max(cfg.meas_noise_m, noise[i])))
+    single = [BallKalman(cfg if cfg.adaptive_meas_noise else
+                         dataclasses.replace(cfg, meas_noise_m=max(cfg.meas_noise_m, noise[i])))
               for i in range(b)]
     rng = np.random.default_rng(1)
     k_g, gain = 5.886, np.array([1.0, 1.2, 0.8, 1.4, 1.0, 0.6])
@@ -286,7 +287,7 @@ def test_batch_kalman_is_the_trackers_filter(overrides):
     for n in range(400):
         t = n * dt
         u = 0.05 * np.sin(2 * np.pi * t / np.array([1.5, 2.0, 2.5, 3.0, 1.0, 0.7]))[:, None] * np.array([1.0, -0.7])
-        accel = None if (n < 3 or not cfg.use_plate_cmd) else -k_g * np.sin(u)
+        accel = None if (n < 3 or not tracker_cfg.use_plate_cmd) else -k_g * np.sin(u)
         a_true = -k_g * gain[:, None] * np.sin(u)
         x, v = x + v * dt + 0.5 * a_true * dt * dt, v + a_true * dt
         if n % 40 == 20:
@@ -313,7 +314,7 @@ def test_batch_kalman_is_the_trackers_filter(overrides):
         assert batch.r[i] == pytest.approx(single[i].kf.R[0, 0], rel=1e-9)
         assert batch.gain[i] == pytest.approx(single[i].input_gain, rel=1e-7)
     assert worst < 1e-9
-    if getattr(cfg, "maneuver_sigma", 0.0) > 0.0 and cfg.use_plate_cmd:
+    if cfg.maneuver_sigma > 0.0 and tracker_cfg.use_plate_cmd:
         assert sum(f.maneuver_count for f in single) > 0   # the pushes were taken as such
 
 

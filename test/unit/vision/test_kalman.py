@@ -1,13 +1,31 @@
 """Constant-velocity Kalman filter: convergence, variable dt, gating, coasting and reset."""
+import dataclasses
+
 import numpy as np
 import pytest
 from filterpy.common import Q_discrete_white_noise
 
-from ball_balance.vision.kalman import BallKalman, DetectionNoiseEstimator, PlateCommandInput
+from ball_balance.vision.kalman import BallKalman, DetectionNoiseEstimator, KalmanConfig, PlateCommandInput
+
+# the filter these tests start from: every adaptation and the push detection off (a test switches
+# on what it is about), the input gain within [0.3, 2.5]
+PLAIN = KalmanConfig(estimate_input_gain=False, input_gain_bounds=(0.3, 2.5), consistency_time_s=0.0,
+                     maneuver_sigma=0.0, maneuver_hold_s=0.0, maneuver_accel_noise_m_s2=0.0,
+                     maneuver_confirm_frames=1, maneuver_confirm_sigma=0.0, maneuver_confirm_noise_m=0.0,
+                     adaptive_meas_noise=False)
+
+
+def filter_with(**settings) -> BallKalman:
+    """A filter with PLAIN's settings but `settings`; the process noise with a known acceleration
+    is accel_noise_m_s2 unless cmd_accel_noise_m_s2 is given."""
+    cfg = dataclasses.replace(PLAIN, **settings)
+    if "cmd_accel_noise_m_s2" not in settings:
+        cfg = dataclasses.replace(cfg, cmd_accel_noise_m_s2=cfg.accel_noise_m_s2)
+    return BallKalman(cfg)
 
 
 def test_process_noise_matches_filterpys_white_noise_acceleration_model():
-    kf = BallKalman(accel_noise_m_s2=2.0)
+    kf = filter_with(accel_noise_m_s2=2.0)
     kf.step(0.0, (0.0, 0.0))
     kf.step(0.04, (0.0, 0.0))
     Q_axis = Q_discrete_white_noise(dim=2, dt=0.04, var=4.0)            # [x, vx] of one axis
@@ -17,7 +35,7 @@ def test_process_noise_matches_filterpys_white_noise_acceleration_model():
 
 def test_velocity_converges_with_jittered_frame_times():
     rng = np.random.default_rng(3)
-    kf = BallKalman(meas_noise_m=0.001, accel_noise_m_s2=0.3)
+    kf = filter_with(meas_noise_m=0.001, accel_noise_m_s2=0.3)
     t, v = 0.0, np.array([0.2, -0.1])
     for _ in range(90):
         t += rng.uniform(0.02, 0.045)
@@ -28,7 +46,7 @@ def test_velocity_converges_with_jittered_frame_times():
 
 
 def test_coasts_for_max_frames_then_resets_and_restarts_on_next_detection():
-    kf = BallKalman(max_coast_frames=3)
+    kf = filter_with(max_coast_frames=3)
     for i in range(10):
         kf.step(i / 30, (0.1 * i / 30, 0.0))
     coast = [kf.step((10 + i) / 30, None) for i in range(4)]
@@ -40,7 +58,7 @@ def test_coasts_for_max_frames_then_resets_and_restarts_on_next_detection():
 
 
 def test_outlier_is_gated_and_counted():
-    kf = BallKalman(meas_noise_m=0.001, gate_sigma=6.0)
+    kf = filter_with(meas_noise_m=0.001, gate_sigma=6.0)
     for i in range(20):
         kf.step(i / 30, (0.0, 0.0))
     est = kf.step(20 / 30, (0.15, 0.0))
@@ -49,7 +67,7 @@ def test_outlier_is_gated_and_counted():
 
 
 def test_long_gap_resets_the_track():
-    kf = BallKalman(max_dt_s=0.5)
+    kf = filter_with(max_dt_s=0.5)
     kf.step(0.0, (0.1, 0.1))
     kf.step(0.03, (0.1, 0.1))
     est = kf.step(1.0, (-0.1, 0.0))
@@ -57,7 +75,7 @@ def test_long_gap_resets_the_track():
 
 
 def test_known_acceleration_is_used_in_the_prediction():
-    with_accel, without = BallKalman(accel_noise_m_s2=0.5), BallKalman(accel_noise_m_s2=0.5)
+    with_accel, without = filter_with(accel_noise_m_s2=0.5), filter_with(accel_noise_m_s2=0.5)
     a = 1.5
     for i in range(30):
         t = i / 30
@@ -69,7 +87,7 @@ def test_known_acceleration_is_used_in_the_prediction():
 
 
 def test_no_detection_before_any_track_is_invalid_zero():
-    est = BallKalman().step(0.0, None)
+    est = filter_with().step(0.0, None)
     assert not est.valid and not est.fresh and (est.x, est.y, est.vx, est.vy) == (0, 0, 0, 0)
 
 
@@ -115,8 +133,8 @@ def test_detection_noise_estimate_ignores_an_outlier_and_skips_gaps():
 def test_adaptive_measurement_noise_follows_the_detections_within_bounds():
     rng = np.random.default_rng(7)
     t, truth, z = _noisy_path(rng, 0.005)
-    adaptive = BallKalman(meas_noise_m=0.001, adaptive_meas_noise=True, accel_noise_m_s2=0.3)
-    fixed = BallKalman(meas_noise_m=0.001, accel_noise_m_s2=0.3)
+    adaptive = filter_with(meas_noise_m=0.001, adaptive_meas_noise=True, accel_noise_m_s2=0.3)
+    fixed = filter_with(meas_noise_m=0.001, accel_noise_m_s2=0.3)
     err_adaptive, err_fixed = [], []
     for ti, zi, xi in zip(t, z, truth, strict=True):
         e, f = adaptive.step(ti, tuple(zi)), fixed.step(ti, tuple(zi))
@@ -126,8 +144,8 @@ def test_adaptive_measurement_noise_follows_the_detections_within_bounds():
     assert fixed.meas_noise_m == pytest.approx(0.001)
     assert np.sqrt(np.mean(np.square(err_adaptive[100:]))) < 0.7 * np.sqrt(np.mean(np.square(err_fixed[100:])))
     assert adaptive.reset_count == 0                     # the 1 mm gate would not have held
-    low = BallKalman(meas_noise_m=0.002, adaptive_meas_noise=True)
-    high = BallKalman(meas_noise_m=0.001, adaptive_meas_noise=True, meas_noise_max_m=0.003)
+    low = filter_with(meas_noise_m=0.002, adaptive_meas_noise=True)
+    high = filter_with(meas_noise_m=0.001, adaptive_meas_noise=True, meas_noise_max_m=0.003)
     _, _, quiet = _noisy_path(rng, 0.0003)
     for ti, qi, zi in zip(t, quiet, z, strict=True):
         low.step(ti, tuple(qi))
@@ -150,8 +168,8 @@ def _run_with_gain(kf, gain, rng, n=600, sigma_m=0.003):
 
 def test_input_gain_is_estimated_and_bounded_and_kept_over_a_dropped_track():
     rng = np.random.default_rng(8)
-    kf = BallKalman(meas_noise_m=0.003, cmd_accel_noise_m_s2=0.05, estimate_input_gain=True)
-    blind = BallKalman(meas_noise_m=0.003, cmd_accel_noise_m_s2=0.05)
+    kf = filter_with(meas_noise_m=0.003, cmd_accel_noise_m_s2=0.05, estimate_input_gain=True)
+    blind = filter_with(meas_noise_m=0.003, cmd_accel_noise_m_s2=0.05)
     err = _run_with_gain(kf, 1.6, rng)
     assert kf.input_gain == pytest.approx(1.6, abs=0.15)
     assert err < 0.6 * _run_with_gain(blind, 1.6, np.random.default_rng(8))
@@ -159,14 +177,14 @@ def test_input_gain_is_estimated_and_bounded_and_kept_over_a_dropped_track():
     assert kf.input_gain == pytest.approx(1.6, abs=0.15)
     kf.step(100.0, (0.0, 0.0))
     assert kf.kf.x[4] == pytest.approx(1.6, abs=0.15)
-    bounded = BallKalman(meas_noise_m=0.003, cmd_accel_noise_m_s2=0.05, estimate_input_gain=True,
-                         input_gain_bounds=(0.5, 1.2))
+    bounded = filter_with(meas_noise_m=0.003, cmd_accel_noise_m_s2=0.05, estimate_input_gain=True,
+                          input_gain_bounds=(0.5, 1.2))
     _run_with_gain(bounded, 1.6, rng)
     assert bounded.input_gain == pytest.approx(1.2)
 
 
 def test_smaller_process_noise_while_the_acceleration_is_known():
-    kf = BallKalman(accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1)
+    kf = filter_with(accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1)
     kf.step(0.0, (0.0, 0.0))
     kf.step(0.04, (0.0, 0.0), accel=(0.0, 0.0))
     assert kf.kf.Q[2, 2] == pytest.approx(0.1 ** 2 * 0.04 ** 2)
@@ -174,13 +192,14 @@ def test_smaller_process_noise_while_the_acceleration_is_known():
     assert kf.kf.Q[2, 2] == pytest.approx(1.0 * 0.04 ** 2)
 
 
-def test_from_config_builds_the_schema_filter():
+def test_the_settings_and_their_defaults_are_the_trackers():
     from ball_balance.vision.config import TrackerConfig
 
+    assert KalmanConfig() == KalmanConfig.from_tracker(TrackerConfig.from_values())
     cfg = TrackerConfig.from_values({"meas_noise_m": 0.002, "cmd_accel_noise_m_s2": 0.2, "adaptive_meas_noise": True,
                                      "meas_noise_max_m": 0.01, "estimate_input_gain": True,
                                      "input_gain_bounds": [0.4, 2.0]})
-    kf = BallKalman.from_config(cfg)
+    kf = BallKalman(KalmanConfig.from_tracker(cfg))
     assert (kf.meas_noise_m, kf.sigma_a_cmd, kf.meas_noise_max_m, kf.gain_bounds, kf.dim) == \
         (pytest.approx(0.002), 0.2, 0.01, (0.4, 2.0), 5)
     assert kf.noise is not None
@@ -202,8 +221,8 @@ def test_plate_command_input_applies_the_command_in_force_a_delay_earlier():
 
 def test_process_noise_rises_while_the_detections_disagree_with_the_known_acceleration():
     def run(consistency_time_s):
-        kf = BallKalman(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
-                        consistency_time_s=consistency_time_s)
+        kf = filter_with(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
+                         consistency_time_s=consistency_time_s)
         rng, err = np.random.default_rng(9), []
         for k in range(90):
             t = k / 30
@@ -222,8 +241,8 @@ def test_process_noise_rises_while_the_detections_disagree_with_the_known_accele
 
 def test_a_push_the_known_acceleration_does_not_explain_widens_that_frames_prediction():
     def run(maneuver_sigma):
-        kf = BallKalman(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
-                        maneuver_sigma=maneuver_sigma)
+        kf = filter_with(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
+                         maneuver_sigma=maneuver_sigma)
         rng, x, err = np.random.default_rng(10), 0.0, []
         for k in range(60):
             t = k / 30
@@ -257,7 +276,7 @@ def test_the_tilt_lever_is_taken_out_of_the_detections_and_added_to_the_position
     k_g, c, dt = 5.886, 0.0218, 1 / 30
 
     def run(lever_m):
-        kf = BallKalman(meas_noise_m=0.0005, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1)
+        kf = filter_with(meas_noise_m=0.0005, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1)
         cmds = PlateCommandInput(k_g, lever_m=lever_m)
         rng, xi, v, pos_err, vel_err = np.random.default_rng(11), 0.0, 0.0, [], []
         for k in range(240):
@@ -285,8 +304,8 @@ def test_after_a_push_the_velocity_is_the_constant_velocity_filters_for_the_hold
     several frames; with maneuver_hold_s the velocity reported after the detection beyond
     maneuver_sigma is that of a constant-velocity filter run alongside, until the hold ends."""
     def run(hold_s):
-        kf = BallKalman(meas_noise_m=0.0005, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
-                        consistency_time_s=0.3, maneuver_sigma=3.5, maneuver_hold_s=hold_s)
+        kf = filter_with(meas_noise_m=0.0005, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
+                         consistency_time_s=0.3, maneuver_sigma=3.5, maneuver_hold_s=hold_s)
         rng, vel = np.random.default_rng(12), {}
         for k in range(90):
             t = k / 30
@@ -311,9 +330,9 @@ def test_during_the_hold_the_models_position_follows_the_push_with_the_maneuver_
     (The braking is not in the known acceleration here: after a push the model does not
     explain the ball's motion exactly either, the closed loop's estimate lagged 3-5 mm.)"""
     def run(maneuver_accel):
-        kf = BallKalman(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.05,
-                        consistency_time_s=0.3, maneuver_sigma=3.5, maneuver_hold_s=1.0,
-                        maneuver_accel_noise_m_s2=maneuver_accel)
+        kf = filter_with(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.05,
+                         consistency_time_s=0.3, maneuver_sigma=3.5, maneuver_hold_s=1.0,
+                         maneuver_accel_noise_m_s2=maneuver_accel)
         rng, error = np.random.default_rng(5), {}
         for k in range(90):
             t = k / 30
@@ -332,9 +351,9 @@ def test_during_the_hold_the_models_position_follows_the_push_with_the_maneuver_
 
 def test_with_two_confirming_frames_scattered_noise_is_not_a_push_and_a_push_still_is():
     def run(confirm_frames, pushed, confirm_noise_m=0.0):
-        kf = BallKalman(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
-                        maneuver_sigma=3.5, maneuver_confirm_frames=confirm_frames,
-                        maneuver_confirm_noise_m=confirm_noise_m)
+        kf = filter_with(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
+                         maneuver_sigma=3.5, maneuver_confirm_frames=confirm_frames,
+                         maneuver_confirm_noise_m=confirm_noise_m)
         rng = np.random.default_rng(3)
         for k in range(90):
             t = k / 60
