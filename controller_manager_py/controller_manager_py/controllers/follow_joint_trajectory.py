@@ -30,7 +30,7 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.task import Future
 
 from . import tolerances as tol
-from .joint_trajectory import INVALID_GOAL, GoalRun, TrajectoryError
+from .trajectory_goal import INVALID_GOAL, GoalRun, TrajectoryError
 
 
 def to_time(seconds: float):
