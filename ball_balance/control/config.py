@@ -113,14 +113,15 @@ COMMON_SCHEMA = [
           read_only=True),
     Param("brake_on_loss_s", 0.6, "when the ball state becomes unusable (lost, hidden, invalid), brake the "
           "ball's motion predicted from the last good state for at most this long, then level; 0: hold the "
-          "last tilt until grace_s ends, as before", "s", 0.0, 5.0, read_only=True),
+          "last tilt until loss_hold_s ends, as before", "s", 0.0, 5.0, read_only=True),
     Param("brake_time_constant_s", 0.2, "braking decelerates the predicted velocity v with x'' = -v / this",
           "s", 0.05, 5.0, read_only=True),
-    Param("stale_after_s", 0.25, "a ball state older than this is stale", "s", 0.01, 5.0, read_only=True),
-    Param("grace_s", 0.3, "hold the last tilt this long after a loss before returning home", "s", 0.0, 10.0,
+    Param("ball_state_max_age_s", 0.25, "a ball state older than this is stale", "s", 0.01, 5.0,
           read_only=True),
-    Param("recover_s", 0.1, "a state must stay healthy this long before holding turns back to engaged "
-          "(hysteresis)", "s", 0.0, 5.0, read_only=True),
+    Param("loss_hold_s", 0.3, "hold the last tilt this long after a loss before returning home", "s", 0.0, 10.0,
+          read_only=True),
+    Param("healthy_before_engage_s", 0.1, "a state must stay healthy this long before holding turns back to "
+          "engaged (hysteresis)", "s", 0.0, 5.0, read_only=True),
     Param("future_tolerance_s", 0.2, "a ball state stamped further than this ahead of our clock is refused "
           "(under use_sim_time this node's clock trails /clock by up to ~0.15 s on a busy machine)",
           "s", 0.0, 1.0, read_only=True),
@@ -194,10 +195,11 @@ def pipeline_config(values: Mapping[str, Any], controller: str) -> PipelineConfi
         brake_time_constant_s=values["brake_time_constant_s"],
         pid=pid_gains(values) if controller == "pid" else PidGains(),
         mpc=mpc,
-        safety=SafetyConfig(min_markers=values["min_markers"], stale_after_s=values["stale_after_s"],
-                            max_position_std_m=values["max_position_std_m"], recover_s=values["recover_s"],
+        safety=SafetyConfig(min_markers=values["min_markers"], ball_state_max_age_s=values["ball_state_max_age_s"],
+                            max_position_std_m=values["max_position_std_m"],
+                            healthy_before_engage_s=values["healthy_before_engage_s"],
                             max_late_s=values["max_prediction_s"],
-                            grace_s=values["grace_s"], home_tolerance_rad=values["home_tolerance_rad"],
+                            loss_hold_s=values["loss_hold_s"], home_tolerance_rad=values["home_tolerance_rad"],
                             plate_half_side_m=PLATE_SIDE_M / 2.0),
         estimator=estimator_config(values),
         law_params=dict(values))

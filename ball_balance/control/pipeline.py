@@ -266,7 +266,7 @@ class ControlPipeline:
                 self.u, predicted = brake
             elif mode == Mode.RETURNING or self.cfg.brake_on_loss_s > 0:
                 self.u = np.zeros(2)
-            # (braking off: HOLDING holds the last tilt until the grace period ends)
+            # (braking off: HOLDING holds the last tilt until loss_hold_s ends)
         else:
             self.u = np.zeros(2)
         if mode in (Mode.ENGAGED, Mode.HOLDING) or braking:
