@@ -41,7 +41,8 @@ class BatchBallKalman:
         self.fast = None
         if cfg.maneuver_hold_s > 0.0 and cfg.maneuver_sigma > 0.0:
             self.fast = BatchBallKalman(batch, dataclasses.replace(
-                cfg, use_plate_cmd=False, estimate_input_gain=False, adaptive_meas_noise=False, consistency_time_s=0.0,
+                cfg, use_plate_cmd=False, estimate_input_gain=False, adaptive_meas_noise=False,
+                model_mismatch_time_constant_s=0.0,
                 maneuver_sigma=0.0, cmd_accel_noise_m_s2=cfg.accel_noise_m_s2))
         self.last_dt = np.zeros(batch)                 # (dt, q) of each ball's last prediction
         self.last_q = np.zeros(batch)
@@ -180,8 +181,8 @@ class BatchBallKalman:
                     inv, widened_distance = self._innovation(y)
                     distance = np.where(widen, widened_distance, distance)
             gate = self.cfg.gate_sigma
-            if self.cfg.consistency_time_s > 0.0:
-                alpha = np.minimum(1.0, dt / self.cfg.consistency_time_s)
+            if self.cfg.model_mismatch_time_constant_s > 0.0:
+                alpha = np.minimum(1.0, dt / self.cfg.model_mismatch_time_constant_s)
                 self.nis = np.where(run, self.nis + alpha * (np.minimum(distance, gate) ** 2 / 2.0 - self.nis),
                                     self.nis)
             ok = run & (distance <= gate)
@@ -258,7 +259,7 @@ class BatchBallKalman:
         known = accel is not None
         if not known:
             q = np.full(len(i), self.sigma_a ** 2)
-        elif self.cfg.consistency_time_s > 0.0:
+        elif self.cfg.model_mismatch_time_constant_s > 0.0:
             q = np.minimum(np.maximum(self.nis[i], 1.0), max(1.0, (self.sigma_a / self.sigma_a_cmd) ** 2)) \
                 * self.sigma_a_cmd ** 2
         else:

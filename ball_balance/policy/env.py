@@ -59,7 +59,8 @@ TRACKER_FILTER_KEYS = ("meas_noise_m", "accel_noise_m_s2", "init_vel_std_m_s", "
                        "max_dt_s", "use_plate_cmd", "plate_cmd_timeout_s", "plate_cmd_delay_s",
                        "estimate_plate_cmd_delay",
                        "cmd_accel_noise_m_s2", "estimate_input_gain", "input_gain_bounds", "input_gain_std",
-                       "input_gain_rate_per_s", "consistency_time_s", "adaptive_meas_noise", "meas_noise_max_m",
+                       "input_gain_rate_per_s", "model_mismatch_time_constant_s", "adaptive_meas_noise",
+                       "meas_noise_max_m",
                        "meas_noise_window_frames", "maneuver_sigma", "maneuver_hold_s", "maneuver_accel_noise_m_s2",
                        "maneuver_confirm_frames", "maneuver_confirm_sigma", "maneuver_confirm_noise_m", "tilt_lever_m",
                        "rolling_factor")

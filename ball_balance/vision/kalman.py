@@ -266,7 +266,7 @@ class BallKalman:
                  meas_noise_max_m: float = 0.02, meas_noise_window: int = 60,
                  estimate_input_gain: bool = False, input_gain_bounds: Tuple[float, float] = (0.3, 2.5),
                  input_gain_std: float = 0.3, input_gain_rate_per_s: float = 0.05,
-                 consistency_time_s: float = 0.0, maneuver_sigma: float = 0.0, maneuver_hold_s: float = 0.0,
+                 model_mismatch_time_constant_s: float = 0.0, maneuver_sigma: float = 0.0, maneuver_hold_s: float = 0.0,
                  maneuver_accel_noise_m_s2: float = 0.0, maneuver_confirm_frames: int = 1,
                  maneuver_confirm_sigma: float = 0.0, maneuver_confirm_noise_m: float = 0.0):
         self.sigma_a = accel_noise_m_s2
@@ -282,7 +282,7 @@ class BallKalman:
         self.gain_bounds = input_gain_bounds
         self.gain_rate = input_gain_rate_per_s
         self.dim = 5 if estimate_input_gain else 4
-        self.consistency_time_s = consistency_time_s
+        self.model_mismatch_time_constant_s = model_mismatch_time_constant_s
         self.nis = 1.0                # running mean of the normalised innovation squared (per axis)
         self.maneuver_sigma = maneuver_sigma
         self.maneuver_count = 0       # detections that re-predicted with accel_noise_m_s2 (total)
@@ -321,7 +321,8 @@ class BallKalman:
                    adaptive_meas_noise=cfg.adaptive_meas_noise, meas_noise_max_m=cfg.meas_noise_max_m,
                    meas_noise_window=cfg.meas_noise_window_frames, estimate_input_gain=cfg.estimate_input_gain,
                    input_gain_bounds=tuple(cfg.input_gain_bounds), input_gain_std=cfg.input_gain_std,
-                   input_gain_rate_per_s=cfg.input_gain_rate_per_s, consistency_time_s=cfg.consistency_time_s,
+                   input_gain_rate_per_s=cfg.input_gain_rate_per_s,
+                   model_mismatch_time_constant_s=cfg.model_mismatch_time_constant_s,
                    maneuver_sigma=cfg.maneuver_sigma, maneuver_hold_s=cfg.maneuver_hold_s,
                    maneuver_accel_noise_m_s2=cfg.maneuver_accel_noise_m_s2,
                    maneuver_confirm_frames=cfg.maneuver_confirm_frames,
@@ -408,7 +409,7 @@ class BallKalman:
             q = self.sigma_a ** 2
         else:
             scale = 1.0
-            if self.consistency_time_s > 0.0:
+            if self.model_mismatch_time_constant_s > 0.0:
                 scale = min(max(self.nis, 1.0), max(1.0, (self.sigma_a / self.sigma_a_cmd) ** 2))
             q = scale * self.sigma_a_cmd ** 2
         return max(q, self.sigma_a_maneuver ** 2) if holding else q
@@ -481,8 +482,8 @@ class BallKalman:
                     self._hold_until = t + self.maneuver_hold_s
                 self._widen_last_prediction()
                 distance = self.mahalanobis(z)
-            if self.consistency_time_s > 0.0:   # a gated detection counts too, at the gate
-                alpha = min(1.0, dt_step / self.consistency_time_s)
+            if self.model_mismatch_time_constant_s > 0.0:   # a gated detection counts too, at the gate
+                alpha = min(1.0, dt_step / self.model_mismatch_time_constant_s)
                 self.nis += alpha * (min(distance, self.gate_sigma) ** 2 / 2.0 - self.nis)
             if distance <= self.gate_sigma:
                 self.kf.update(np.asarray(z, dtype=np.float64))
