@@ -140,8 +140,6 @@ COMMON_SCHEMA = [
     Param("ik_mode", "pivot", "'wrist': wrist joints only (plate pivots 0.11 m below its centre); "
           "'pivot': all joints, plate tilts about its own centre", choices=("wrist", "pivot"), read_only=True),
     Param("max_joint_step_rad", 0.02, "per-joint change per tick", "rad", 1e-4, 0.5, read_only=True),
-    Param("lowpass_alpha", 1.0, "joint low-pass y += alpha (x - y) per tick (1 = off)", "", 0.01, 1.0,
-          read_only=True),
     Param("joint_margin_rad", 0.05, "stay this far inside the URDF joint limits", "rad", 0.0, 1.0,
           read_only=True),
 ]
@@ -214,8 +212,8 @@ def estimator_config(values: Mapping[str, Any]) -> EstimatorConfig:
 
 
 def shaper_config(values: Mapping[str, Any]) -> ShaperConfig:
-    return ShaperConfig(max_joint_step_rad=values["max_joint_step_rad"], lowpass_alpha=values["lowpass_alpha"],
-                        max_tilt_rad=values["max_total_tilt_rad"], joint_margin_rad=values["joint_margin_rad"])
+    return ShaperConfig(max_joint_step_rad=values["max_joint_step_rad"], max_tilt_rad=values["max_total_tilt_rad"],
+                        joint_margin_rad=values["joint_margin_rad"])
 
 
 def reference(values: Mapping[str, Any]) -> Reference:

@@ -24,7 +24,7 @@ late (otherwise healthy, at most `max_late_s` old: the pipeline predicts it forw
 HOLDING controlling; `loss_hold_s` counts from the moment the state stops being usable
 (invalid, poor pose, or older than max_late_s) and a brief recovery does not restart it. Leaving ENGAGED/HOLDING for
 RETURNING asks the caller to reset its integrators (`reset_requested`). Smoothness itself
-comes from the command shaper (per-joint step clip + low-pass).
+comes from the command shaper (per-joint step clip).
 """
 from __future__ import annotations
 
