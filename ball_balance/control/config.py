@@ -84,8 +84,6 @@ COMMON_SCHEMA = [
           "(FK of /joint_states)", read_only=True),
     Param("actuation_delay_min_window_s", 0.6, "commands stored before the delay estimate starts (it then "
           "uses the window filled so far, up to 3 s)", "s", 0.1, 3.0, read_only=True),
-    Param("actuation_delay_replace_start", True, "the first delay alignment replaces actuation_delay_s "
-          "outright (false: blended in by half, as every later one)", read_only=True),
     Param("adapt_plant_gain", EstimatorConfig.adapt_gain, "estimate the plant gain k*g online from the ball "
           "positions and the plate tilt reached (unknown gravity, ball type, friction); rolling_factor * "
           "gravity_m_s2 is the starting value", read_only=True),
@@ -187,7 +185,6 @@ def pipeline_config(values: Mapping[str, Any], controller: str) -> PipelineConfi
         latency_compensation=values["latency_compensation"], actuation_delay_s=values["actuation_delay_s"],
         estimate_delay=values["estimate_actuation_delay"],
         delay_min_window_s=values["actuation_delay_min_window_s"],
-        delay_replace_start=values["actuation_delay_replace_start"],
         max_prediction_s=values["max_prediction_s"], engage_accel_m_s2=values["engage_accel_m_s2"],
         max_tilt_rad=values["max_tilt_cmd_rad"], brake_on_loss_s=values["brake_on_loss_s"],
         brake_time_constant_s=values["brake_time_constant_s"],

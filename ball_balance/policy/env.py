@@ -326,7 +326,7 @@ class BatchDelayEstimator:
         self.b, self.period_s, self.max_lag = batch, single.period_s, single.max_lag
         self.n = single._cmd.maxlen
         self.update_every, self.blend, self.min_excitation = single.update_every, single.blend, single.min_excitation
-        self.min_window, self.replace_start = single.min_window, single.replace_start
+        self.min_window = single.min_window
         self.estimate_s = np.full(batch, float(single.estimate_s))
         self.converged = np.zeros(batch, bool)
         self.cmd = np.zeros((batch, self.n, 2))     # oldest first, the newest in the last row
@@ -361,7 +361,7 @@ class BatchDelayEstimator:
         inner = (best > 0) & (best < self.max_lag) & (denom > 0)
         frac = np.where(inner, 0.5 * (c0 - c2) / np.where(inner, denom, 1.0), 0.0)
         measured = (best + frac) * self.period_s
-        weight = np.where(self.converged | (not self.replace_start), self.blend, 1.0)
+        weight = np.where(self.converged, self.blend, 1.0)
         self.estimate_s = np.where(excited, self.estimate_s + weight * (measured - self.estimate_s), self.estimate_s)
         self.converged |= excited
 
@@ -437,8 +437,7 @@ class PlateBatch:
         from ball_balance.control.prediction import DelayEstimator
 
         v = self.pid_values
-        return DelayEstimator(v["actuation_delay_s"], CONTROL_DT_S, min_window_s=v["actuation_delay_min_window_s"],
-                              replace_start=v["actuation_delay_replace_start"])
+        return DelayEstimator(v["actuation_delay_s"], CONTROL_DT_S, min_window_s=v["actuation_delay_min_window_s"])
 
     @property
     def actuation_delay_s(self) -> np.ndarray:
