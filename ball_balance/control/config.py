@@ -111,7 +111,7 @@ COMMON_SCHEMA = [
           read_only=True),
     Param("brake_on_loss_s", 0.6, "when the ball state becomes unusable (lost, hidden, invalid), brake the "
           "ball's motion predicted from the last good state for at most this long, then level; 0: hold the "
-          "last tilt until loss_hold_s ends, as before", "s", 0.0, 5.0, read_only=True),
+          "last tilt until loss_hold_s ends", "s", 0.0, 5.0, read_only=True),
     Param("brake_time_constant_s", 0.2, "braking decelerates the predicted velocity v with x'' = -v / this",
           "s", 0.05, 5.0, read_only=True),
     Param("ball_state_max_age_s", 0.25, "a ball state older than this is stale", "s", 0.01, 5.0,
@@ -124,8 +124,9 @@ COMMON_SCHEMA = [
           "(under use_sim_time this node's clock trails /clock by up to ~0.15 s on a busy machine)",
           "s", 0.0, 1.0, read_only=True),
     Param("max_ball_speed_m_s", 2.0, "a ball state faster than this is refused", "m/s", 0.1, 20.0, read_only=True),
-    Param("max_ball_jump_m", 0.03, "a ball state further than this from where the ball was heading is refused "
-          "(until 3 in a row agree: a re-acquisition)", "m", 0.001, 1.0, read_only=True),
+    Param("max_ball_jump_m", 0.03, "a ball state further than this from where the last accepted state, moving "
+          "at its velocity, puts the ball is refused (until 3 in a row agree: a re-acquisition)", "m", 0.001, 1.0,
+          read_only=True),
     Param("joint_states_timeout_s", 1.0, "no /joint_states (or, under use_sim_time, no /clock progress) for this "
           "long: stop commanding until they return", "s", 0.05, 60.0, read_only=True),
     Param("control_trigger", "ball_state", "'ball_state': one step per new ball state as it arrives (no wait "

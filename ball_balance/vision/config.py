@@ -128,7 +128,8 @@ TRACKER_SCHEMA = (
           "maneuver_confirm_sigma (one beyond gate_sigma always does); 1 = every detection beyond maneuver_sigma, "
           "more ignores scattered noise", "frames", 1, 10),
     Param("maneuver_confirm_sigma", 1.5,
-          "Mahalanobis distance beyond which a detection that points the way of the one before confirms a push",
+          "Mahalanobis distance beyond which a detection that points the way of the preceding one confirms a "
+          "push",
           "", 0.0, 1000.0),
     Param("maneuver_confirm_noise_m", 0.002,
           "maneuver_confirm_frames applies only while the measurement noise (1 sigma, estimated) is at least "
