@@ -102,9 +102,9 @@ if ((! TRUTH_FED)); then
   start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
     -p "publish_debug_image:=$DEBUG_IMAGE" ${RT_OFF[@]+"${RT_OFF[@]}"}
 fi
-# peer_timeout_s 5 s (1 s for a real arm): on a loaded 2-core machine the controller saw
+# joint_states_timeout_s 5 s (1 s for a real arm): on a loaded 2-core machine the controller saw
 # /joint_states gaps of 1.0-2.3 s wall time from a live manager
-start controller "$EXE" --ros-args --params-file "$YAML" -p use_sim_time:=true -p peer_timeout_s:=5.0 \
+start controller "$EXE" --ros-args --params-file "$YAML" -p use_sim_time:=true -p joint_states_timeout_s:=5.0 \
   ${RT_OFF[@]+"${RT_OFF[@]}"} ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"}
 start visualizer ball_balance_visualizer --ros-args -p use_sim_time:=true ${VIS_PARAMS[@]+"${VIS_PARAMS[@]}"}
 # the simulation starts paused: it runs once the tracker (or the truth feed), the controller and

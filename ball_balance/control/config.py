@@ -84,8 +84,6 @@ COMMON_SCHEMA = [
           "(FK of /joint_states)", read_only=True),
     Param("actuation_delay_min_window_s", 0.6, "commands stored before the delay estimate starts (it then "
           "uses the window filled so far, up to 3 s)", "s", 0.1, 3.0, read_only=True),
-    Param("actuation_delay_replace_start", True, "the first delay alignment replaces actuation_delay_s "
-          "outright (false: blended in by half, as every later one)", read_only=True),
     Param("adapt_plant_gain", EstimatorConfig.adapt_gain, "estimate the plant gain k*g online from the ball "
           "positions and the plate tilt reached (unknown gravity, ball type, friction); rolling_factor * "
           "gravity_m_s2 is the starting value", read_only=True),
@@ -113,22 +111,24 @@ COMMON_SCHEMA = [
           read_only=True),
     Param("brake_on_loss_s", 0.6, "when the ball state becomes unusable (lost, hidden, invalid), brake the "
           "ball's motion predicted from the last good state for at most this long, then level; 0: hold the "
-          "last tilt until grace_s ends, as before", "s", 0.0, 5.0, read_only=True),
+          "last tilt until loss_hold_s ends", "s", 0.0, 5.0, read_only=True),
     Param("brake_time_constant_s", 0.2, "braking decelerates the predicted velocity v with x'' = -v / this",
           "s", 0.05, 5.0, read_only=True),
-    Param("stale_after_s", 0.25, "a ball state older than this is stale", "s", 0.01, 5.0, read_only=True),
-    Param("grace_s", 0.3, "hold the last tilt this long after a loss before returning home", "s", 0.0, 10.0,
+    Param("ball_state_max_age_s", 0.25, "a ball state older than this is stale", "s", 0.01, 5.0,
           read_only=True),
-    Param("recover_s", 0.1, "a state must stay healthy this long before holding turns back to engaged "
-          "(hysteresis)", "s", 0.0, 5.0, read_only=True),
-    Param("future_tolerance_s", 0.2, "a ball state stamped further than this ahead of our clock is refused "
+    Param("loss_hold_s", 0.3, "hold the last tilt this long after a loss before returning home", "s", 0.0, 10.0,
+          read_only=True),
+    Param("healthy_before_engage_s", 0.1, "a state must stay healthy this long before holding turns back to "
+          "engaged (hysteresis)", "s", 0.0, 5.0, read_only=True),
+    Param("max_stamp_ahead_s", 0.2, "a ball state stamped further than this ahead of our clock is refused "
           "(under use_sim_time this node's clock trails /clock by up to ~0.15 s on a busy machine)",
           "s", 0.0, 1.0, read_only=True),
     Param("max_ball_speed_m_s", 2.0, "a ball state faster than this is refused", "m/s", 0.1, 20.0, read_only=True),
-    Param("max_ball_jump_m", 0.03, "a ball state further than this from where the ball was heading is refused "
-          "(until 3 in a row agree: a re-acquisition)", "m", 0.001, 1.0, read_only=True),
-    Param("peer_timeout_s", 1.0, "no /joint_states (or, under use_sim_time, no /clock progress) for this long: "
-          "stop commanding until they return", "s", 0.05, 60.0, read_only=True),
+    Param("max_ball_jump_m", 0.03, "a ball state further than this from where the last accepted state, moving "
+          "at its velocity, puts the ball is refused (until 3 in a row agree: a re-acquisition)", "m", 0.001, 1.0,
+          read_only=True),
+    Param("joint_states_timeout_s", 1.0, "no /joint_states (or, under use_sim_time, no /clock progress) for this "
+          "long: stop commanding until they return", "s", 0.05, 60.0, read_only=True),
     Param("control_trigger", "ball_state", "'ball_state': one step per new ball state as it arrives (no wait "
           "for a tick; control_rate_hz must equal the camera rate, the pipeline assumes 1/control_rate_hz per "
           "step), the timer then steps only while states are missing; 'timer': a step every control_rate_hz "
@@ -139,8 +139,6 @@ COMMON_SCHEMA = [
     Param("ik_mode", "pivot", "'wrist': wrist joints only (plate pivots 0.11 m below its centre); "
           "'pivot': all joints, plate tilts about its own centre", choices=("wrist", "pivot"), read_only=True),
     Param("max_joint_step_rad", 0.02, "per-joint change per tick", "rad", 1e-4, 0.5, read_only=True),
-    Param("lowpass_alpha", 1.0, "joint low-pass y += alpha (x - y) per tick (1 = off)", "", 0.01, 1.0,
-          read_only=True),
     Param("joint_margin_rad", 0.05, "stay this far inside the URDF joint limits", "rad", 0.0, 1.0,
           read_only=True),
 ]
@@ -188,16 +186,16 @@ def pipeline_config(values: Mapping[str, Any], controller: str) -> PipelineConfi
         latency_compensation=values["latency_compensation"], actuation_delay_s=values["actuation_delay_s"],
         estimate_delay=values["estimate_actuation_delay"],
         delay_min_window_s=values["actuation_delay_min_window_s"],
-        delay_replace_start=values["actuation_delay_replace_start"],
         max_prediction_s=values["max_prediction_s"], engage_accel_m_s2=values["engage_accel_m_s2"],
         max_tilt_rad=values["max_tilt_cmd_rad"], brake_on_loss_s=values["brake_on_loss_s"],
         brake_time_constant_s=values["brake_time_constant_s"],
         pid=pid_gains(values) if controller == "pid" else PidGains(),
         mpc=mpc,
-        safety=SafetyConfig(min_markers=values["min_markers"], stale_after_s=values["stale_after_s"],
-                            max_position_std_m=values["max_position_std_m"], recover_s=values["recover_s"],
+        safety=SafetyConfig(min_markers=values["min_markers"], ball_state_max_age_s=values["ball_state_max_age_s"],
+                            max_position_std_m=values["max_position_std_m"],
+                            healthy_before_engage_s=values["healthy_before_engage_s"],
                             max_late_s=values["max_prediction_s"],
-                            grace_s=values["grace_s"], home_tolerance_rad=values["home_tolerance_rad"],
+                            loss_hold_s=values["loss_hold_s"], home_tolerance_rad=values["home_tolerance_rad"],
                             plate_half_side_m=PLATE_SIDE_M / 2.0),
         estimator=estimator_config(values),
         law_params=dict(values))
@@ -212,8 +210,8 @@ def estimator_config(values: Mapping[str, Any]) -> EstimatorConfig:
 
 
 def shaper_config(values: Mapping[str, Any]) -> ShaperConfig:
-    return ShaperConfig(max_joint_step_rad=values["max_joint_step_rad"], lowpass_alpha=values["lowpass_alpha"],
-                        max_tilt_rad=values["max_total_tilt_rad"], joint_margin_rad=values["joint_margin_rad"])
+    return ShaperConfig(max_joint_step_rad=values["max_joint_step_rad"], max_tilt_rad=values["max_total_tilt_rad"],
+                        joint_margin_rad=values["joint_margin_rad"])
 
 
 def reference(values: Mapping[str, Any]) -> Reference:

@@ -137,7 +137,6 @@ class Chain:
 @dataclass(frozen=True)
 class ShaperConfig:
     max_joint_step_rad: float = 0.02     # per tick, per joint
-    lowpass_alpha: float = 1.0           # 1 = no filtering; y += alpha (x - y)
     max_tilt_rad: float = 0.20           # total plate tilt from home
     joint_margin_rad: float = 0.05       # stay this far inside the URDF limits
 
@@ -222,13 +221,13 @@ class PlateKinematics:
 
     # --- shaping --------------------------------------------------------------------
     def shape(self, q_target: np.ndarray, q_prev: np.ndarray) -> np.ndarray:
-        """Low-pass toward q_target, then the per-joint step limit, then joint limits.
+        """Step toward q_target within the per-joint step limit, then the joint limits.
 
         The step limit scales the whole joint step (no joint moves more than
         max_joint_step_rad) instead of clipping joints one by one, so the motion keeps the
         IK's direction: the tilt direction, and in "pivot" mode the plate centre, hold."""
         s = self.shaper
-        step = s.lowpass_alpha * (q_target - q_prev)
+        step = q_target - q_prev
         largest = float(np.max(np.abs(step))) if step.size else 0.0
         if largest > s.max_joint_step_rad:
             step *= s.max_joint_step_rad / largest

@@ -41,7 +41,6 @@ class PipelineConfig:
     actuation_delay_s: float = 0.03         # command -> plate tilt (arm + controller); initial value
     estimate_delay: bool = True             # refine actuation_delay_s online from the measured joints
     delay_min_window_s: float = 0.6         # commands stored before the first delay estimate
-    delay_replace_start: bool = True        # the first estimate replaces actuation_delay_s (a guess)
     max_prediction_s: float = 0.3           # never extrapolate further than this
     reference_resume_s: float = 2.0         # re-engaging within this of a loss continues the reference
     engage_accel_m_s2: float = 0.2          # at a fresh engagement, lead the ball in from where it is (0: off)
@@ -186,8 +185,7 @@ class ControlPipeline:
         self.law = make_tilt_law(cfg)
         self.history = TiltHistory()
         self.delay = DelayEstimator(cfg.actuation_delay_s, cfg.control_period_s,
-                                    min_window_s=cfg.delay_min_window_s,
-                                    replace_start=cfg.delay_replace_start)
+                                    min_window_s=cfg.delay_min_window_s)
         self.plant = PlantEstimator(cfg.estimator, cfg.k_g)
         self._last_stamp = -math.inf
         self._last_good = None            # (stamp, pos, vel) of the last state controlled on
@@ -266,7 +264,7 @@ class ControlPipeline:
                 self.u, predicted = brake
             elif mode == Mode.RETURNING or self.cfg.brake_on_loss_s > 0:
                 self.u = np.zeros(2)
-            # (braking off: HOLDING holds the last tilt until the grace period ends)
+            # (braking off: HOLDING holds the last tilt until loss_hold_s ends)
         else:
             self.u = np.zeros(2)
         if mode in (Mode.ENGAGED, Mode.HOLDING) or braking:

@@ -2,7 +2,7 @@
 (issue 9: a bad message must never replace a good one, even for one tick). No ROS.
 
 `BallStateGate` decides whether one ball state may be used:
-  - its stamp is neither in the future (beyond `future_tolerance_s`: clocks of two processes
+  - its stamp is neither in the future (beyond `max_stamp_ahead_s`: clocks of two processes
     under simulated time differ by a /clock period) nor older than `max_age_s` (the oldest
     state the controller would still act on through prediction, max_prediction_s: a state
     that is only late is newer news than the one it replaces), and it is newer than the state
@@ -37,7 +37,7 @@ from ball_balance.control.safety import BallObservation
 @dataclass(frozen=True)
 class GateConfig:
     max_age_s: float = 0.5
-    future_tolerance_s: float = 0.2
+    max_stamp_ahead_s: float = 0.2
     plate_half_side_m: float = 0.2285
     max_speed_m_s: float = 2.0
     max_jump_m: float = 0.03
@@ -48,7 +48,7 @@ class GateConfig:
 
 def gate_config(values: Mapping[str, Any], plate_half_side_m: float, k_g: float) -> GateConfig:
     """GateConfig from the controllers' validated parameter values."""
-    return GateConfig(max_age_s=values["max_prediction_s"], future_tolerance_s=values["future_tolerance_s"],
+    return GateConfig(max_age_s=values["max_prediction_s"], max_stamp_ahead_s=values["max_stamp_ahead_s"],
                       plate_half_side_m=plate_half_side_m, max_speed_m_s=values["max_ball_speed_m_s"],
                       max_jump_m=values["max_ball_jump_m"],
                       max_accel_m_s2=k_g * math.sin(values["max_total_tilt_rad"]))
@@ -93,7 +93,7 @@ class BallStateGate:
         age = now_s - stamp_s
         if not math.isfinite(age):
             return Verdict(False, "non_finite", "non-finite stamp")
-        if age < -cfg.future_tolerance_s:
+        if age < -cfg.max_stamp_ahead_s:
             return Verdict(False, "future", f"stamp {-age:.2f} s in the future")
         if age > cfg.max_age_s:
             return Verdict(False, "stale", f"stamp {age:.2f} s old (limit {cfg.max_age_s:.2f} s)")

@@ -75,15 +75,14 @@ def predict(pos_m: np.ndarray, vel_m_s: np.ndarray, t_from_s: float, t_to_s: flo
 class _DelayAlignment:
     """What the delay estimators share: the estimate and how an alignment is taken in.
 
-    The start value is a guess, not evidence: the first alignment replaces it outright
-    (`replace_start`), later ones are blended in (`blend`). Nothing changes while the commands
-    barely move (std below `min_excitation_rad`): a still plate says nothing about delay.
+    The start value is a guess, not evidence: the first alignment replaces it outright, later
+    ones are blended in (`blend`). Nothing changes while the commands barely move (std below
+    `min_excitation_rad`): a still plate says nothing about delay.
     """
 
-    def __init__(self, initial_s: float, blend: float, min_excitation_rad: float, replace_start: bool):
+    def __init__(self, initial_s: float, blend: float, min_excitation_rad: float):
         self.estimate_s = initial_s
         self.converged = False          # True once a first alignment has been taken in
-        self.replace_start = replace_start
         self.blend, self.min_excitation = blend, min_excitation_rad
 
     @staticmethod
@@ -98,7 +97,7 @@ class _DelayAlignment:
         return best + frac
 
     def _take(self, measured_s: float) -> None:
-        weight = self.blend if self.converged or not self.replace_start else 1.0
+        weight = self.blend if self.converged else 1.0
         self.estimate_s += weight * (measured_s - self.estimate_s)
         self.converged = True
 
@@ -113,16 +112,16 @@ class DelayEstimator(_DelayAlignment):
     (std below `min_excitation_rad`).
 
     Estimating begins as soon as `min_window_s` of commands (plus the longest lag) are stored,
-    over the window filled so far, and the first alignment replaces the start value outright
-    (`replace_start`). (Waiting for the full window and blending from the start value left a
-    0.2 s delay estimated at 0.03 s for 3.3 s and at 0.17 s after 4 s, and the MPC, planning
-    for the wrong delay, dropped the ball; docs/control.md.)
+    over the window filled so far, and the first alignment replaces the start value outright:
+    waiting for the full window and blending from the start value leaves a 0.2 s delay
+    estimated at 0.03 s for 3.3 s and at 0.17 s after 4 s, and the MPC, planning for the
+    wrong delay, drops the ball (docs/benchmarks/control.md, "Delay estimate start").
     """
 
     def __init__(self, initial_s: float, period_s: float, max_delay_s: float = 0.3, window_s: float = 3.0,
                  update_every: int = 25, blend: float = 0.5, min_excitation_rad: float = 0.003,
-                 min_window_s: float = 0.6, replace_start: bool = True):
-        super().__init__(initial_s, blend, min_excitation_rad, replace_start)
+                 min_window_s: float = 0.6):
+        super().__init__(initial_s, blend, min_excitation_rad)
         self.period_s = period_s
         self.max_lag = int(round(max_delay_s / period_s))
         n = int(round(window_s / period_s)) + self.max_lag + 1
@@ -175,8 +174,8 @@ class StampedDelayEstimator(_DelayAlignment):
 
     def __init__(self, initial_s: float, max_delay_s: float = 0.3, window_s: float = 3.0, step_s: float = 0.005,
                  update_period_s: float = 0.25, blend: float = 0.2, min_excitation_rad: float = 0.003,
-                 min_window_s: float = 1.0, min_correlation: float = 0.5, replace_start: bool = True):
-        super().__init__(initial_s, blend, min_excitation_rad, replace_start)
+                 min_window_s: float = 1.0, min_correlation: float = 0.5):
+        super().__init__(initial_s, blend, min_excitation_rad)
         self.delays_s = np.arange(0.0, max_delay_s + 0.5 * step_s, step_s)
         self.window_s, self.min_window_s = window_s, min(min_window_s, window_s)
         self.update_period_s = update_period_s

@@ -4,26 +4,27 @@ States (`Mode`):
   HOMING     start-up: drive the arm to home, never tilt for the ball.
   READY      at home, waiting for a healthy ball state.
   ENGAGED    controlling the ball.
-  HOLDING    ENGAGED but the state went unhealthy, for at most `grace_s`: a state that is
+  HOLDING    ENGAGED but the state went unhealthy, for at most `loss_hold_s`: a state that is
              only late is still used through its prediction; anything else holds the last tilt.
-  RETURNING  unhealthy beyond the grace period: go back to home smoothly, then READY; a state
-             healthy again for `recover_s` on the way re-engages from where the plate is.
+  RETURNING  unhealthy beyond `loss_hold_s`: go back to home smoothly, then READY; a state
+             healthy again for `healthy_before_engage_s` on the way re-engages from where the
+             plate is.
 
 A ball state is healthy when tracking_valid, its plate pose is good enough, all numbers are
-finite, the ball is on the plate, and its age is within stale_after_s. "Good enough": when
-the tracker says how uncertain the ball's position is because of the plate pose
+finite, the ball is on the plate, and its age is within ball_state_max_age_s. "Good enough":
+when the tracker says how uncertain the ball's position is because of the plate pose
 (`position_std_m` > 0, from /plate_pose), that figure must be within max_position_std_m,
 whatever the marker count (a hand over one or two markers leaves a usable pose); when it
 does not say (0.0, a tracker without /plate_pose), markers_found >= min_markers.
 
 Hysteresis: HOLDING returns to ENGAGED only after the state has been healthy for
-`recover_s` without a break, so a state that is fresh one tick and stale the next (a
-stalling tracker under load) does not flip the mode at the tick rate. A state that is only
+`healthy_before_engage_s` without a break, so a state that is fresh one tick and stale the
+next (a stalling tracker under load) does not flip the mode at the tick rate. A state that is only
 late (otherwise healthy, at most `max_late_s` old: the pipeline predicts it forward) keeps
-HOLDING controlling; the grace period runs from the moment the state stops being usable
-(invalid, poor pose, or older than max_late_s) and is not restarted by a brief recovery. Leaving ENGAGED/HOLDING for
+HOLDING controlling; `loss_hold_s` counts from the moment the state stops being usable
+(invalid, poor pose, or older than max_late_s) and a brief recovery does not restart it. Leaving ENGAGED/HOLDING for
 RETURNING asks the caller to reset its integrators (`reset_requested`). Smoothness itself
-comes from the command shaper (per-joint step clip + low-pass).
+comes from the command shaper (per-joint step clip).
 """
 from __future__ import annotations
 
@@ -45,9 +46,9 @@ class Mode(enum.Enum):
 class SafetyConfig:
     min_markers: int = 3          # markers needed in a frame to trust the plate pose (std unknown)
     max_position_std_m: float = 0.005  # ball position 1-sigma from the plate pose (std known)
-    stale_after_s: float = 0.25   # a state older than this is stale
-    grace_s: float = 0.3          # how long to hold the last tilt before returning home
-    recover_s: float = 0.1        # healthy this long without a break to leave HOLDING
+    ball_state_max_age_s: float = 0.25    # a state older than this is stale
+    loss_hold_s: float = 0.3              # how long to hold the last tilt before returning home
+    healthy_before_engage_s: float = 0.1  # healthy this long without a break to leave HOLDING
     max_late_s: float = 0.5       # a late but otherwise healthy state is acted on (predicted) up to this age
     home_tolerance_rad: float = 0.01  # max |q - q_home| to count as "at home"
     plate_half_side_m: float = 0.2285
@@ -105,7 +106,7 @@ class SafetySupervisor:
         pose = self.pose_problem(obs)
         if pose:
             return False, pose
-        if obs.age_s > self.cfg.stale_after_s:
+        if obs.age_s > self.cfg.ball_state_max_age_s:
             return False, f"state stale ({obs.age_s:.2f} s old)"
         if max(abs(obs.x), abs(obs.y)) > self.cfg.plate_half_side_m:
             return False, "ball off the plate"
@@ -118,11 +119,11 @@ class SafetySupervisor:
         mode = self.mode
         if mode == Mode.RETURNING and ok:
             # the ball is seen again on its way home (a stall, a hand lifted): take it up from
-            # where the plate is once the state has stayed healthy for recover_s, instead of
-            # levelling a plate that still carries the ball
+            # where the plate is once the state has stayed healthy for healthy_before_engage_s,
+            # instead of levelling a plate that still carries the ball
             if self._healthy_since is None:
                 self._healthy_since = now_s
-            if now_s - self._healthy_since >= self.cfg.recover_s:
+            if now_s - self._healthy_since >= self.cfg.healthy_before_engage_s:
                 self._go(Mode.ENGAGED, f"re-acquired while returning (healthy for {now_s - self._healthy_since:.2f} s)")
                 self.reset_requested = True
             elif at_home:
@@ -143,14 +144,14 @@ class SafetySupervisor:
             if ok:
                 if self._healthy_since is None:
                     self._healthy_since = now_s
-                if now_s - self._healthy_since >= self.cfg.recover_s:
+                if now_s - self._healthy_since >= self.cfg.healthy_before_engage_s:
                     self._go(Mode.ENGAGED, f"recovered (healthy for {now_s - self._healthy_since:.2f} s)")
             else:
                 self._healthy_since = None
                 self.reason = why
                 if self.usable_except_age(obs) and obs.age_s <= self.cfg.max_late_s:
-                    self._unhealthy_since = now_s   # late, still acted on: the grace period waits
-                elif now_s - self._unhealthy_since > self.cfg.grace_s:
+                    self._unhealthy_since = now_s   # late, still acted on: loss_hold_s waits
+                elif now_s - self._unhealthy_since > self.cfg.loss_hold_s:
                     self._go(Mode.RETURNING, why)
                     self.reset_requested = True
         return self.mode

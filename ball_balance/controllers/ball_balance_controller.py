@@ -8,8 +8,8 @@ targets. No /joint_states round trip and no separate node between the ball and t
 
 Parameters: every parameter of the balance nodes (ball_balance/control/config.py, the one
 schema: reference, PID gains, MPC weights, policy model, safety, shaping) except the nodes'
-own triggering (control_trigger, peer_timeout_s: joint states never go missing here), plus
-`async_step`. Two rates:
+own triggering (control_trigger, joint_states_timeout_s: joint states never go missing
+here), plus `async_step`. Two rates:
   - `control_rate_hz` (the schema's 50; config/ur_controllers_policy.yaml 60, the policy's): a
     pipeline step (safety, prediction, tilt law, IK, shaping) every 1/control_rate_hz of the
     manager's time, as the nodes' timer; the policy's history and the shaping's step limit are
@@ -101,7 +101,7 @@ from controller_manager_py.manager.throttle import Throttle
 from controller_manager_py.parameters import Param
 
 # the nodes' own triggering: here steps follow the manager's clock and the joints are state interfaces
-NODE_ONLY = {"control_trigger", "peer_timeout_s"}
+NODE_ONLY = {"control_trigger", "joint_states_timeout_s"}
 GATE_KINDS = ("non_finite", "future", "stale", "old", "off_plate", "too_fast", "jump")
 # The worker holds Python's interpreter lock while it steps (1-3 ms of Python): preempted there by
 # another process, it would keep the manager's loop (SCHED_FIFO 50) waiting for that lock for as

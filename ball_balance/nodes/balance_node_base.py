@@ -42,8 +42,8 @@ Measured choice (rates matched, two busy processes): docs/control.md, "When it s
 subscriptions keep only the newest message: a node that falls behind drops old states
 instead of working through a queue of them.
 
-Dead peers: no /joint_states for peer_timeout_s, or under use_sim_time no /clock progress for
-as long, stops all commands (the arm holds where it is, the node says why); when they return
+Dead peers: no /joint_states for joint_states_timeout_s, or under use_sim_time no /clock
+progress for as long, stops all commands (the arm holds where it is, the node says why); when they return
 the pipeline restarts from homing at the measured joints. A clock that jumps back (a
 simulation reset) restarts it too. The peer watchdog runs on the steady clock.
 
@@ -148,7 +148,7 @@ class BalanceControllerNode(Node):
         self._arrival_ages_s: list = []               # age of accepted states on arrival
         self._next_report_s = time.monotonic() + STATS_PERIOD_S
         self.stopped_reason = ""                      # non-empty: commands stopped (a dead peer)
-        timeout = self.params["peer_timeout_s"]
+        timeout = self.params["joint_states_timeout_s"]
         self.joint_beat, self.clock_beat = Heartbeat(timeout), Heartbeat(timeout)
         self._sim_time = bool(self.get_parameter("use_sim_time").value)
         self._clock_seen_ns: Optional[int] = None

@@ -176,8 +176,8 @@ class BatchBallKalman:
                     inv, widened_distance = self._innovation(y)
                     distance = np.where(widen, widened_distance, distance)
             gate = self.cfg.gate_sigma
-            if self.cfg.consistency_time_s > 0.0:
-                alpha = np.minimum(1.0, dt / self.cfg.consistency_time_s)
+            if self.cfg.model_mismatch_time_constant_s > 0.0:
+                alpha = np.minimum(1.0, dt / self.cfg.model_mismatch_time_constant_s)
                 self.nis = np.where(run, self.nis + alpha * (np.minimum(distance, gate) ** 2 / 2.0 - self.nis),
                                     self.nis)
             ok = run & (distance <= gate)
@@ -254,7 +254,7 @@ class BatchBallKalman:
         known = accel is not None
         if not known:
             q = np.full(len(i), self.sigma_a ** 2)
-        elif self.cfg.consistency_time_s > 0.0:
+        elif self.cfg.model_mismatch_time_constant_s > 0.0:
             q = np.minimum(np.maximum(self.nis[i], 1.0), max(1.0, (self.sigma_a / self.sigma_a_cmd) ** 2)) \
                 * self.sigma_a_cmd ** 2
         else:

@@ -60,7 +60,8 @@ TRACKER_FILTER_KEYS = ("meas_noise_m", "accel_noise_m_s2", "init_vel_std_m_s", "
                        "max_dt_s", "use_plate_cmd", "plate_cmd_timeout_s", "plate_cmd_delay_s",
                        "estimate_plate_cmd_delay",
                        "cmd_accel_noise_m_s2", "estimate_input_gain", "input_gain_bounds", "input_gain_std",
-                       "input_gain_rate_per_s", "consistency_time_s", "adaptive_meas_noise", "meas_noise_max_m",
+                       "input_gain_rate_per_s", "model_mismatch_time_constant_s", "adaptive_meas_noise",
+                       "meas_noise_max_m",
                        "meas_noise_window_frames", "maneuver_sigma", "maneuver_hold_s", "maneuver_accel_noise_m_s2",
                        "maneuver_confirm_frames", "maneuver_confirm_sigma", "maneuver_confirm_noise_m", "tilt_lever_m",
                        "rolling_factor")
@@ -326,7 +327,7 @@ class BatchDelayEstimator:
         self.b, self.period_s, self.max_lag = batch, single.period_s, single.max_lag
         self.n = single._cmd.maxlen
         self.update_every, self.blend, self.min_excitation = single.update_every, single.blend, single.min_excitation
-        self.min_window, self.replace_start = single.min_window, single.replace_start
+        self.min_window = single.min_window
         self.estimate_s = np.full(batch, float(single.estimate_s))
         self.converged = np.zeros(batch, bool)
         self.cmd = np.zeros((batch, self.n, 2))     # oldest first, the newest in the last row
@@ -361,7 +362,7 @@ class BatchDelayEstimator:
         inner = (best > 0) & (best < self.max_lag) & (denom > 0)
         frac = np.where(inner, 0.5 * (c0 - c2) / np.where(inner, denom, 1.0), 0.0)
         measured = (best + frac) * self.period_s
-        weight = np.where(self.converged | (not self.replace_start), self.blend, 1.0)
+        weight = np.where(self.converged, self.blend, 1.0)
         self.estimate_s = np.where(excited, self.estimate_s + weight * (measured - self.estimate_s), self.estimate_s)
         self.converged |= excited
 
@@ -437,8 +438,7 @@ class PlateBatch:
         from ball_balance.control.prediction import DelayEstimator
 
         v = self.pid_values
-        return DelayEstimator(v["actuation_delay_s"], CONTROL_DT_S, min_window_s=v["actuation_delay_min_window_s"],
-                              replace_start=v["actuation_delay_replace_start"])
+        return DelayEstimator(v["actuation_delay_s"], CONTROL_DT_S, min_window_s=v["actuation_delay_min_window_s"])
 
     @property
     def actuation_delay_s(self) -> np.ndarray:

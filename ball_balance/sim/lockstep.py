@@ -35,7 +35,8 @@ from typing import Callable, Deque, Optional
 
 STAMP_TOLERANCE_S = 1e-6      # header stamps are whole nanoseconds: a frame's time survives as one
 # a frame unanswered this long is lost, not slow; well below the controllers' dead-peer timeout
-# in simulation (peer_timeout_s 5 s in scripts/sim_balance.sh), which also watches /clock progress
+# in simulation (joint_states_timeout_s 5 s in scripts/sim_balance.sh), which also watches
+# /clock progress
 ANSWER_TIMEOUT_WALL_S = 2.0
 UNANSWERED_KEPT = 64          # frames remembered while running free (about 1 s at 60 Hz)
 

@@ -109,7 +109,7 @@ TRACKER_SCHEMA = (
     Param("input_gain_std", 0.3, "uncertainty (1 sigma) of that ratio at the first track", "", 0.0, 10.0),
     Param("input_gain_rate_per_s", 0.05, "random-walk rate of that ratio (1 sigma per sqrt(s))",
           "1/sqrt(s)", 0.0, 10.0),
-    Param("consistency_time_s", 0.3,
+    Param("model_mismatch_time_constant_s", 0.3,
           "time constant of the running innovation consistency that raises cmd_accel_noise_m_s2 (up to "
           "accel_noise_m_s2) while the detections disagree with the model; 0 = off", "s", 0.0, 60.0),
     Param("maneuver_sigma", 3.5,
@@ -128,7 +128,8 @@ TRACKER_SCHEMA = (
           "maneuver_confirm_sigma (one beyond gate_sigma always does); 1 = every detection beyond maneuver_sigma, "
           "more ignores scattered noise", "frames", 1, 10),
     Param("maneuver_confirm_sigma", 1.5,
-          "Mahalanobis distance beyond which a detection that points the way of the one before confirms a push",
+          "Mahalanobis distance beyond which a detection that points the way of the preceding one confirms a "
+          "push",
           "", 0.0, 1000.0),
     Param("maneuver_confirm_noise_m", 0.002,
           "maneuver_confirm_frames applies only while the measurement noise (1 sigma, estimated) is at least "
@@ -184,7 +185,7 @@ class TrackerConfig:
     input_gain_bounds: Tuple[float, float]
     input_gain_std: float
     input_gain_rate_per_s: float
-    consistency_time_s: float
+    model_mismatch_time_constant_s: float
     maneuver_sigma: float
     maneuver_hold_s: float
     maneuver_accel_noise_m_s2: float

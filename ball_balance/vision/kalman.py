@@ -276,7 +276,7 @@ class KalmanConfig:
     input_gain_bounds: Tuple[float, float] = _TRACKER_DEFAULTS["input_gain_bounds"]
     input_gain_std: float = _TRACKER_DEFAULTS["input_gain_std"]
     input_gain_rate_per_s: float = _TRACKER_DEFAULTS["input_gain_rate_per_s"]
-    consistency_time_s: float = _TRACKER_DEFAULTS["consistency_time_s"]
+    model_mismatch_time_constant_s: float = _TRACKER_DEFAULTS["model_mismatch_time_constant_s"]
     maneuver_sigma: float = _TRACKER_DEFAULTS["maneuver_sigma"]
     maneuver_hold_s: float = _TRACKER_DEFAULTS["maneuver_hold_s"]
     maneuver_accel_noise_m_s2: float = _TRACKER_DEFAULTS["maneuver_accel_noise_m_s2"]
@@ -298,7 +298,7 @@ class KalmanConfig:
         noises, gate and coasting, no adaptation, no push detection; without a known
         acceleration its process noise is accel_noise_m_s2 anyway."""
         return dataclasses.replace(self, cmd_accel_noise_m_s2=self.accel_noise_m_s2, estimate_input_gain=False,
-                                   adaptive_meas_noise=False, consistency_time_s=0.0, maneuver_sigma=0.0)
+                                   adaptive_meas_noise=False, model_mismatch_time_constant_s=0.0, maneuver_sigma=0.0)
 
 
 class BallKalman:
@@ -319,7 +319,7 @@ class BallKalman:
         self.gain_bounds = cfg.input_gain_bounds
         self.gain_rate = cfg.input_gain_rate_per_s
         self.dim = 5 if cfg.estimate_input_gain else 4
-        self.consistency_time_s = cfg.consistency_time_s
+        self.model_mismatch_time_constant_s = cfg.model_mismatch_time_constant_s
         self.nis = 1.0                # running mean of the normalised innovation squared (per axis)
         self.maneuver_sigma = cfg.maneuver_sigma
         self.maneuver_count = 0       # detections that re-predicted with accel_noise_m_s2 (total)
@@ -429,7 +429,7 @@ class BallKalman:
             q = self.sigma_a ** 2
         else:
             scale = 1.0
-            if self.consistency_time_s > 0.0:
+            if self.model_mismatch_time_constant_s > 0.0:
                 scale = min(max(self.nis, 1.0), max(1.0, (self.sigma_a / self.sigma_a_cmd) ** 2))
             q = scale * self.sigma_a_cmd ** 2
         return max(q, self.sigma_a_maneuver ** 2) if holding else q
@@ -502,8 +502,8 @@ class BallKalman:
                     self._hold_until = t + self.maneuver_hold_s
                 self._widen_last_prediction()
                 distance = self.mahalanobis(z)
-            if self.consistency_time_s > 0.0:   # a gated detection counts too, at the gate
-                alpha = min(1.0, dt_step / self.consistency_time_s)
+            if self.model_mismatch_time_constant_s > 0.0:   # a gated detection counts too, at the gate
+                alpha = min(1.0, dt_step / self.model_mismatch_time_constant_s)
                 self.nis += alpha * (min(distance, self.gate_sigma) ** 2 / 2.0 - self.nis)
             if distance <= self.gate_sigma:
                 self.kf.update(np.asarray(z, dtype=np.float64))

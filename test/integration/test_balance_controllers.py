@@ -232,7 +232,8 @@ def test_a_second_ball_state_publisher_is_named_and_ignored(launcher, graph, exe
     FakeWorld(graph)   # ball at (+x, -y): u_x > 0, u_y < 0 while it is acted on
     # generous limits: this test process may stall under load, a late state must not end the test
     process = launcher.start([executable(exe), "--ros-args", "--params-file", str(ROOT / "config" / yaml),
-                              "-p", "stale_after_s:=2.0", "-p", "grace_s:=5.0", "-p", "peer_timeout_s:=10.0"])
+                              "-p", "ball_state_max_age_s:=2.0", "-p", "loss_hold_s:=5.0",
+                              "-p", "joint_states_timeout_s:=10.0"])
     graph.collect(Vector3Stamped, "/plate_cmd", timeout=30, predicate=lambda m: m.vector.x > 0.01)
     graph.spin_until(lambda: "from /test_graph" in process.output(), 20, "the controller naming its source")
     engaged_before = process.output().count("mode engaged")
@@ -251,7 +252,7 @@ def test_a_second_ball_state_publisher_is_named_and_ignored(launcher, graph, exe
 def test_silent_joint_states_stop_the_commands_until_they_return(launcher, graph):
     world = FakeWorld(graph)
     process = launcher.start([executable("ball_balance_controller"), "--ros-args", "--params-file",
-                              str(ROOT / "config" / "pid.yaml"), "-p", "peer_timeout_s:=0.5"])
+                              str(ROOT / "config" / "pid.yaml"), "-p", "joint_states_timeout_s:=0.5"])
     graph.collect(Vector3Stamped, "/plate_cmd", timeout=30, predicate=lambda m: m.vector.x > 0.01)
     world.joints_on = False
     graph.spin_until(lambda: "no /joint_states" in process.output(), 10, "a log line about /joint_states")

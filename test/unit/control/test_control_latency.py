@@ -140,26 +140,11 @@ def test_delay_estimator_replaces_a_wrong_start_value_within_a_second():
     assert est.estimate_s == pytest.approx(0.2, abs=0.01)
 
 
-def test_delay_estimator_old_behaviour_waits_for_the_full_window_and_blends():
-    from ball_balance.control.prediction import DelayEstimator
-
-    period = 0.02
-    est = DelayEstimator(initial_s=0.03, period_s=period, min_window_s=3.0, replace_start=False)
-    commands, measured = _lagged_commands(lag=10)
-    for i in range(150):   # 3.0 s: the window is not full yet
-        est.add(commands[i], measured[i])
-    assert est.estimate_s == 0.03
-    for i in range(150, 175):  # first update at 3.5 s: half way from the start value
-        est.add(commands[i], measured[i])
-    assert est.estimate_s == pytest.approx(0.03 + 0.5 * (0.2 - 0.03), abs=0.01)
-
-
-def test_pipeline_takes_the_delay_estimate_knobs_from_the_schema():
+def test_pipeline_takes_the_delay_estimate_window_from_the_schema():
     from ball_balance.control import config as control_config
     from controller_manager_py.parameters import validate
     values = validate(control_config.PID_SCHEMA)
-    assert values["actuation_delay_min_window_s"] == 0.6 and values["actuation_delay_replace_start"] is True
-    values = validate(control_config.PID_SCHEMA, {"actuation_delay_min_window_s": 1.5,
-                                                  "actuation_delay_replace_start": False})
+    assert values["actuation_delay_min_window_s"] == 0.6
+    values = validate(control_config.PID_SCHEMA, {"actuation_delay_min_window_s": 1.5})
     cfg = control_config.pipeline_config(values, "pid")
-    assert cfg.delay_min_window_s == 1.5 and cfg.delay_replace_start is False
+    assert cfg.delay_min_window_s == 1.5

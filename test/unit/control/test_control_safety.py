@@ -19,7 +19,7 @@ def test_homes_first_and_engages_only_at_home_with_a_healthy_state():
 
 
 def _engaged():
-    s = SafetySupervisor(SafetyConfig(grace_s=0.3))
+    s = SafetySupervisor(SafetyConfig(loss_hold_s=0.3))
     s.update(0.0, obs(), True)
     s.update(0.0, obs(), True)
     assert s.mode == Mode.ENGAGED
@@ -30,7 +30,7 @@ def test_short_loss_holds_and_recovers_after_a_healthy_run():
     s = _engaged()
     assert s.update(1.0, obs(tracking_valid=False), True) == Mode.HOLDING
     assert s.update(1.2, obs(tracking_valid=False), True) == Mode.HOLDING
-    assert s.update(1.25, obs(), True) == Mode.HOLDING     # healthy, not yet for recover_s
+    assert s.update(1.25, obs(), True) == Mode.HOLDING     # healthy, not yet for healthy_before_engage_s
     assert s.update(1.36, obs(), True) == Mode.ENGAGED
     assert "recovered" in s.reason
 
@@ -42,7 +42,7 @@ def test_a_state_alternately_fresh_and_late_holds_on_without_flip_flops_or_going
 
 
 def test_a_state_too_old_to_predict_from_goes_home_after_grace_despite_fresh_flashes():
-    s = SafetySupervisor(SafetyConfig(grace_s=0.3, max_late_s=0.5))
+    s = SafetySupervisor(SafetyConfig(loss_hold_s=0.3, max_late_s=0.5))
     s.update(0.0, obs(), True)
     s.update(0.0, obs(), True)
     modes = [s.update(1.0 + 0.02 * i, obs(age_s=0.02 if i % 4 == 3 else 0.6), False) for i in range(40)]
@@ -86,7 +86,7 @@ def test_a_ball_seen_again_on_the_way_home_is_taken_up_after_a_healthy_run():
     s = _engaged()
     s.update(1.0, obs(markers_found=0), False)
     assert s.update(1.31, obs(markers_found=0), False) == Mode.RETURNING
-    assert s.update(1.40, obs(), False) == Mode.RETURNING     # healthy, not yet for recover_s
+    assert s.update(1.40, obs(), False) == Mode.RETURNING     # healthy, not yet for healthy_before_engage_s
     assert s.update(1.45, obs(age_s=0.4), False) == Mode.RETURNING   # a break restarts the run
     assert s.update(1.50, obs(), False) == Mode.RETURNING
     assert s.update(1.61, obs(), False) == Mode.ENGAGED
@@ -94,7 +94,7 @@ def test_a_ball_seen_again_on_the_way_home_is_taken_up_after_a_healthy_run():
 
 
 def test_stale_nan_and_off_plate_states_are_unhealthy():
-    s = SafetySupervisor(SafetyConfig(stale_after_s=0.25))
+    s = SafetySupervisor(SafetyConfig(ball_state_max_age_s=0.25))
     assert not s.healthy(obs(age_s=0.3))[0]
     assert "stale" in s.healthy(obs(age_s=0.3))[1]
     assert not s.healthy(obs(x=math.nan))[0]

@@ -10,7 +10,7 @@ def ball(x=0.0, y=0.0, vx=0.0, vy=0.0, valid=True):
 
 
 def test_states_stamped_in_the_future_or_too_old_are_refused_with_the_reason():
-    gate = BallStateGate(GateConfig(max_age_s=0.5, future_tolerance_s=0.05))
+    gate = BallStateGate(GateConfig(max_age_s=0.5, max_stamp_ahead_s=0.05))
     assert gate.check(100.0, 90.0, ball()).kind == "stale"
     assert "10.00 s old" in gate.check(100.0, 90.0, ball()).reason
     assert gate.check(100.0, 99.6, ball()).ok            # late, still worth predicting from

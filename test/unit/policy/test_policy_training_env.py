@@ -259,7 +259,7 @@ def test_training_domains_cover_the_benchmark_extremes(knob):
 
 
 @pytest.mark.parametrize("overrides", [{}, {"estimate_input_gain": False, "adaptive_meas_noise": False},
-                                       {"consistency_time_s": 0.0, "use_plate_cmd": False},
+                                       {"model_mismatch_time_constant_s": 0.0, "use_plate_cmd": False},
                                        {"maneuver_sigma": 2.5}, {"maneuver_sigma": 2.5, "maneuver_confirm_frames": 2},
                                        {"maneuver_sigma": 2.5, "maneuver_confirm_frames": 2,
                                         "maneuver_confirm_noise_m": 0.0025}])

@@ -9,7 +9,7 @@ from ball_balance.vision.kalman import BallKalman, DetectionNoiseEstimator, Kalm
 
 # the filter these tests start from: every adaptation and the push detection off (a test switches
 # on what it is about), the input gain within [0.3, 2.5]
-PLAIN = KalmanConfig(estimate_input_gain=False, input_gain_bounds=(0.3, 2.5), consistency_time_s=0.0,
+PLAIN = KalmanConfig(estimate_input_gain=False, input_gain_bounds=(0.3, 2.5), model_mismatch_time_constant_s=0.0,
                      maneuver_sigma=0.0, maneuver_hold_s=0.0, maneuver_accel_noise_m_s2=0.0,
                      maneuver_confirm_frames=1, maneuver_confirm_sigma=0.0, maneuver_confirm_noise_m=0.0,
                      adaptive_meas_noise=False)
@@ -220,9 +220,9 @@ def test_plate_command_input_applies_the_command_in_force_a_delay_earlier():
 
 
 def test_process_noise_rises_while_the_detections_disagree_with_the_known_acceleration():
-    def run(consistency_time_s):
+    def run(model_mismatch_time_constant_s):
         kf = filter_with(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
-                         consistency_time_s=consistency_time_s)
+                         model_mismatch_time_constant_s=model_mismatch_time_constant_s)
         rng, err = np.random.default_rng(9), []
         for k in range(90):
             t = k / 30
@@ -305,7 +305,7 @@ def test_after_a_push_the_velocity_is_the_constant_velocity_filters_for_the_hold
     maneuver_sigma is that of a constant-velocity filter run alongside, until the hold ends."""
     def run(hold_s):
         kf = filter_with(meas_noise_m=0.0005, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
-                         consistency_time_s=0.3, maneuver_sigma=3.5, maneuver_hold_s=hold_s)
+                         model_mismatch_time_constant_s=0.3, maneuver_sigma=3.5, maneuver_hold_s=hold_s)
         rng, vel = np.random.default_rng(12), {}
         for k in range(90):
             t = k / 30
@@ -331,7 +331,7 @@ def test_during_the_hold_the_models_position_follows_the_push_with_the_maneuver_
     explain the ball's motion exactly either, the closed loop's estimate lagged 3-5 mm.)"""
     def run(maneuver_accel):
         kf = filter_with(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.05,
-                         consistency_time_s=0.3, maneuver_sigma=3.5, maneuver_hold_s=1.0,
+                         model_mismatch_time_constant_s=0.3, maneuver_sigma=3.5, maneuver_hold_s=1.0,
                          maneuver_accel_noise_m_s2=maneuver_accel)
         rng, error = np.random.default_rng(5), {}
         for k in range(90):
