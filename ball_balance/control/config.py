@@ -31,12 +31,14 @@ def _six(value) -> str | None:
 
 
 REFERENCE_SCHEMA = [
-    Param("reference_kind", "stationary", "what the ball tracks", choices=KINDS),
+    Param("reference_kind", "stationary", "what the ball tracks", choices=KINDS, user_facing=True),
     Param("reference_radius_m", 0.10, "circle/figure-eight radius, square half side, step amplitude", "m",
-          0.0, 0.2),
-    Param("reference_period_s", 10.0, "one lap (circle, figure-eight, square) or 5 steps", "s", 0.5, 600.0),
-    Param("reference_centre_m", [0.0, 0.0], "centre of the reference, plate frame [x, y]", "m", check=_pair),
-    Param("reference_csv_path", "", "CSV path t_s,x_m,y_m (reference_kind=csv)"),
+          0.0, 0.2, user_facing=True),
+    Param("reference_period_s", 10.0, "one lap (circle, figure-eight, square) or 5 steps", "s", 0.5, 600.0,
+          user_facing=True),
+    Param("reference_centre_m", [0.0, 0.0], "centre of the reference, plate frame [x, y]", "m", check=_pair,
+          user_facing=True),
+    Param("reference_csv_path", "", "CSV path t_s,x_m,y_m (reference_kind=csv)", user_facing=True),
     Param("reference_start_delay_s", 0.0, "hold the centre this long after engaging, then start", "s",
           0.0, 600.0),
     Param("reference_blend_s", 2.0, "blend from the centre into the path over this long (no jump)", "s",
@@ -44,9 +46,9 @@ REFERENCE_SCHEMA = [
 ]
 
 PID_GAINS_SCHEMA = [
-    Param("kp", PidGains.kp, "proportional gain", "rad/m", 0.0, 20.0),
-    Param("ki", PidGains.ki, "integral gain", "rad/(m s)", 0.0, 20.0),
-    Param("kd", PidGains.kd, "derivative gain on the measured velocity", "rad/(m/s)", 0.0, 20.0),
+    Param("kp", PidGains.kp, "proportional gain", "rad/m", 0.0, 20.0, user_facing=True),
+    Param("ki", PidGains.ki, "integral gain", "rad/(m s)", 0.0, 20.0, user_facing=True),
+    Param("kd", PidGains.kd, "derivative gain on the measured velocity", "rad/(m/s)", 0.0, 20.0, user_facing=True),
     Param("i_limit_rad", PidGains.i_limit_rad, "clamp on ki*integral", "rad", 0.0, 0.5),
     Param("i_zone_m", PidGains.i_zone_m, "integrate only while |error| below this", "m", 0.0, 1.0),
     Param("deadband_m", PidGains.deadband_m, "error deadband", "m", 0.0, 0.05),
@@ -59,22 +61,26 @@ PID_GAINS_SCHEMA = [
 
 MPC_SCHEMA = [
     Param("mpc_horizon", MpcConfig.horizon, "prediction horizon N (steps of one control period)", "", 2, 200,
-          read_only=True),
-    Param("mpc_q_pos", MpcConfig.q_pos, "weight on position error", "1/m^2", 0.0, 1e6, read_only=True),
-    Param("mpc_q_vel", MpcConfig.q_vel, "weight on velocity error", "1/(m/s)^2", 0.0, 1e6, read_only=True),
-    Param("mpc_r_u", MpcConfig.r_u, "weight on tilt minus feed-forward", "1/rad^2", 1e-6, 1e6, read_only=True),
-    Param("mpc_r_du", MpcConfig.r_du, "weight on tilt change per step", "1/rad^2", 0.0, 1e6, read_only=True),
+          read_only=True, user_facing=True),
+    Param("mpc_q_pos", MpcConfig.q_pos, "weight on position error", "1/m^2", 0.0, 1e6, read_only=True,
+          user_facing=True),
+    Param("mpc_q_vel", MpcConfig.q_vel, "weight on velocity error", "1/(m/s)^2", 0.0, 1e6, read_only=True,
+          user_facing=True),
+    Param("mpc_r_u", MpcConfig.r_u, "weight on tilt minus feed-forward", "1/rad^2", 1e-6, 1e6, read_only=True,
+          user_facing=True),
+    Param("mpc_r_du", MpcConfig.r_du, "weight on tilt change per step", "1/rad^2", 0.0, 1e6, read_only=True,
+          user_facing=True),
     Param("max_tilt_rate_rad_s", MpcConfig.du_max_rad_s, "tilt-rate constraint", "rad/s", 0.01, 20.0,
           read_only=True),
 ]
 
 COMMON_SCHEMA = [
-    Param("control_rate_hz", 50.0, "control tick rate", "Hz", 5.0, 500.0, read_only=True),
+    Param("control_rate_hz", 50.0, "control tick rate", "Hz", 5.0, 500.0, read_only=True, user_facing=True),
     Param("rolling_factor", ROLLING_FACTOR_SHELL, "k in x'' = k g sin(tilt): 0.6 shell, 0.714 solid", "",
-          0.1, 1.0, read_only=True),
+          0.1, 1.0, read_only=True, user_facing=True),
     Param("gravity_m_s2", GRAVITY_M_S2, "g", "m/s^2", 0.1, 30.0, read_only=True),
     Param("max_tilt_cmd_rad", 0.15, "per-axis tilt command limit (controller output clip)", "rad", 0.0, 0.35,
-          read_only=True),
+          read_only=True, user_facing=True),
     Param("max_total_tilt_rad", 0.20, "limit on the plate's total tilt from home", "rad", 0.0, 0.5,
           read_only=True),
     Param("latency_compensation", True, "predict the ball state over the measured delay", read_only=True),
@@ -135,7 +141,7 @@ COMMON_SCHEMA = [
           "tick on the newest state", choices=("ball_state", "timer"), read_only=True),
     Param("home_tolerance_rad", 0.01, "max joint error to count as at home", "rad", 1e-4, 0.5, read_only=True),
     Param("home_positions_rad", list(HOME_POSITIONS_RAD), "home joint positions (plate level)", "rad",
-          check=_six, read_only=True),
+          check=_six, read_only=True, user_facing=True),
     Param("ik_mode", "pivot", "'wrist': wrist joints only (plate pivots 0.11 m below its centre); "
           "'pivot': all joints, plate tilts about its own centre", choices=("wrist", "pivot"), read_only=True),
     Param("max_joint_step_rad", 0.02, "per-joint change per tick", "rad", 1e-4, 0.5, read_only=True),

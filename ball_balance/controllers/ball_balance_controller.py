@@ -115,7 +115,7 @@ MODE_CODE = {Mode.HOMING: 0.0, Mode.READY: 1.0, Mode.ENGAGED: 2.0, Mode.HOLDING:
 def _schema() -> tuple:
     """The balance nodes' parameters (PID, MPC and policy schemas: one source), once each."""
     seen, params = set(), [Param("tilt_law", "policy", "the tilt law: the learned policy (PID + ONNX "
-                                 "correction), the PID or the MPC", choices=CONTROLLERS),
+                                 "correction), the PID or the MPC", choices=CONTROLLERS, user_facing=True),
                            Param("command_ramp", True, "write the joint command as a ramp from the last "
                                  "command to the step's target over one control period (false: the target "
                                  "at once, a staircase at control_rate_hz that makes the ball hop)"),

@@ -11,7 +11,7 @@ DEFAULT_MODEL = "policies/residual_tilt.onnx"
 
 POLICY_PARAMS = [
     Param("policy_model", DEFAULT_MODEL, "ONNX policy model: absolute, or relative to the package's config/ "
-          "folder", read_only=True),
+          "folder", read_only=True, user_facing=True),
     Param("policy_blend_s", 1.0, "after every engagement, ramp the policy's correction in from 0 over this "
           "long (0: at once)", "s", 0.0, 30.0, read_only=True),
     Param("policy_max_delay_s", 0.17, "the policy's correction applies in full up to this command-to-plate "

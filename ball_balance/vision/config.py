@@ -28,29 +28,31 @@ def _range_pair(value) -> Optional[str]:
 
 _IDS = tuple(pg.MARKER_CENTRES_M)
 SOURCE_SCHEMA = (
-    Param("source", "topic", "where frames come from", choices=("topic", "camera", "file")),
-    Param("image_topic", "/camera/image_raw", "sensor_msgs/Image input (source=topic), bgr8 or rgb8"),
+    Param("source", "topic", "where frames come from", choices=("topic", "camera", "file"), user_facing=True),
+    Param("image_topic", "/camera/image_raw", "sensor_msgs/Image input (source=topic), bgr8 or rgb8", user_facing=True),
     Param("camera_info_topic", "/camera/camera_info",
-          "sensor_msgs/CameraInfo for intrinsics when no calibration_file ('' = off)"),
-    Param("camera_device", "0", "USB camera: device index ('0') or path ('/dev/video0') (source=camera)"),
-    Param("camera_width", 640, "requested capture width (source=camera)", "px", 16, 8192),
-    Param("camera_height", 480, "requested capture height (source=camera)", "px", 16, 8192),
-    Param("camera_fps", 30.0, "requested capture rate (source=camera)", "Hz", 1.0, 1000.0),
-    Param("video_file", "", "video file to replay (source=file)"),
+          "sensor_msgs/CameraInfo for intrinsics when no calibration_file ('' = off)", user_facing=True),
+    Param("camera_device", "0", "USB camera: device index ('0') or path ('/dev/video0') (source=camera)",
+          user_facing=True),
+    Param("camera_width", 640, "requested capture width (source=camera)", "px", 16, 8192, user_facing=True),
+    Param("camera_height", 480, "requested capture height (source=camera)", "px", 16, 8192, user_facing=True),
+    Param("camera_fps", 30.0, "requested capture rate (source=camera)", "Hz", 1.0, 1000.0, user_facing=True),
+    Param("video_file", "", "video file to replay (source=file)", user_facing=True),
     Param("video_loop", False, "restart the video file at its end (source=file)"),
     Param("video_rate_hz", 0.0, "replay rate (source=file); 0 = the file's own rate", "Hz", 0.0, 1000.0),
-    Param("calibration_file", "", "camera calibration YAML (ROS camera_info format); '' = none"),
+    Param("calibration_file", "", "camera calibration YAML (ROS camera_info format); '' = none", user_facing=True),
     Param("undistort", "points", "with a calibration: undistort detected points (cheap) or whole images",
           choices=("points", "image")),
 )
 
 TRACKER_SCHEMA = (
     # plate and markers (docs/design.md section 5)
-    Param("plate_side_m", pg.PLATE_SIDE_M, "plate side length", "m", 0.05, 5.0),
-    Param("marker_side_m", pg.MARKER_SIDE_M, "ArUco marker side, black border included", "m", 0.005, 1.0),
+    Param("plate_side_m", pg.PLATE_SIDE_M, "plate side length", "m", 0.05, 5.0, user_facing=True),
+    Param("marker_side_m", pg.MARKER_SIDE_M, "ArUco marker side, black border included", "m", 0.005, 1.0,
+          user_facing=True),
     Param("marker_ids", _IDS, "ArUco DICT_4X4_50 ids on the plate",
           check=lambda v: None if len(v) >= 1 and all(isinstance(i, int) and 0 <= i < 50 for i in v)
-          else "must be ids in 0..49"),
+          else "must be ids in 0..49", user_facing=True),
     Param("marker_x_m", tuple(pg.MARKER_CENTRES_M[i][0] for i in _IDS), "marker centres x (plate frame)", "m"),
     Param("marker_y_m", tuple(pg.MARKER_CENTRES_M[i][1] for i in _IDS), "marker centres y (plate frame)", "m"),
     Param("startup_frames", 10, "frames with all markers visible averaged into the start-up plate pose",
@@ -69,11 +71,11 @@ TRACKER_SCHEMA = (
           "map the ball centre at its height above the plate (needs intrinsics, or estimates them)"),
     # ball segmentation
     Param("hsv_lower", (0, 100, 60), "lower HSV bound of the ball colour (OpenCV H 0..179)",
-          check=_three_ints_0_255),
-    Param("hsv_upper", (25, 255, 255), "upper HSV bound of the ball colour", check=_three_ints_0_255),
+          check=_three_ints_0_255, user_facing=True),
+    Param("hsv_upper", (25, 255, 255), "upper HSV bound of the ball colour", check=_three_ints_0_255, user_facing=True),
     Param("morph_kernel_px", 3, "morphological opening kernel size (0 = none)", "px", 0, 31),
     Param("min_circularity", 0.6, "minimum 4*pi*area/perimeter^2 of the ball blob", "", 0.0, 1.0),
-    Param("ball_radius_m", pg.BALL_RADIUS_M, "ball radius", "m", 0.001, 0.5),
+    Param("ball_radius_m", pg.BALL_RADIUS_M, "ball radius", "m", 0.001, 0.5, user_facing=True),
     Param("ball_radius_range_m", (0.012, 0.030), "accepted apparent blob radius [min, max]", "m",
           check=_range_pair),
     Param("plate_margin_m", 0.010, "detections farther than this outside the plate are rejected", "m", 0.0, 1.0),

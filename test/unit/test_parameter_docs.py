@@ -47,3 +47,13 @@ def test_every_executable_and_plugin_is_accounted_for(gen):
 
 def test_output_is_deterministic(gen):
     assert gen.render() == gen.render()
+
+
+@pytest.mark.parametrize("node", ["ball_tracker", "ball_balance_controller", "ball_balance_mpc",
+                                  "ball_balance_policy"])
+def test_a_user_holds_at_most_15_settings_per_node(gen, node):
+    """The tracker and each controller node mark the settings a user sets (user_facing); the
+    rest are advanced, and the docs list them after."""
+    component = next(c for c in gen.components() if c.kind == "node" and c.name == node)
+    user = [p.name for p in component.schema() if p.user_facing]
+    assert 1 <= len(user) <= 15, user
