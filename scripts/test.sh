@@ -14,6 +14,9 @@ if (($# == 0)); then
   # its own); the pytest run below is then the rest (test/ only)
   echo "[test] controller_manager_py alone"
   controller_manager_py/test/run_standalone.sh -q
+  # ... and installed with pip into a fresh venv, as a user of the package has it
+  echo "[test] controller_manager_py installed"
+  controller_manager_py/test/run_installed.sh -q
   echo "[test] pytest"
   exec python -m pytest test
 fi

@@ -1,0 +1,72 @@
+#!/usr/bin/env bash
+# controller_manager_py installed as a user installs it, then its tests against that copy: a
+# fresh venv on top of the environment's Python packages (rclpy, numpy, the message packages),
+# `pip install` of this folder (a wheel built as pip builds it; no ball_balance anywhere),
+# and pytest with the installed package, its entry points and its `ros2_control_node` (never
+# this folder) on the path.
+#
+#   controller_manager_py/test/run_installed.sh [pytest args]
+#
+# Needs a ROS 2 Jazzy environment with the interface packages (control_msgs,
+# controller_manager_msgs, pal_statistics_msgs): here `source env.sh`, which it does itself when
+# nothing is sourced. PYTHON chooses the base interpreter (default: the repository's .venv).
+set -euo pipefail
+PKG="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+REPO="$(cd "$PKG/.." && pwd)"
+if [[ -z "${AMENT_PREFIX_PATH:-}" && -f "$REPO/env.sh" ]]; then
+  source "$REPO/env.sh"
+fi
+PYTHON="${PYTHON:-}"
+if [[ -z "$PYTHON" ]]; then
+  if [[ -x "$REPO/.venv/bin/python" ]]; then PYTHON="$REPO/.venv/bin/python"; else PYTHON=python3; fi
+fi
+
+TMP="$(mktemp -d)"
+trap 'rm -rf "$TMP"' EXIT
+VENV="$TMP/venv"
+"$PYTHON" -m venv --without-pip "$VENV"
+# the base environment's packages (pip among them), as a site directory of the new venv (its
+# .pth files count)
+base_site="$("$PYTHON" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
+venv_site="$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
+echo "import site; site.addsitedir('$base_site')" > "$venv_site/base_environment.pth"
+# the ROS wheels' shared libraries live in the base environment's prefix (their bootstrapper
+# looks in the running interpreter's, the new venv's)
+ros_libs="$("$PYTHON" -c 'import sys; print(sys.prefix)')/lib"
+for libs in "$base_site"/ros_*.libs; do [[ -d "$libs" ]] && ros_libs="$ros_libs:$libs"; done
+export LD_LIBRARY_PATH="$ros_libs${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+# PYTHONPATH: the environment's entries that hold no application package and not this folder
+path=""
+IFS=: read -ra entries <<<"${PYTHONPATH:-}"
+for entry in "${entries[@]}"; do
+  [[ -z "$entry" || "$entry" == "$REPO" || "$entry" == "$REPO/"* ]] && continue
+  [[ -e "$entry/ball_balance" || -e "$entry/controller_manager_py" ]] && continue
+  path="${path:+$path:}$entry"
+done
+# the interface packages built in this repository's workspace (the environment's, elsewhere)
+for site in "$REPO"/install/lib/python3*/site-packages; do
+  [[ -d "$site" && ! -e "$site/ball_balance" && ! -e "$site/controller_manager_py" ]] && path="${path:+$path:}$site"
+done
+
+cd "$TMP"
+PYTHONPATH="$path" "$VENV/bin/python" -m pip install --quiet --no-deps "$PKG" \
+  >"$TMP/pip.log" 2>&1 || { cat "$TMP/pip.log" >&2; echo "run_installed: pip install failed" >&2; exit 1; }
+
+PYTHONPATH="$path" "$VENV/bin/python" -P - "$VENV" <<'PY'
+import importlib.util, sys
+from pathlib import Path
+from importlib.metadata import entry_points
+
+venv = Path(sys.argv[1])
+assert importlib.util.find_spec("ball_balance") is None, "ball_balance is importable: not a standalone install"
+import controller_manager_py
+where = Path(controller_manager_py.__file__).resolve()
+assert where.is_relative_to(venv), f"controller_manager_py from {where}, not the installed copy in {venv}"
+controllers = sorted(ep.name for ep in entry_points(group="controller_manager_py.controllers"))
+assert "joint_trajectory_controller/JointTrajectoryController" in controllers, controllers
+assert (venv / "bin" / "ros2_control_node").exists(), "no ros2_control_node console script"
+print(f"run_installed: controller_manager_py installed in {where.parent}; ball_balance not importable")
+PY
+# the tests from this folder, the package from the venv (pythonpath: the tests' helpers only)
+PYTHONPATH="$path" PATH="$VENV/bin:$PATH" exec "$VENV/bin/python" -P -m pytest -p no:cacheprovider \
+  -c "$PKG/pytest.ini" --rootdir "$PKG" -o pythonpath=test "$PKG/test" "$@"
