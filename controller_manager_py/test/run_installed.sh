@@ -49,7 +49,10 @@ for site in "$REPO"/install/lib/python3*/site-packages; do
 done
 
 cd "$TMP"
-PYTHONPATH="$path" "$VENV/bin/python" -m pip install --quiet --no-deps "$PKG" \
+# built from a copy: a build writes its egg-info beside setup.py
+mkdir "$TMP/src" && cp -r "$PKG/package.xml" "$PKG/setup.py" "$PKG/setup.cfg" "$PKG/README.md" "$PKG/resource" \
+  "$PKG/controller_manager_py" "$TMP/src/"
+PYTHONPATH="$path" "$VENV/bin/python" -m pip install --quiet --no-deps "$TMP/src" \
   >"$TMP/pip.log" 2>&1 || { cat "$TMP/pip.log" >&2; echo "run_installed: pip install failed" >&2; exit 1; }
 
 PYTHONPATH="$path" "$VENV/bin/python" -P - "$VENV" <<'PY'
