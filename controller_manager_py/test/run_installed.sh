@@ -11,18 +11,8 @@
 # controller_manager_msgs, pal_statistics_msgs): here `source env.sh`, which it does itself when
 # nothing is sourced. PYTHON chooses the base interpreter (default: the repository's .venv).
 set -euo pipefail
-PKG="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-REPO="$(cd "$PKG/.." && pwd)"
-if [[ -z "${AMENT_PREFIX_PATH:-}" && -f "$REPO/env.sh" ]]; then
-  source "$REPO/env.sh"
-fi
-PYTHON="${PYTHON:-}"
-if [[ -z "$PYTHON" ]]; then
-  if [[ -x "$REPO/.venv/bin/python" ]]; then PYTHON="$REPO/.venv/bin/python"; else PYTHON=python3; fi
-fi
+source "$(dirname "${BASH_SOURCE[0]}")/standalone_env.sh"
 
-TMP="$(mktemp -d)"
-trap 'rm -rf "$TMP"' EXIT
 VENV="$TMP/venv"
 "$PYTHON" -m venv --without-pip "$VENV"
 # the base environment's packages (pip among them), as a site directory of the new venv (its
@@ -35,18 +25,8 @@ echo "import site; site.addsitedir('$base_site')" > "$venv_site/base_environment
 ros_libs="$("$PYTHON" -c 'import sys; print(sys.prefix)')/lib"
 for libs in "$base_site"/ros_*.libs; do [[ -d "$libs" ]] && ros_libs="$ros_libs:$libs"; done
 export LD_LIBRARY_PATH="$ros_libs${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
-# PYTHONPATH: the environment's entries that hold no application package and not this folder
-path=""
-IFS=: read -ra entries <<<"${PYTHONPATH:-}"
-for entry in "${entries[@]}"; do
-  [[ -z "$entry" || "$entry" == "$REPO" || "$entry" == "$REPO/"* ]] && continue
-  [[ -e "$entry/ball_balance" || -e "$entry/controller_manager_py" ]] && continue
-  path="${path:+$path:}$entry"
-done
-# the interface packages built in this repository's workspace (the environment's, elsewhere)
-for site in "$REPO"/install/lib/python3*/site-packages; do
-  [[ -d "$site" && ! -e "$site/ball_balance" && ! -e "$site/controller_manager_py" ]] && path="${path:+$path:}$site"
-done
+# PYTHONPATH: the environment's entries, not this folder
+path="$ENV_PYTHONPATH"
 
 cd "$TMP"
 # built from a copy: a build writes its egg-info beside setup.py

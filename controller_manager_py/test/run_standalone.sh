@@ -10,31 +10,14 @@
 # controller_manager_msgs, pal_statistics_msgs): here `source env.sh`, which it does itself
 # when nothing is sourced. PYTHON chooses the interpreter (default: the repository's .venv, else python3).
 set -euo pipefail
-PKG="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"   # the package folder (package.xml, setup.py)
-REPO="$(cd "$PKG/.." && pwd)"
-if [[ -z "${AMENT_PREFIX_PATH:-}" && -f "$REPO/env.sh" ]]; then
-  source "$REPO/env.sh"
-fi
-PYTHON="${PYTHON:-}"
-if [[ -z "$PYTHON" ]]; then
-  if [[ -x "$REPO/.venv/bin/python" ]]; then PYTHON="$REPO/.venv/bin/python"; else PYTHON=python3; fi
-fi
+source "$(dirname "${BASH_SOURCE[0]}")/standalone_env.sh"
 
-TMP="$(mktemp -d)"
-trap 'rm -rf "$TMP"' EXIT
 # the entry points (plugins) as an installed package has them, from our setup.py alone
 (cd "$PKG" && "$PYTHON" setup.py -q egg_info --egg-base "$TMP" >"$TMP/egg_info.log" 2>&1) \
   || { cat "$TMP/egg_info.log" >&2; echo "run_standalone: setup.py egg_info failed" >&2; exit 1; }
 
-# PYTHONPATH: this folder, the egg-info, and the environment's entries that hold no
-# application package (colcon's build folders and anything with a ball_balance in it go).
-path="$PKG:$TMP"
-IFS=: read -ra entries <<<"${PYTHONPATH:-}"
-for entry in "${entries[@]}"; do
-  [[ -z "$entry" || "$entry" == "$REPO" || "$entry" == "$REPO/build"* ]] && continue
-  [[ -e "$entry/ball_balance" || -e "$entry/controller_manager_py" ]] && continue
-  path="$path:$entry"
-done
+# PYTHONPATH: this folder, the egg-info, and the environment's entries
+path="$PKG:$TMP${ENV_PYTHONPATH:+:$ENV_PYTHONPATH}"
 
 cd "$PKG"
 PYTHONPATH="$path" "$PYTHON" -P - "$PKG" <<'PY'
