@@ -121,20 +121,21 @@ COMMON_SCHEMA = [
     Param("brake_time_constant_s", 0.2, "braking decelerates the predicted velocity v with x'' = -v / this",
           "s", 0.05, 5.0, read_only=True),
     Param("ball_state_max_age_s", 0.25, "a ball state older than this is stale", "s", 0.01, 5.0,
-          read_only=True),
+          read_only=True, formerly=("stale_after_s",)),
     Param("loss_hold_s", 0.3, "hold the last tilt this long after a loss before returning home", "s", 0.0, 10.0,
-          read_only=True),
+          read_only=True, formerly=("grace_s",)),
     Param("healthy_before_engage_s", 0.1, "a state must stay healthy this long before holding turns back to "
-          "engaged (hysteresis)", "s", 0.0, 5.0, read_only=True),
+          "engaged (hysteresis)", "s", 0.0, 5.0, read_only=True, formerly=("recover_s",)),
     Param("max_stamp_ahead_s", 0.2, "a ball state stamped further than this ahead of our clock is refused "
           "(under use_sim_time this node's clock trails /clock by up to ~0.15 s on a busy machine)",
-          "s", 0.0, 1.0, read_only=True),
+          "s", 0.0, 1.0, read_only=True, formerly=("future_tolerance_s",)),
     Param("max_ball_speed_m_s", 2.0, "a ball state faster than this is refused", "m/s", 0.1, 20.0, read_only=True),
     Param("max_ball_jump_m", 0.03, "a ball state further than this from where the last accepted state, moving "
           "at its velocity, puts the ball is refused (until 3 in a row agree: a re-acquisition)", "m", 0.001, 1.0,
           read_only=True),
     Param("joint_states_timeout_s", 1.0, "no /joint_states (or, under use_sim_time, no /clock progress) for this "
-          "long: stop commanding until they return", "s", 0.05, 60.0, read_only=True),
+          "long: stop commanding until they return", "s", 0.05, 60.0, read_only=True,
+          formerly=("peer_timeout_s",)),
     Param("control_trigger", "ball_state", "'ball_state': one step per new ball state as it arrives (no wait "
           "for a tick; control_rate_hz must equal the camera rate, the pipeline assumes 1/control_rate_hz per "
           "step), the timer then steps only while states are missing; 'timer': a step every control_rate_hz "

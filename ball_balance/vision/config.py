@@ -113,7 +113,8 @@ TRACKER_SCHEMA = (
           "1/sqrt(s)", 0.0, 10.0),
     Param("model_mismatch_time_constant_s", 0.3,
           "time constant of the running innovation consistency that raises cmd_accel_noise_m_s2 (up to "
-          "accel_noise_m_s2) while the detections disagree with the model; 0 = off", "s", 0.0, 60.0),
+          "accel_noise_m_s2) while the detections disagree with the model; 0 = off", "s", 0.0, 60.0,
+          formerly=("consistency_time_s",)),
     Param("maneuver_sigma", 3.5,
           "a detection farther than this Mahalanobis distance re-predicts its frame with accel_noise_m_s2 "
           "(a push the commanded tilt does not explain); 0 = off", "", 0.0, 1000.0),

@@ -9,7 +9,8 @@ start-up. `validate` does the same for a plain dict (no ROS), for tests and tool
 `report_unknown_parameters` catches the other mistake: a value given to a node (parameter
 file or `-p`) under a name it never declares, e.g. `kp_typo`, which rclpy keeps silently. It
 logs one warning naming them (and the closest declared name), or refuses to start when the
-node's `unknown_parameters` parameter is `error`.
+node's `unknown_parameters` parameter is `error`. A name a parameter had before it was renamed
+(`Param.formerly`) is named with its new name instead of a guess.
 """
 from __future__ import annotations
 
@@ -41,6 +42,8 @@ class Param:
     advanced: their defaults suit every setup tested, docs list them after the user-facing ones."""
     check: Optional[Callable[[Any], Optional[str]]] = field(default=None, compare=False)
     """Extra check: returns an error message, or None when the value is fine."""
+    formerly: Sequence[str] = ()
+    """Names this parameter had before (a value given under one is reported with this name)."""
 
     def validate(self, value: Any) -> Any:
         """Return `value` coerced to this parameter's type, or raise ParameterError."""
@@ -96,7 +99,7 @@ def validate(schema: Iterable[Param], values: Mapping[str, Any] | None = None,
     known = {p.name for p in schema}
     unknown = sorted(set(values) - known)
     if unknown and not allow_unknown:
-        raise ParameterError(f"unknown parameter(s): {', '.join(unknown)}")
+        raise ParameterError(f"unknown parameter(s): {describe_unknown(unknown, known, renamed_names(schema))}")
     return MappingProxyType({p.name: p.validate(values.get(p.name, p.default)) for p in schema})
 
 
@@ -104,6 +107,9 @@ def declare_parameters(node, schema: Iterable[Param]) -> Mapping[str, Any]:
     """Declare `schema` on an rclpy node and return the validated values (read-only)."""
     from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
+    schema = list(schema)
+    # kept on the node for report_unknown_parameters: a value under a former name says the new one
+    node.__dict__.setdefault("_former_parameter_names", {}).update(renamed_names(schema))
     values = {}
     for p in schema:
         descriptor = ParameterDescriptor(
@@ -134,6 +140,11 @@ def unknown_parameter_names(given: Iterable[str], declared: Iterable[str]) -> Li
     return sorted(set(given) - set(declared))
 
 
+def renamed_names(schema: Iterable[Param]) -> Mapping[str, str]:
+    """Former name -> current name, for the parameters of `schema` that were renamed."""
+    return {old: p.name for p in schema for old in p.formerly}
+
+
 def closest_name(name: str, declared: Iterable[str]) -> Optional[str]:
     """The declared name `name` was probably meant to be (kp_typo -> kp), or None."""
     declared = sorted(declared)
@@ -142,11 +153,16 @@ def closest_name(name: str, declared: Iterable[str]) -> Optional[str]:
     return close[0] if close else None
 
 
-def describe_unknown(unknown: Sequence[str], declared: Iterable[str]) -> str:
-    """'kp_typo (did you mean kp?), foo' for a message."""
+def describe_unknown(unknown: Sequence[str], declared: Iterable[str],
+                     renamed: Optional[Mapping[str, str]] = None) -> str:
+    """'kp_typo (did you mean kp?), grace_s (renamed loss_hold_s), foo' for a message."""
     declared = list(declared)
+    renamed = renamed or {}
     parts = []
     for name in unknown:
+        if name in renamed:
+            parts.append(f"{name} (renamed {renamed[name]})")
+            continue
         close = closest_name(name, declared)
         parts.append(f"{name} (did you mean {close}?)" if close else name)
     return ", ".join(parts)
@@ -165,7 +181,8 @@ def report_unknown_parameters(node) -> List[str]:
     unknown = unknown_parameter_names(getattr(node, "_parameter_overrides", {}), declared)
     if not unknown:
         return unknown
-    text = (f"unknown parameter(s) given to {node.get_fully_qualified_name()}: {describe_unknown(unknown, declared)} "
+    names = describe_unknown(unknown, declared, getattr(node, "_former_parameter_names", None))
+    text = (f"unknown parameter(s) given to {node.get_fully_qualified_name()}: {names} "
             "(not declared by this node; `ros2 param list` shows the declared ones)")
     if policy == "error":
         raise ParameterError(f"{text}; unknown_parameters is 'error'")

@@ -1,7 +1,14 @@
 """Parameter files checked before a node starts, and unknown parameter names named."""
 import pytest
 
-from controller_manager_py.parameters import describe_unknown, unknown_parameter_names
+from controller_manager_py.parameters import (
+    Param,
+    ParameterError,
+    describe_unknown,
+    renamed_names,
+    unknown_parameter_names,
+    validate,
+)
 from controller_manager_py.ros.params_files import ParamsFileError, check_params_files, params_files_in
 
 
@@ -34,3 +41,33 @@ def test_unknown_parameter_names_suggest_the_closest_declared_one():
     assert unknown == ["kp_typo", "max_tilt", "zzz"]
     assert describe_unknown(unknown, declared) == \
         "kp_typo (did you mean kp?), max_tilt (did you mean max_tilt_rad?), zzz"
+
+
+def test_a_former_name_is_reported_with_its_new_name():
+    schema = [Param("loss_hold_s", 0.3, formerly=("grace_s",)), Param("kp", 2.0)]
+    assert renamed_names(schema) == {"grace_s": "loss_hold_s"}
+    assert describe_unknown(["grace_s", "kp_typo"], ["loss_hold_s", "kp"], renamed_names(schema)) == \
+        "grace_s (renamed loss_hold_s), kp_typo (did you mean kp?)"
+    with pytest.raises(ParameterError, match=r"grace_s \(renamed loss_hold_s\)"):
+        validate(schema, {"grace_s": 0.5})
+
+
+def test_a_node_given_a_former_name_names_the_new_one():
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from controller_manager_py.parameters import declare_parameters, report_unknown_parameters
+
+    context = Context()
+    rclpy.init(context=context, args=["--ros-args", "--disable-external-lib-logs"])
+    try:
+        node = Node("renamed_test", context=context, parameter_overrides=[
+            Parameter("grace_s", value=0.5), Parameter("unknown_parameters", value="error")])
+        declare_parameters(node, [Param("loss_hold_s", 0.3, formerly=("grace_s",))])
+        with pytest.raises(ParameterError, match=r"/renamed_test: grace_s \(renamed loss_hold_s\)"):
+            report_unknown_parameters(node)
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
