@@ -18,7 +18,7 @@ if (($# == 0)); then
   echo "[test] controller_manager_py installed"
   controller_manager_py/test/run_installed.sh -q
   echo "[test] pytest"
-  exec python -m pytest test
+  exec python -m pytest --durations=15 test
 fi
 echo "[test] pytest"
 exec python -m pytest "$@"
