@@ -9,9 +9,11 @@
 #   scripts/sim_arm.sh --sim-config config/sim_truth_fed.yaml   # no camera, /ball_state from truth
 #   scripts/sim_arm.sh --param camera_rate_hz=60 --param camera_width=320 --param camera_height=240
 #   scripts/sim_arm.sh --trajectory                 # MPC-style: the trajectory controller active
+#   scripts/sim_arm.sh --check-params --param ball_force_deg=2   # only check the parameters: exit 0, or 2
 #
 # Topics: /joint_states, /tf, /tf_static, /robot_description, /camera/image_raw,
-# /camera/camera_info, /sim/ball_truth, /sim/ball_dropped, /clock; service /sim/reset_ball.
+# /camera/camera_info, /sim/ball_truth, /sim/ball_dropped, /clock; services /sim/reset_ball,
+# /sim/set_ball_force and more (docs/simulation.md).
 # See the camera without a display:
 #   camera_snapshot --ros-args -p png:=/tmp/camera.png -p mp4:=/tmp/camera.mp4 -p duration_s:=5.0
 set -euo pipefail
@@ -26,7 +28,8 @@ SIM_CONFIG="$ROOT/config/sim.yaml"
 CONTROLLERS="$ROOT/config/ur_controllers.yaml"
 PARAMS=()
 TRAJECTORY=0
-usage() { sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; }
+CHECK_ONLY=0
+usage() { sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; }
 while (($#)); do
   case "$1" in
     --sim-config) SIM_CONFIG="$(realpath "$2")"; shift 2 ;;
@@ -35,6 +38,7 @@ while (($#)); do
     --seed) PARAMS+=(--param "seed=$2"); shift 2 ;;
     --param) PARAMS+=(--param "$2"); shift 2 ;;
     --trajectory) TRAJECTORY=1; shift ;;
+    --check-params) CHECK_ONLY=1; shift ;;
     -h|--help) usage; exit 0 ;;
     *) echo "sim_arm.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
@@ -49,6 +53,7 @@ python -m ball_balance.robot --hardware mujoco --param "sim_config=$SIM_CONFIG" 
   --param "robot_description_file=$URDF" ${PARAMS[@]+"${PARAMS[@]}"} >"$URDF" || { rm -rf "$WORK"; exit 2; }
 # bad parameters: one clear line before anything starts
 python -m ball_balance.hardware.mujoco_system --check "$URDF" || { rm -rf "$WORK"; exit 2; }
+((CHECK_ONLY)) && { rm -rf "$WORK"; exit 0; }
 
 if ((TRAJECTORY)); then
   ACTIVE="[joint_state_broadcaster, scaled_joint_trajectory_controller]"

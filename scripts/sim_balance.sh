@@ -13,6 +13,16 @@
 #   scripts/sim_balance.sh --truth-fed                          # no camera/tracker: /ball_state from truth
 #   scripts/sim_balance.sh --param kp:=2.0                      # any controller parameter
 #   scripts/sim_balance.sh --sim-param camera_rate_hz=60        # any simulation parameter (config/sim.yaml)
+#   scripts/sim_balance.sh --force 2 90       # a constant force on the ball, as a plate 2 deg off level, towards +y
+#   scripts/sim_balance.sh --plate-offset 2 0 # the plate mounted 2 deg off level about its x axis (rolls to -y)
+#
+# --force DEG [DIR_DEG]: F = m g sin(DEG) on the ball's centre towards DIR_DEG (plate axes, from +x
+# towards +y; default 0), from the start; change it while running (docs/simulation.md):
+#   ros2py service call /sim/set_ball_force ball_tracker_msgs/srv/SetBallForce \
+#     "{ball_force_deg: 2.0, ball_force_dir_deg: 0.0}"
+# --plate-offset DEG [AXIS_DEG]: the plate mounted DEG off level on the flange, turned about the
+# horizontal plate axis at AXIS_DEG from +x (default 0); the ball rolls towards AXIS_DEG - 90.
+# The domains force_1deg..force_3deg and off_level_2deg do the same as the benchmark's episodes.
 #
 # Exit code: the monitor's (0: the ball stayed on the plate, 1: it dropped), 3 when a node of
 # the graph exited before the monitor (e.g. the controller manager died), 2 for bad arguments.
@@ -44,7 +54,10 @@ TRUTH_FED=0
 DEBUG_IMAGE=false
 CTRL_PARAMS=()
 SIM_PARAMS=()
-usage() { sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,32p' "$0" | sed 's/^# \{0,1\}//'; }
+# the optional second number of --force and --plate-offset (a negative angle is a number, not an option)
+optional_number() { [[ -n "${1:-}" && "$1" != --* ]]; }
+needs() { (($1 >= 2)) || { echo "sim_balance.sh: $2 needs a value (see --help)" >&2; exit 2; }; }
 while (($#)); do
   case "$1" in
     --controller) CONTROLLER="$2"; shift 2 ;;
@@ -62,6 +75,14 @@ while (($#)); do
     --debug-image) DEBUG_IMAGE=true; shift ;;
     --param) CTRL_PARAMS+=(-p "$2"); shift 2 ;;
     --sim-param) SIM_PARAMS+=(--param "$2"); shift 2 ;;
+    --force)
+      needs $# "$1"; SIM_PARAMS+=(--param "ball_force_deg=$2"); shift 2
+      if optional_number "${1:-}"; then SIM_PARAMS+=(--param "ball_force_dir_deg=$1"); shift; fi ;;
+    --plate-offset)
+      needs $# "$1"; SIM_PARAMS+=(--param "plate_mount_tilt_deg=$2"); shift 2
+      AXIS=0
+      if optional_number "${1:-}"; then AXIS="$1"; shift; fi
+      SIM_PARAMS+=(--param "plate_mount_axis_deg=$AXIS") ;;
     -h|--help) usage; exit 0 ;;
     *) echo "sim_balance.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
@@ -84,6 +105,10 @@ VIS_PARAMS=()
 
 SIM_CONFIG="$ROOT/config/sim.yaml"
 ((TRUTH_FED)) && SIM_CONFIG="$ROOT/config/sim_truth_fed.yaml"
+SIM_ARGS=(--sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y"
+          --param start_paused=true ${ARM_FLAGS[@]+"${ARM_FLAGS[@]}"} ${SIM_PARAMS[@]+"${SIM_PARAMS[@]}"})
+# a bad simulation parameter (--force 20, --sim-param ...): its one line, before anything starts
+"$ROOT/scripts/sim_arm.sh" --check-params "${SIM_ARGS[@]}" || exit 2
 LOGS="$(mktemp -d "${TMPDIR:-/tmp}/ball_balance_graph.XXXXXX")"
 source "$ROOT/scripts/lib/stop_all.sh"
 source "$ROOT/scripts/lib/graph.sh"
@@ -95,9 +120,7 @@ on_stopped() { echo "sim_balance.sh: stopped (logs in $LOGS)" >&2; }
 trap stop_all INT TERM EXIT
 
 echo "sim_balance.sh: $CONTROLLER controller, domain $DOMAIN seed $SEED, ball released at ($BALL_X, $BALL_Y) m; logs in $LOGS" >&2
-start sim "$ROOT/scripts/sim_arm.sh" --sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" \
-  --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y" --param start_paused=true ${ARM_FLAGS[@]+"${ARM_FLAGS[@]}"} \
-  ${SIM_PARAMS[@]+"${SIM_PARAMS[@]}"}
+start sim "$ROOT/scripts/sim_arm.sh" "${SIM_ARGS[@]}"
 if ((! TRUTH_FED)); then
   start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
     -p "publish_debug_image:=$DEBUG_IMAGE" ${RT_OFF[@]+"${RT_OFF[@]}"}

@@ -41,7 +41,6 @@ from ball_balance.control import config as control_config
 from ball_balance.control.kinematics import Chain, PlateKinematics
 from ball_balance.control.pipeline import ControlPipeline
 from ball_balance.control.safety import BallObservation, Mode
-from ball_balance.plate_geometry import GRAVITY_M_S2
 from ball_balance.robot import HOME_POSITIONS_RAD, JOINT_NAMES, robot_description
 from controller_manager_py.controllers.command_ramp import CommandRamp
 from controller_manager_py.parameters import validate
@@ -59,8 +58,6 @@ REFERENCES = {
     "spiral": dict(reference_kind="csv", reference_csv_path=str(PATHS_DIR / "spiral.csv")),
 }
 BALLS = {"": None, "shell": True, "solid": False}   # EpisodeSpec.ball -> DomainKnobs.ball_shell
-# the force steps of a domain's `force_step_deg` (simulated s): on, turned by 90 degrees, off
-FORCE_STEP_ON_S, FORCE_STEP_TURN_S, FORCE_STEP_OFF_S = 5.0, 9.0, 13.0
 
 
 # ---- events (all times in simulated seconds since the release) ---------------------------
@@ -242,29 +239,12 @@ def episode_knobs(spec: EpisodeSpec):
     return dataclasses.replace(knobs, **dict(spec.knobs))
 
 
-def force_step_events(mass_kg: float, gravity_m_s2: float, angle_deg: float, direction_deg: float) -> tuple:
-    """A domain's force steps: F = m g sin(angle), the force that accelerates the rolling ball
-    as a plate tilted by `angle` does (both through the same rolling factor), towards
-    `direction_deg` (plate axes) from FORCE_STEP_ON_S, turned by 90 degrees at
-    FORCE_STEP_TURN_S, off at FORCE_STEP_OFF_S. Forces add up in the sim, so the second
-    starts as the first ends."""
-    f_n = mass_kg * gravity_m_s2 * math.sin(math.radians(angle_deg))
-    phi = math.radians(direction_deg)
-    first = (f_n * math.cos(phi), f_n * math.sin(phi))
-    second = (f_n * math.cos(phi + math.pi / 2.0), f_n * math.sin(phi + math.pi / 2.0))
-    return (Force(FORCE_STEP_ON_S, FORCE_STEP_TURN_S - FORCE_STEP_ON_S, *first, step=True),
-            Force(FORCE_STEP_TURN_S, FORCE_STEP_OFF_S - FORCE_STEP_TURN_S, *second, step=True))
-
-
 def episode_events(spec: EpisodeSpec, knobs) -> list:
     """The spec's events plus the domain's pushes (seeded directions), hands over markers
-    (seeded markers) and force steps (the knobs' direction) that start before the episode's
-    end, in time order."""
+    (seeded markers) and force steps (DomainKnobs.force_steps, held Force events) that start
+    before the episode's end, in time order."""
     events = list(spec.events)
-    if knobs.force_step_deg > 0.0:
-        events += [e for e in force_step_events(knobs.ball_mass_kg, GRAVITY_M_S2 * knobs.gravity_scale,
-                                                knobs.force_step_deg, knobs.force_step_dir_deg)
-                   if e.t_s < spec.duration_s]
+    events += [Force(*step, step=True) for step in knobs.force_steps() if step[0] < spec.duration_s]
     if knobs.occlusion_markers > 0:
         rng = np.random.default_rng(spec.seed + 1299709)
         t = knobs.occlusion_interval_s

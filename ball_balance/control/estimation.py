@@ -88,6 +88,19 @@ def plant_statistics(plant_of) -> list:
             ("plant_gain_ratio", lambda: plant_of().k_g / plant_of().k_g_nominal)]
 
 
+def level_offset_summary(tilt_x_deg: float, tilt_y_deg: float) -> str:
+    """The level offset per axis (plant_statistics' disturbance_tilt_*_deg) in words, for
+    /diagnostics: how far the plate is off level as the ball feels it, and which way the ball
+    is pushed (plate axes, from +x towards +y; a force set with /sim/set_ball_force towards
+    `ball_force_dir_deg` reads as that direction)."""
+    size = math.hypot(tilt_x_deg, tilt_y_deg)
+    if not math.isfinite(size):
+        return f"no estimate (x {tilt_x_deg}, y {tilt_y_deg} deg)"
+    towards = math.degrees(math.atan2(tilt_y_deg, tilt_x_deg)) % 360.0
+    return (f"plate {size:.2f} deg off level as the ball feels it, pushing it towards {towards:.0f} deg "
+            f"(x {tilt_x_deg:+.2f}, y {tilt_y_deg:+.2f} deg)")
+
+
 class PlantEstimator:
     """Sliding-window least-squares estimate of k_g and d (both axes) from ball positions and
     the plate tilt history. Feed `add_tilt` every tick and `add_state` with each new ball state."""

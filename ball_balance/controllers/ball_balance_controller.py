@@ -65,7 +65,8 @@ held), `refused_policy_ticks` (policy: non-finite observation or output, last ti
 `mode` (0 homing, 1 ready, 2 engaged, 3 holding, 4 returning), `tilt_x_rad`, `tilt_y_rad`,
 `step_time_us`, and the plant estimate `disturbance_tilt_x_deg`, `disturbance_tilt_y_deg` (the
 disturbance as a plate-level offset, asin(d / (k g))) and `plant_gain_ratio` (as the nodes'
-~/statistics); the refused_* and missed_* counters also show in /diagnostics (WARN while they grow).
+~/statistics); the refused_* and missed_* counters also show in /diagnostics (WARN while they grow),
+and so does the plant estimate (values of the manager's "Controllers Activity" status).
 """
 from __future__ import annotations
 
@@ -211,7 +212,7 @@ class BallBalanceController(ControllerInterface):
         self.register_introspection("tilt_y_rad", lambda: self.u[1])
         self.register_introspection("step_time_us", lambda: self.step_time_us)
         for name, getter in plant_statistics(lambda: self.pipeline.plant):
-            self.register_introspection(name, getter)
+            self.register_introspection(name, getter, in_diagnostics=True)
         self._create_ros_entities(control_hz)
         self.get_logger().info(f"{self.name}: {values['tilt_law']} tilt law, a step at {control_hz:g} Hz"
                                f"{' (worker thread)' if values['async_step'] else ''}, joint targets written at "

@@ -35,8 +35,15 @@ A thin adapter around ball_balance.sim.SimWorld (the physics) and CameraThread (
   /sim/push_ball (geometry_msgs/Vector3Stamped, topic): an impulse, the ball's velocity
   changes by the vector [m/s] (plate axes), spin kept consistent with rolling;
   /sim/ball_pushed (geometry_msgs/Vector3Stamped, topic, published): every push applied
-  (asked for, or the domain's), stamped with the simulated time it acted.
+  (asked for, or the domain's), stamped with the simulated time it acted;
+  /sim/set_ball_force (ball_tracker_msgs/SetBallForce): a constant force on the ball's centre
+  held from now on, as the plate tilt that rolls the ball the same way (`ball_force_deg`,
+  `ball_force_dir_deg`, the parameters that set it at start); a bad request is refused with
+  the reason and changes nothing.
   Requests are taken by the real-time loop at its next read().
+- the domain's disturbances, on simulated time from the start as in a benchmark episode: its
+  pushes (`pushes`, every push_interval_s) and force steps (`force_2deg`: on at 5 s, turned
+  at 9 s, off at 13 s; DomainKnobs.force_steps); its plate mounting is built into the model.
 
 Hardware parameters (`<hardware><param name=...>` in the URDF; see SCHEMA), optionally from
 a YAML file given as `sim_config` (URDF params win).
@@ -98,6 +105,9 @@ SCHEMA = (
     Param("ball_mass_kg", "", _KNOB), Param("ball_friction", "", _KNOB), Param("gravity_scale", "", _KNOB),
     Param("detection_noise_m", "", _KNOB), Param("latency_s", "", _KNOB), Param("light_scale", "", _KNOB),
     Param("exposure", "", _KNOB),
+    Param("plate_mount_tilt_deg", "", _KNOB + " (the plate mounted this far off level on the flange)"),
+    Param("plate_mount_axis_deg", "", _KNOB + " (the horizontal plate axis, from +x, it is tilted about: the "
+          "ball rolls towards this direction less 90 deg)"),
     Param("ball_x", 0.0, "initial ball position, plate frame", "m", -0.2, 0.2, user_facing=True),
     Param("ball_y", 0.0, "initial ball position, plate frame", "m", -0.2, 0.2, user_facing=True),
     Param("sim_config", "", "YAML file with any of these parameters (URDF params win)", user_facing=True),
@@ -108,9 +118,15 @@ SCHEMA = (
               user_facing=True),
     Param("step_simulation_steps", 1, "physics steps per /sim/step_simulation call (while paused)", "", 1, 100000),
     Param("wrench_duration", 0.1, "how long one /sim/ball_wrench message acts", "s", 0.0, 10.0),
+    Param("ball_force_deg", 0.0, "a constant force on the ball's centre from the start, equal to a plate tilted "
+          "this far (F = m g sin(angle)); change it while running with /sim/set_ball_force", "deg", 0.0, 10.0,
+          user_facing=True),
+    Param("ball_force_dir_deg", 0.0, "the direction the force pushes the ball, plate axes from +x towards +y",
+          "deg", -360.0, 360.0, user_facing=True),
 )
 _KNOB_NAMES = ("ball_mass_kg", "ball_friction", "gravity_scale", "detection_noise_m", "latency_s",
-               "light_scale", "exposure")
+               "light_scale", "exposure", "plate_mount_tilt_deg", "plate_mount_axis_deg")
+_PARAMS = {p.name: p for p in SCHEMA}
 
 
 def parse_hardware_params(raw: Mapping[str, str]) -> Mapping[str, object]:
@@ -218,6 +234,8 @@ class MujocoSystem(SystemInterface):
             return CallbackReturn.ERROR
         self.provides_clock = bool(self.params["sim_time"])
         self.world.place_ball(self.params["ball_x"], self.params["ball_y"])
+        self.ball_force = (self.params["ball_force_deg"], self.params["ball_force_dir_deg"])
+        self._hold_ball_force()
         self._pos_cmd = [self.command_handles[f"{n}/position"] for n in robot.JOINT_NAMES]
         self._pos = [self.state_handles[f"{n}/position"] for n in robot.JOINT_NAMES]
         self._vel = [self.state_handles.get(f"{n}/velocity") for n in robot.JOINT_NAMES]
@@ -287,6 +305,8 @@ class MujocoSystem(SystemInterface):
         # the domain's pushes (`pushes`): every push_interval_s, a seeded direction
         self._next_push_s = self.world.knobs.push_interval_s if self.world.knobs.push_speed_m_s > 0 else math.inf
         self._push_rng = np.random.default_rng(self.params["seed"] + 104729)
+        # the domain's force steps (force_1deg ...): on, turned, off at the benchmark's times
+        self._force_steps = collections.deque(self.world.knobs.force_steps())
         self._next_clock_s = self.world.time_s
         self._wall_anchor = None
         if not self.introspection:  # once, also after cleanup + configure
@@ -356,6 +376,9 @@ class MujocoSystem(SystemInterface):
             angle = self._push_rng.uniform(0.0, 2.0 * math.pi)
             speed = world.knobs.push_speed_m_s
             self._push(speed * math.cos(angle), speed * math.sin(angle))
+        while self._force_steps and t >= self._force_steps[0][0]:
+            _, duration_s, fx_n, fy_n = self._force_steps.popleft()
+            world.apply_force(fx_n, fy_n, duration_s)
         self._copy_states()
         # a camera frame (rendered, and/or a truth-fed detection), unless lock-step holds it back
         if t >= self._next_frame_s and not (answers is not None and answers.must_wait()):
@@ -458,6 +481,7 @@ class MujocoSystem(SystemInterface):
             world.set_joint_positions(robot.HOME_POSITIONS_RAD)
             world.place_ball(self.params["ball_x"], self.params["ball_y"])
             world.clear_forces()
+            self._hold_ball_force()   # a setting of the world, like the plate's mounting: it stays
             self._target = world.joint_positions()
             self._copy_states()
         self._requests.append(reset)
@@ -491,6 +515,27 @@ class MujocoSystem(SystemInterface):
         ros = self.ros
         if ros is not None:
             ros.publish_pushed(self.world.time_s, dvx_m_s, dvy_m_s)
+
+    def request_ball_force(self, tilt_deg: float, direction_deg: float) -> str:
+        """A constant force on the ball's centre from the next read() on, replacing the last one:
+        the force of a plate tilted by `tilt_deg` (F = m g sin(tilt), this domain's ball and
+        gravity), towards `direction_deg` (plate axes, from +x). Raises ParameterError, naming
+        the bad value, and changes nothing when a value is out of the bounds of
+        ball_force_deg / ball_force_dir_deg. Returns what will act, in words."""
+        tilt = _PARAMS["ball_force_deg"].validate(tilt_deg)
+        direction = _PARAMS["ball_force_dir_deg"].validate(direction_deg)
+
+        def hold():
+            self.ball_force = (tilt, direction)
+            self._hold_ball_force()
+        self._requests.append(hold)
+        f_n = math.hypot(*self.world.knobs.tilt_force_n(tilt, 0.0))
+        return (f"ball force {f_n * 1e3:.3f} mN towards {direction:g} deg (plate axes), as a plate tilted "
+                f"{tilt:g} deg" if tilt > 0.0 else "no ball force")
+
+    def _hold_ball_force(self) -> None:
+        """(loop, or before it runs) The world holds `ball_force` (tilt, direction) on the ball."""
+        self.world.hold_force(*self.world.knobs.tilt_force_n(*self.ball_force))
 
     def request_wrench(self, force_n, torque_n_m, duration_s: float, in_plate_axes: bool = True) -> None:
         """A force and torque on the ball's centre for `duration_s` (plate or world axes)."""

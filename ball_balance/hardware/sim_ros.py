@@ -14,6 +14,7 @@ from typing import Mapping
 
 import numpy as np
 from ball_tracker_msgs.msg import BallState
+from ball_tracker_msgs.srv import SetBallForce
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.clock import Clock as RosClock
@@ -32,6 +33,7 @@ from ball_balance.sim.config import camera_intrinsics
 from ball_balance.sim.lockstep import REPORT_PERIOD_S, PaceReport
 from ball_balance.tf.ros import StaticTransformBroadcaster, stamp_to_ns, transform_to_msg
 from ball_balance.tf.transform import Transform
+from controller_manager_py.parameters import ParameterError
 
 # Images: sensor-data QoS (docs/design.md section 4), keep-last 1 (a best-effort frame is never resent, older
 # ones are of no use); whole frames at full rate need config/dds (docs/transport.md).
@@ -80,6 +82,7 @@ class SimRosIo:
                           if params["latency_trace"] else None)
         self.controls = controls
         self._closed = False
+        self.refused_force_requests = 0   # /sim/set_ball_force requests refused
         # stamps = sim time + this offset: 0 with sim_time (the component owns /clock), else
         # the wall-clock time at start, so stamps compare with wall-clock nodes
         self.stamp_offset_s = 0.0
@@ -88,6 +91,7 @@ class SimRosIo:
             node.create_service(Trigger, "/sim/reset_world", self._handle_reset_world),
             node.create_service(SetBool, "/sim/set_pause", self._handle_pause),
             node.create_service(Trigger, "/sim/step_simulation", self._handle_step),
+            node.create_service(SetBallForce, "/sim/set_ball_force", self._handle_ball_force),
         ]
         self.timers = []   # lock-step's (follow_answers)
         self.subscriptions = [
@@ -232,6 +236,19 @@ class SimRosIo:
         response.success = True
         response.message = (f"advancing {steps} physics step(s) of {self.world.physics_dt_s * 1e3:g} ms "
                             f"from t={self.world.time_s:.6f} s")
+        return response
+
+    def _handle_ball_force(self, request, response):
+        try:
+            held = self.controls.request_ball_force(request.ball_force_deg, request.ball_force_dir_deg)
+        except ParameterError as error:
+            self.refused_force_requests += 1
+            response.success, response.message = False, f"refused, the force in effect is unchanged: {error}"
+            self.logger.warning(f"/sim/set_ball_force: {response.message} ({self.refused_force_requests} refused "
+                                "so far)", throttle_duration_sec=1.0)
+            return response
+        response.success, response.message = True, f"from the next cycle: {held}"
+        self.logger.info(f"/sim/set_ball_force: {held}")
         return response
 
     def _plate_axes(self, frame_id: str, what: str):

@@ -24,6 +24,10 @@ Outputs
                   plate-level offset: the tilt at which the ball stays still, asin(d / (k g)),
                   control/estimation.py `level_offset_deg`; a plate mounted 2 degrees off level
                   shows as 2 degrees) and `plant_gain_ratio` (estimated k g / configured).
+  /diagnostics    diagnostic_msgs/DiagnosticArray (every second, steady clock): status
+                  "<node>: Plant Estimate" (level OK), the same three values and, as its
+                  message, the level offset in words (control/estimation.py
+                  `level_offset_summary`), so a user learns that the plate is not level.
 
 Every /ball_state is judged on arrival (control/plausibility.py) and only a plausible one
 from the publisher the node locked onto replaces the state in use: stamps in the future or
@@ -63,6 +67,7 @@ from typing import Optional
 
 import numpy as np
 from ball_tracker_msgs.msg import BallState
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PointStamped, PoseWithCovarianceStamped, Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
@@ -71,7 +76,7 @@ from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 
 from ball_balance.control import config as control_config
-from ball_balance.control.estimation import plant_statistics
+from ball_balance.control.estimation import level_offset_summary, plant_statistics
 from ball_balance.control.kinematics import Chain, KinematicsError
 from ball_balance.control.pipeline import ControlPipeline
 from ball_balance.control.plausibility import BallStateGate, Heartbeat, SourceLock, gate_config
@@ -94,6 +99,7 @@ WATCHDOG_PERIOD_S = 0.1        # steady-clock checks of the peers
 GRAPH_CHECK_PERIOD_S = 1.0     # publishers on /ball_state and /plate_pose
 UNNAMED = "(a node not yet named in the graph)"
 STATS_PERIOD_S = 10.0          # how often the step statistics are logged
+DIAGNOSTICS_PERIOD_S = 1.0     # /diagnostics, as the controller manager's
 # parameters of the node itself, beside its controller's SCHEMA
 NODE_SCHEMA = [
     # above the tracker (40) and the simulated camera (30): the newest frame's state is
@@ -164,11 +170,14 @@ class BalanceControllerNode(Node):
         self.plate_cmd_pub = self.create_publisher(Vector3Stamped, "/plate_cmd", 10)
         self.reference_pub = self.create_publisher(PointStamped, "/ball_reference", 10)
         self.statistics = StatisticsRegistry(self, "~/statistics")
-        self.statistics.set_entries(plant_statistics(lambda: self.pipeline.plant))
+        self._plant_entries = plant_statistics(lambda: self.pipeline.plant)
+        self.statistics.set_entries(self._plant_entries)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.timer = self.create_timer(self._period_s, self.on_tick)
-        self.watchdog = self.create_timer(WATCHDOG_PERIOD_S, self.on_watchdog,
-                                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
+        self.watchdog = self.create_timer(WATCHDOG_PERIOD_S, self.on_watchdog, clock=steady_clock)
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self.on_diagnostics, clock=steady_clock)
         # last, once the node's threads exist (threads started later inherit the policy)
         priority = self.params["thread_priority"]
         if priority > 0 and not set_process_realtime_priority(priority):
@@ -355,6 +364,22 @@ class BalanceControllerNode(Node):
         elif self.stopped_reason:
             self.get_logger().info(f"resuming after '{self.stopped_reason}': homing from the measured joints")
             self.restart()
+
+    def on_diagnostics(self) -> None:
+        """Every DIAGNOSTICS_PERIOD_S (steady clock): the plant estimate on /diagnostics."""
+        values = {name: float(getter()) for name, getter in self._plant_entries}
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status.append(DiagnosticStatus(
+            level=DiagnosticStatus.OK, name=f"{self.get_name()}: Plant Estimate",
+            message=level_offset_summary(values["disturbance_tilt_x_deg"], values["disturbance_tilt_y_deg"]),
+            hardware_id=self.get_fully_qualified_name(),
+            values=[KeyValue(key=name, value=f"{value:.4f}") for name, value in values.items()]))
+        try:
+            self.diagnostics_pub.publish(msg)
+        except Exception:  # noqa: BLE001 - rclpy raises RCLError when the context went away
+            if self.context.ok():
+                raise
 
     def log_statistics(self) -> None:
         """Every STATS_PERIOD_S: steps by trigger and how old states are when they arrive."""

@@ -20,7 +20,16 @@ import random
 from dataclasses import dataclass, field, fields, replace
 from typing import Optional, Tuple
 
-from ball_balance.plate_geometry import BALL_MASS_KG, BALL_RADIUS_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
+from ball_balance.plate_geometry import (
+    BALL_MASS_KG,
+    BALL_RADIUS_M,
+    GRAVITY_M_S2,
+    ROLLING_FACTOR_SHELL,
+    ROLLING_FACTOR_SOLID,
+)
+
+# a domain's force steps (`force_step_deg`), simulated s from the release: on, turned by 90 degrees, off
+FORCE_STEP_ON_S, FORCE_STEP_TURN_S, FORCE_STEP_OFF_S = 5.0, 9.0, 13.0
 
 
 class SimConfigError(ValueError):
@@ -177,6 +186,26 @@ class DomainKnobs:
 
     def as_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def force_steps(self) -> Tuple[Tuple[float, float, float, float], ...]:
+        """The domain's force steps as (start s, duration s, fx N, fy N), plate axes: the force of
+        a plate tilted by `force_step_deg` (tilt_force_n) towards `force_step_dir_deg` from
+        FORCE_STEP_ON_S, turned by 90 degrees at FORCE_STEP_TURN_S, off at FORCE_STEP_OFF_S;
+        the second starts as the first ends (forces add up in the sim). None when
+        force_step_deg is 0. Benchmark episodes and the hosted simulation both apply them."""
+        if self.force_step_deg == 0.0:
+            return ()
+        angle, direction = self.force_step_deg, self.force_step_dir_deg
+        return ((FORCE_STEP_ON_S, FORCE_STEP_TURN_S - FORCE_STEP_ON_S, *self.tilt_force_n(angle, direction)),
+                (FORCE_STEP_TURN_S, FORCE_STEP_OFF_S - FORCE_STEP_TURN_S, *self.tilt_force_n(angle, direction + 90.0)))
+
+    def tilt_force_n(self, tilt_deg: float, direction_deg: float) -> Tuple[float, float]:
+        """(fx, fy) [N, plate axes]: the force on the ball's centre that rolls this domain's ball
+        as a plate tilted by `tilt_deg` would, F = m g sin(tilt) (force and tilt both act through
+        the same rolling factor), towards `direction_deg` (from +x towards +y)."""
+        f_n = self.ball_mass_kg * GRAVITY_M_S2 * self.gravity_scale * math.sin(math.radians(tilt_deg))
+        phi = math.radians(direction_deg)
+        return f_n * math.cos(phi), f_n * math.sin(phi)
 
 
 # domain -> {knob: value, (low, high) drawn uniformly, or [choices]}

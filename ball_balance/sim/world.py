@@ -19,7 +19,8 @@ controller does). Commands are applied `DomainKnobs.latency_s` after they are gi
 
 Disturbances: `place_ball(x, y, vx, vy)` releases the ball rolling (spin consistent with
 rolling, so no speed is lost to slip), `push_ball(dvx, dvy)` is an impulse with the matching
-spin, `apply_force(fx, fy, duration_s)` a timed external force on the ball's centre.
+spin, `apply_force(fx, fy, duration_s)` a timed external force on the ball's centre,
+`hold_force(fx, fy)` a constant one until changed.
 It renders in the calling thread; the ROS component uses `snapshot()` + CameraRenderer in
 its own thread instead.
 """
@@ -117,6 +118,7 @@ class SimWorld:
         self._renderer = None
         self._plate_vel = np.zeros(6)
         self._forces: list = []     # (end time_s, [force N, torque N m] in world axes) on the ball
+        self._held_force = None     # the entry of _forces that hold_force put there
         self.history_s = 0.0        # keep (time, qpos) of this much past (motion blur)
         self._history: collections.deque = collections.deque()
         self.reset()
@@ -135,7 +137,7 @@ class SimWorld:
         """Time 0, arm at `joint_positions` (held there), ball at rest on the plate at `ball_xy`."""
         mujoco.mj_resetData(self.model, self.data)
         self._pending.clear()
-        self._forces = []
+        self.clear_forces()
         self._history.clear()
         self._dropped = False
         self.set_joint_positions(joint_positions)
@@ -182,22 +184,36 @@ class SimWorld:
         Friction at the contact makes the spin follow, as for a finger pushing the ball."""
         self.apply_wrench((fx_n, fy_n, fz_n), (0.0, 0.0, 0.0), duration_s)
 
+    def hold_force(self, fx_n: float, fy_n: float) -> None:
+        """A constant force (N, plate axes at the time of the call) on the ball's centre from now
+        until the next hold_force, which replaces it ((0, 0) ends it), clear_forces() or reset().
+        The timed forces of apply_force / apply_wrench add to it."""
+        if not (math.isfinite(fx_n) and math.isfinite(fy_n)):
+            raise CommandError(f"force ({fx_n}, {fy_n}) N must be finite")
+        self._forces = [entry for entry in self._forces if entry is not self._held_force]
+        self._held_force = None
+        if fx_n != 0.0 or fy_n != 0.0:
+            self.apply_wrench((fx_n, fy_n, 0.0), (0.0, 0.0, 0.0), math.inf)
+            self._held_force = self._forces[-1]
+
     def apply_wrench(self, force_n: Sequence[float], torque_n_m: Sequence[float], duration_s: float,
                      in_plate_axes: bool = True) -> None:
         """Force (N) and torque (N m) on the ball's centre for `duration_s` s (at least one
-        physics step), in plate axes at the time of the call or in world axes."""
+        physics step; math.inf: until clear_forces()), in plate axes at the time of the call or
+        in world axes."""
         values = np.concatenate([np.asarray(force_n, dtype=float).reshape(3),
-                                 np.asarray(torque_n_m, dtype=float).reshape(3), [duration_s]])
-        if not np.all(np.isfinite(values)) or duration_s < 0.0:
-            raise CommandError(f"wrench {values[:6].tolist()} for {duration_s} s: needs finite numbers "
+                                 np.asarray(torque_n_m, dtype=float).reshape(3)])
+        if not np.all(np.isfinite(values)) or not duration_s >= 0.0:
+            raise CommandError(f"wrench {values.tolist()} for {duration_s} s: needs finite numbers "
                                "and a duration >= 0")
         R = self.plate_pose()[1] if in_plate_axes else np.eye(3)
         end = self.time_s + max(duration_s, self.physics_dt_s)
         self._forces.append((end, np.concatenate([R @ values[:3], R @ values[3:6]])))
 
     def clear_forces(self) -> None:
-        """End every external force and torque on the ball now."""
+        """End every external force and torque on the ball now (the held one too)."""
         self._forces = []
+        self._held_force = None
         self.data.xfrc_applied[self.ids.ball_body, :] = 0.0
 
     def _add_rolling_velocity(self, dvx: float, dvy: float) -> None:
@@ -329,7 +345,8 @@ class SimWorld:
         if not self._forces:
             return
         now = self.data.time
-        self._forces = [(end, f) for end, f in self._forces if end > now + 1e-12]
+        # the same tuples kept: hold_force finds its own by identity
+        self._forces = [entry for entry in self._forces if entry[0] > now + 1e-12]
         for _, wrench_W in self._forces:
             self.data.xfrc_applied[body, :] += wrench_W
 

@@ -180,3 +180,14 @@ def test_refused_and_limited_commands_turn_diagnostics_warn_with_counts_then_ok_
     fwd.slot.reset()
     controllers, hardware, _ = roll_up(cm, THRESHOLDS, counts)
     assert controllers.level == OK and hardware.level == OK  # nothing new since the last report
+
+
+def test_values_registered_in_diagnostics_are_listed_and_never_graded():
+    cm = make_manager(rate=500)
+    fwd = spawn(cm, "fwd", "position_controllers/JointGroupPositionController", {"joints": JOINTS})
+    fwd.register_introspection("level_offset_deg", lambda: 2.0, in_diagnostics=True)
+    fwd.register_introspection("internal_gain", lambda: 5.0)
+    controllers, _, _ = roll_up(cm, THRESHOLDS, {})
+    assert ("fwd level_offset_deg", "2.0000") in controllers.values
+    assert not any("internal_gain" in key for key, _ in controllers.values)
+    assert controllers.level == OK

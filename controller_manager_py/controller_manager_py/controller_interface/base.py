@@ -27,7 +27,7 @@ import enum
 import logging
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Callable, Dict, List, Mapping, Sequence, Tuple
+from typing import Callable, Dict, List, Mapping, Sequence, Set, Tuple
 
 from ..hardware_interface.handle import CommandInterface, StateInterface
 from ..hardware_interface.types import CallbackReturn, State, return_type
@@ -68,6 +68,7 @@ class ControllerInterface:
         self._logger = logging.getLogger("controller")
         self.manager_update_rate = 0
         self.introspection: List[Tuple[str, Callable[[], float]]] = []
+        self.diagnostic_values: Set[str] = set()   # introspection names also listed in /diagnostics
 
     # ---- plumbing (called by the manager) --------------------------------------------
     def init(self, name: str, node, logger, manager_update_rate: int) -> CallbackReturn:
@@ -104,11 +105,15 @@ class ControllerInterface:
         on_configure or later (e.g. joint limits: manager.joint_limits.limits_from_description)."""
         return self.robot_description
 
-    def register_introspection(self, name: str, getter: Callable[[], float]) -> None:
+    def register_introspection(self, name: str, getter: Callable[[], float], in_diagnostics: bool = False) -> None:
         """Publish `getter()` as `<controller>.<name>` on ~/introspection_data (call in on_configure).
         Counters of bad input named `refused_*`, `clamped_*` or `limited_*` also appear in
-        /diagnostics, WARN when they grew since the previous report."""
+        /diagnostics, WARN when they grew since the previous report; `in_diagnostics` lists any
+        other value there too (key `<controller> <name>`, in the "Controllers Activity" status),
+        for what a user should see without subscribing to introspection (an estimate, a mode)."""
         self.introspection.append((name, getter))
+        if in_diagnostics:
+            self.diagnostic_values.add(name)
 
     def get_logger(self):
         return self._logger

@@ -12,7 +12,8 @@ Refused and limited commands: a controller's introspection entries named `refuse
 `clamped_*`, `limited_*` or `missed_*` (e.g. forward_command's `refused_commands`,
 onnx_policy's `missed_inferences`) and each hardware component's joint-limits stage
 (`limited_commands`) are listed with their counts; a count that grew since the previous
-roll-up makes its status WARN, naming how many.
+roll-up makes its status WARN, naming how many. Other introspection values a controller
+registered `in_diagnostics` are listed as they are (key `<controller> <name>`).
 """
 from __future__ import annotations
 
@@ -118,13 +119,17 @@ def roll_up(cm, thresholds: Mapping[str, float], counts: Optional[Dict[str, floa
     for spec in list(cm.controllers.values()):
         states[spec.state.label] = states.get(spec.state.label, 0) + 1
         controllers.values.append((spec.name, spec.state.label))
+        listed = getattr(spec.c, "diagnostic_values", ())
         for what, getter in list(spec.c.introspection):
-            if what.startswith(REFUSAL_PREFIXES):
+            if what.startswith(REFUSAL_PREFIXES) or what in listed:
                 try:
                     value = float(getter())
                 except Exception:  # noqa: BLE001 - a counter that vanished with a reconfigure
                     continue
-                grade_count(controllers, spec.name, what, value, counts)
+                if what.startswith(REFUSAL_PREFIXES):
+                    grade_count(controllers, spec.name, what, value, counts)
+                else:
+                    controllers.values.append((f"{spec.name} {what}", f"{value:.4f}"))
         if spec.state == State.ACTIVE:
             grade_stats(controllers, spec.name, spec.stats, spec.effective_rate, thresholds, "controllers")
             if spec.async_handler is not None:

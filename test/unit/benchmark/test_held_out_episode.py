@@ -8,9 +8,6 @@ import numpy as np
 import pytest
 
 from ball_balance.benchmark.episode import (
-    FORCE_STEP_OFF_S,
-    FORCE_STEP_ON_S,
-    FORCE_STEP_TURN_S,
     EpisodeSpec,
     Force,
     Occlusion,
@@ -22,6 +19,7 @@ from ball_balance.benchmark.episode import (
 )
 from ball_balance.benchmark.metrics import episode_metrics
 from ball_balance.plate_geometry import GRAVITY_M_S2
+from ball_balance.sim.config import FORCE_STEP_OFF_S, FORCE_STEP_ON_S, FORCE_STEP_TURN_S
 
 
 def forces(spec):

@@ -4,7 +4,13 @@ import math
 import numpy as np
 from control_plant import K_G, DelayedPlant
 
-from ball_balance.control.estimation import EstimatorConfig, PlantEstimator, level_offset_deg, plant_statistics
+from ball_balance.control.estimation import (
+    EstimatorConfig,
+    PlantEstimator,
+    level_offset_deg,
+    level_offset_summary,
+    plant_statistics,
+)
 
 DT = 0.02          # control tick: the tilt is recorded every tick
 FRAME = 1.0 / 30   # camera: a ball position every frame
@@ -109,3 +115,11 @@ def test_the_disturbance_reads_as_the_plate_level_offset_that_causes_it():
     names = dict(plant_statistics(lambda: est))
     assert list(names) == ["disturbance_tilt_x_deg", "disturbance_tilt_y_deg", "plant_gain_ratio"]
     assert math.isclose(names["disturbance_tilt_x_deg"](), 2.0) and math.isclose(names["plant_gain_ratio"](), 1.0)
+
+
+def test_the_level_offset_in_words_says_how_far_and_which_way_the_ball_is_pushed():
+    text = level_offset_summary(0.0, 2.0)   # e.g. /sim/set_ball_force 2 deg towards 90 deg
+    assert "2.00 deg off level" in text and "towards 90 deg" in text and "y +2.00" in text
+    assert "towards 225 deg" in level_offset_summary(-1.0, -1.0)
+    assert "0.00 deg off level" in level_offset_summary(0.0, 0.0)
+    assert "no estimate" in level_offset_summary(math.nan, 0.0)

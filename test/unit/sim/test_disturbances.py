@@ -2,6 +2,7 @@
 speed, pushes and timed forces change its motion as physics says, the harsher domains exist
 and are reproducible."""
 import dataclasses
+import math
 
 import pytest
 
@@ -59,6 +60,78 @@ def test_bad_disturbances_are_refused(world):
         world.push_ball(float("nan"), 0.0)
     with pytest.raises(CommandError, match="duration"):
         world.apply_force(0.01, 0.0, -1.0)
+    with pytest.raises(CommandError, match="duration"):
+        world.apply_force(0.01, 0.0, float("nan"))
+
+
+def _rolling_gain(world):
+    """k / m: the rolling ball's acceleration per newton on its centre."""
+    k = ROLLING_FACTOR_SHELL if world.config.ball_shell else ROLLING_FACTOR_SOLID
+    return k / world.knobs.ball_mass_kg
+
+
+def test_held_force_acts_until_replaced_and_zero_ends_it(world):
+    world.reset()
+    world.advance(0.05)
+    world.hold_force(0.002, 0.0)
+    world.advance(0.2)
+    a = _rolling_gain(world) * 0.002
+    assert world.ball_truth().vx == pytest.approx(a * 0.2, rel=0.05)
+    world.hold_force(0.0, 0.002)            # replaces the first: x keeps its speed, y gains
+    world.advance(0.2)
+    truth = world.ball_truth()
+    assert truth.vx == pytest.approx(a * 0.2, rel=0.05) and truth.vy == pytest.approx(a * 0.2, rel=0.05)
+    world.hold_force(0.0, 0.0)
+    world.advance(0.1)
+    assert world.ball_truth().vy == pytest.approx(truth.vy, rel=0.03)
+    assert not world.data.xfrc_applied[world.ids.ball_body].any()
+
+
+def test_timed_forces_add_to_the_held_force_and_clear_forces_ends_both(world):
+    world.reset()
+    world.advance(0.05)
+    world.hold_force(0.002, 0.0)
+    world.apply_force(0.002, 0.0, 0.1)
+    world.advance(0.2)   # 0.004 N for 0.1 s, then 0.002 N for 0.1 s
+    assert world.ball_truth().vx == pytest.approx(_rolling_gain(world) * 0.006 * 0.1, rel=0.05)
+    world.clear_forces()
+    world.advance(0.01)
+    assert not world.data.xfrc_applied[world.ids.ball_body].any()
+
+
+def test_a_bad_held_force_is_refused_and_the_one_in_effect_stays(world):
+    world.reset()
+    world.hold_force(0.002, 0.0)
+    with pytest.raises(CommandError, match="finite"):
+        world.hold_force(float("inf"), 0.0)
+    world.advance(0.01)
+    assert math.hypot(*world.data.xfrc_applied[world.ids.ball_body][:3]) == pytest.approx(0.002)
+    world.clear_forces()
+
+
+def test_a_tilt_force_rolls_the_ball_as_the_tilted_plate_would(world):
+    world.reset()
+    world.advance(0.05)
+    knobs = world.knobs
+    fx, fy = knobs.tilt_force_n(2.0, 120.0)
+    assert math.hypot(fx, fy) == pytest.approx(knobs.ball_mass_kg * 9.81 * math.sin(math.radians(2.0)))
+    world.hold_force(fx, fy)
+    world.advance(0.3)
+    k = ROLLING_FACTOR_SHELL if world.config.ball_shell else ROLLING_FACTOR_SOLID
+    speed = k * 9.81 * math.sin(math.radians(2.0)) * 0.3   # x'' = k g sin(tilt)
+    truth = world.ball_truth()
+    assert (truth.vx, truth.vy) == (pytest.approx(speed * math.cos(math.radians(120.0)), rel=0.05),
+                                    pytest.approx(speed * math.sin(math.radians(120.0)), rel=0.05))
+    world.clear_forces()
+
+
+def test_force_steps_of_a_domain_are_on_turned_and_off():
+    knobs = DomainKnobs.sample("force_3deg", 4)
+    (on, duration1, fx1, fy1), (turn, duration2, fx2, fy2) = knobs.force_steps()
+    assert (on, on + duration1, turn, turn + duration2) == (5.0, 9.0, 9.0, 13.0)
+    assert (fx1, fy1) == pytest.approx(knobs.tilt_force_n(3.0, knobs.force_step_dir_deg))
+    assert (fx2, fy2) == pytest.approx((-fy1, fx1))
+    assert DomainKnobs().force_steps() == ()
 
 
 def test_the_domain_chooses_the_ball():

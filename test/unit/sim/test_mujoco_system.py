@@ -7,6 +7,7 @@ import pytest
 
 from ball_balance import robot
 from controller_manager_py.hardware_interface import CallbackReturn, State, parse_control_resources, return_type
+from controller_manager_py.parameters import ParameterError
 from controller_manager_py.plugins import HARDWARE_GROUP, load_class
 
 PERIOD_S = 0.002
@@ -93,6 +94,10 @@ def test_ball_states_follow_the_ball(system):
     ({"pacing": "fast"}, "pacing"),
     ({"gravity_scale": "heavy"}, "gravity_scale"),
     ({"robot_description_file": "/nonexistent.urdf"}, "cannot read"),
+    ({"ball_force_deg": "12"}, "ball_force_deg"),
+    ({"ball_force_dir_deg": "nan"}, "ball_force_dir_deg"),
+    ({"plate_mount_tilt_deg": "11"}, "plate_mount_tilt_deg"),
+    ({"plate_mount_axis_deg": "-90"}, "plate_mount_axis_deg"),
 ])
 def test_bad_hardware_parameter_fails_on_init_naming_it(params, message, caplog):
     with caplog.at_level(logging.ERROR):
@@ -112,9 +117,13 @@ def test_description_without_plate_link_fails_on_init(tmp_path, caplog):
 
 
 def test_domain_and_knob_overrides_reach_the_world():
-    system, result = make_system({"domain": "high_gravity", "ball_mass_kg": "0.004", "seed": 3})
+    system, result = make_system({"domain": "high_gravity", "ball_mass_kg": "0.004", "seed": 3,
+                                  "plate_mount_tilt_deg": "2", "plate_mount_axis_deg": "30"})
     assert result == CallbackReturn.SUCCESS
     assert system.world.knobs.gravity_scale == 1.5 and system.world.knobs.ball_mass_kg == 0.004
+    assert (system.world.knobs.plate_mount_tilt_deg, system.world.knobs.plate_mount_axis_deg) == (2.0, 30.0)
+    normal = system.world.plate_pose()[1][:, 2]
+    assert math.degrees(math.acos(normal[2])) == pytest.approx(2.0, abs=1e-6)
 
 
 class _WallClock:
@@ -275,3 +284,67 @@ def test_pushes_domain_pushes_the_ball_in_the_hosted_simulation():
     speed = (system.get_state("ball/vx") ** 2 + system.get_state("ball/vy") ** 2) ** 0.5
     assert speed == pytest.approx(0.15, rel=0.1)
     system.on_shutdown(State.ACTIVE)
+
+
+def _ball_velocity(system):
+    return system.get_state("ball/vx"), system.get_state("ball/vy")
+
+
+def _tilt_speed(system, tilt_deg, seconds):
+    """The speed a plate tilted by tilt_deg gives the ball in `seconds`: k g sin(tilt) t."""
+    gravity = 9.81 * system.world.knobs.gravity_scale
+    return system.world.config.rolling_factor * gravity * math.sin(math.radians(tilt_deg)) * seconds
+
+
+def test_ball_force_from_the_start_and_changed_while_running():
+    system, result = make_system({"ball_force_deg": "2", "ball_force_dir_deg": "90"})
+    assert result == CallbackReturn.SUCCESS
+    system.on_configure(State.UNCONFIGURED)
+    system.on_activate(State.INACTIVE)
+    try:
+        run_cycles(system, 100)    # 0.2 s towards +y
+        vx, vy = _ball_velocity(system)
+        assert vy == pytest.approx(_tilt_speed(system, 2.0, 0.2), rel=0.1) and abs(vx) < 1e-3
+        said = system.request_ball_force(1.0, 180.0)
+        assert "180 deg" in said and "1 deg" in said
+        run_cycles(system, 100)    # the y speed kept, -x gained at half the rate
+        vx, vy2 = _ball_velocity(system)
+        assert vx == pytest.approx(-_tilt_speed(system, 1.0, 0.2), rel=0.1) and vy2 == pytest.approx(vy, rel=0.05)
+        system.request_reset_world()   # the force is a setting of the world: it stays
+        run_cycles(system, 100)
+        vx, vy = _ball_velocity(system)
+        assert vx == pytest.approx(-_tilt_speed(system, 1.0, 0.2), rel=0.1) and abs(vy) < 1e-3
+        assert system.request_ball_force(0.0, 0.0) == "no ball force"
+        run_cycles(system, 50)
+        assert _ball_velocity(system)[0] == pytest.approx(vx, rel=0.05)
+    finally:
+        system.on_shutdown(State.ACTIVE)
+
+
+@pytest.mark.parametrize("tilt, direction, name", [(10.5, 0.0, "ball_force_deg"), (math.nan, 0.0, "ball_force_deg"),
+                                                   (-1.0, 0.0, "ball_force_deg"), (1.0, math.inf, "ball_force_dir_deg"),
+                                                   (1.0, 400.0, "ball_force_dir_deg")])
+def test_a_bad_ball_force_request_is_refused_naming_the_value_and_changes_nothing(system, tilt, direction, name):
+    system.request_ball_force(1.0, 0.0)
+    with pytest.raises(ParameterError, match=name):
+        system.request_ball_force(tilt, direction)
+    run_cycles(system, 100)
+    assert system.ball_force == (1.0, 0.0)
+    assert system.get_state("ball/vx") == pytest.approx(_tilt_speed(system, 1.0, 0.2), rel=0.1)
+
+
+def test_force_domain_steps_in_the_hosted_simulation_as_in_an_episode():
+    system, result = make_system({"domain": "force_3deg", "seed": 2})
+    assert result == CallbackReturn.SUCCESS
+    system.on_configure(State.UNCONFIGURED)
+    system.on_activate(State.INACTIVE)
+    try:
+        run_cycles(system, int(4.9 / PERIOD_S))
+        assert max(map(abs, _ball_velocity(system))) < 1e-3
+        run_cycles(system, int(0.4 / PERIOD_S))    # on at 5 s, towards force_step_dir_deg
+        vx, vy = _ball_velocity(system)
+        direction = math.radians(system.world.knobs.force_step_dir_deg)
+        assert math.hypot(vx, vy) == pytest.approx(_tilt_speed(system, 3.0, 0.3), rel=0.15)
+        assert vx * math.cos(direction) + vy * math.sin(direction) > 0.95 * math.hypot(vx, vy)
+    finally:
+        system.on_shutdown(State.ACTIVE)
