@@ -24,11 +24,17 @@ The D term's velocity error passes a first-order low-pass (`derivative_filter_s`
 tracker's Kalman velocity is noisy enough that, unfiltered, it shook the plate (tilt-rate
 RMS 3x the MPC's), pulled the online plant estimate off through the loop and cost
 1-2 mm on the circle and 0.3-0.7 s of push recovery (docs/control.md).
+
+The law is written once, over arrays (`Pid`): every element is an independent axis, a
+plate's two at run time (`PlatePid`), a batch of plates' in the training plant
+(ball_balance/policy/env.py).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+from typing import Optional, Tuple
+
+import numpy as np
 
 
 @dataclass(frozen=True)
@@ -45,77 +51,91 @@ class PidGains:
     i_max_vel_error_m_s: float = 0.03  # integrate only while |v - v_ref| is below this (0: off)
 
 
-class AxisPid:
-    """One plate axis. `step` is allocation-free; `reset` clears the integral."""
+class Pid:
+    """The law over an array of independent axes of `shape` sharing one gain set: () one
+    axis, (2,) a plate, (batch, 2) a batch of plates. `reset` clears the integral and the
+    derivative filter."""
 
-    def __init__(self, gains: PidGains, k_g: float):
+    def __init__(self, gains: PidGains, k_g: float, shape: Tuple[int, ...] = ()):
         self.gains = gains
-        self.k_g = k_g              # k * g [m/s^2 per rad], for acceleration feed-forward
-        self.integral = 0.0         # integral of the error [m s]
-        self.saturated = False      # last output was clipped
-        self.vel_error_filtered: float | None = None   # D term's input after the low-pass
+        self.k_g = k_g                  # k * g [m/s^2 per rad], for acceleration feed-forward
+        self.shape = tuple(shape)
+        self.integral = np.zeros(self.shape)        # integral of the error [m s]
+        self.saturated = np.zeros(self.shape, bool)  # last output was clipped
+        self.vel_error_filtered: Optional[np.ndarray] = None   # D term's input after the low-pass
 
     def reset(self) -> None:
-        self.integral = 0.0
-        self.saturated = False
+        self.integral = np.zeros(self.shape)
+        self.saturated = np.zeros(self.shape, bool)
         self.vel_error_filtered = None
 
-    def step(self, error_m: float, vel_error_m_s: float, acc_ref_m_s2: float, dt_s: float,
-             gain_scale: float = 1.0, u_bias_rad: float = 0.0) -> float:
-        """One update. error_m = x - r, vel_error_m_s = v - v_ref. Returns u [rad], clipped.
+    def step(self, error_m, vel_error_m_s, acc_ref_m_s2, dt_s: float, gain_scale=1.0,
+             u_bias_rad=0.0) -> np.ndarray:
+        """One update of every axis. error_m = x - r, vel_error_m_s = v - v_ref, acc_ref_m_s2:
+        arrays of the law's shape (or broadcasting to it). Returns u [rad], clipped.
 
         gain_scale multiplies the feedback (P, I, D) only, e.g. k_g (configured) / k_g (estimated)
         to keep the loop's acceleration per metre of error on a stronger plant; u_bias_rad = d / k_g
         cancels an estimated constant disturbance (control/estimation.py). The caller passes the
-        reference acceleration scaled to the plant gain it believes in. 1 and 0 without an estimate.
+        reference acceleration scaled to the plant gain it believes in. 1 and 0 without an
+        estimate; either may be an array broadcasting to the law's shape.
         """
         g = self.gains
-        e = 0.0 if abs(error_m) < g.deadband_m else error_m - math.copysign(g.deadband_m, error_m)
-        u_ff = -acc_ref_m_s2 / self.k_g
+        e = np.asarray(error_m, dtype=float)
+        if g.deadband_m > 0.0:   # |e| below it counts as zero, above it is measured from its edge
+            e = e - np.minimum(np.maximum(e, -g.deadband_m), g.deadband_m)
+        vel_error = np.array(vel_error_m_s, dtype=float)
         if g.derivative_filter_s > 0.0 and self.vel_error_filtered is not None:
             alpha = dt_s / (g.derivative_filter_s + dt_s)
-            vel_error_m_s = self.vel_error_filtered + alpha * (vel_error_m_s - self.vel_error_filtered)
-        self.vel_error_filtered = vel_error_m_s
-        u_pd = gain_scale * (g.kp * e + g.kd * vel_error_m_s) + u_ff + u_bias_rad
+            vel_error = self.vel_error_filtered + alpha * (vel_error - self.vel_error_filtered)
+        self.vel_error_filtered = vel_error
+        u_ff = np.asarray(acc_ref_m_s2, dtype=float) / -self.k_g
+        u_pd = gain_scale * (g.kp * e + g.kd * vel_error) + u_ff + u_bias_rad
+        k_i = gain_scale * g.ki
         # Integrate near the reference's speed, unless the output is saturated and the error
         # would push it further.
-        settled = g.i_max_vel_error_m_s <= 0.0 or abs(vel_error_m_s) < g.i_max_vel_error_m_s
-        candidate = self.integral + (e * dt_s if abs(e) < g.i_zone_m and settled else 0.0)
-        u_raw = u_pd + gain_scale * g.ki * candidate
-        pushing_out = (u_raw > g.u_max_rad and e > 0) or (u_raw < -g.u_max_rad and e < 0)
-        if not pushing_out:
-            self.integral = candidate
+        in_zone = np.abs(e) < g.i_zone_m
+        grows = in_zone & (np.abs(vel_error) < g.i_max_vel_error_m_s) if g.i_max_vel_error_m_s > 0.0 else in_zone
+        candidate = self.integral + np.where(grows, e * dt_s, 0.0)
+        u_raw = u_pd + k_i * candidate
+        pushing_out = np.sign(e) * u_raw > g.u_max_rad   # past the limit on the error's side
+        integral = np.where(pushing_out, self.integral, candidate)
         if g.ki > 0:
             i_max = g.i_limit_rad / g.ki
-            self.integral = min(max(self.integral, -i_max), i_max)
-        u_raw = u_pd + gain_scale * g.ki * self.integral
-        u = min(max(u_raw, -g.u_max_rad), g.u_max_rad)
+            integral = np.minimum(np.maximum(integral, -i_max), i_max)
+        u_raw = u_pd + k_i * integral
+        u = np.minimum(np.maximum(u_raw, -g.u_max_rad), g.u_max_rad)
         self.saturated = u != u_raw
-        if self.saturated and g.ki > 0 and g.antiwindup_time_s > 0 and abs(e) < g.i_zone_m:
+        if g.ki > 0 and g.antiwindup_time_s > 0 and np.count_nonzero(self.saturated):
             # back-calculation: unwind only the integral that pushes into the limit, to zero at most
-            into_limit = math.copysign(1.0, u_raw - u)
-            if self.integral * into_limit > 0:
-                bleed = abs(u_raw - u) / (gain_scale * g.ki * g.antiwindup_time_s) * dt_s
-                self.integral = into_limit * max(0.0, abs(self.integral) - bleed)
+            into_limit = np.sign(u_raw - u)
+            unwind = self.saturated & in_zone & (integral * into_limit > 0)
+            bleed = np.abs(u_raw - u) / (k_i * g.antiwindup_time_s) * dt_s
+            integral = np.where(unwind, into_limit * np.maximum(0.0, np.abs(integral) - bleed), integral)
+        self.integral = integral
         return u
 
 
 class PlatePid:
-    """Two independent axes (x -> u_x, y -> u_y) sharing one gain set."""
+    """A plate's two axes (x -> u_x, y -> u_y) sharing one gain set, stepped on the ball state
+    and a reference sample."""
 
     def __init__(self, gains: PidGains, k_g: float):
-        self.axes = (AxisPid(gains, k_g), AxisPid(gains, k_g))
+        self.law = Pid(gains, k_g, (2,))
+
+    @property
+    def gains(self) -> PidGains:
+        return self.law.gains
 
     def set_gains(self, gains: PidGains) -> None:
-        for axis in self.axes:
-            axis.gains = gains
+        self.law.gains = gains
 
     def reset(self) -> None:
-        for axis in self.axes:
-            axis.reset()
+        self.law.reset()
 
-    def step(self, pos_m, vel_m_s, ref, dt_s: float, gain_scale: float = 1.0, u_bias_rad=(0.0, 0.0)):
+    def step(self, pos_m, vel_m_s, ref, dt_s: float, gain_scale: float = 1.0,
+             u_bias_rad=(0.0, 0.0)) -> Tuple[float, float]:
         """pos/vel: measured (predicted) ball state, ref: RefSample. Returns (u_x, u_y) [rad]."""
-        return tuple(axis.step(pos_m[i] - ref.p[i], vel_m_s[i] - ref.v[i], ref.a[i], dt_s, gain_scale,
-                               float(u_bias_rad[i]))
-                     for i, axis in enumerate(self.axes))
+        u = self.law.step(np.subtract(pos_m, ref.p), np.subtract(vel_m_s, ref.v), ref.a, dt_s, gain_scale,
+                          u_bias_rad)
+        return float(u[0]), float(u[1])

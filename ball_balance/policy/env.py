@@ -10,7 +10,8 @@ rates the closed-loop benchmark uses (ball_balance/benchmark/episode.py):
     control tick 60 Hz (the PID node's rate; config/policy.yaml): online plant estimate (k g
     and a constant disturbance, the pipeline's control/estimation.py, batched) -> latency
     prediction over the state's age with that estimate -> the PID as the pid node runs it
-    (schema defaults, the estimate in its feed-forward, disturbance tilt and feedback scale)
+    (control/pid.py's own law over the batch; schema defaults, the estimate in its
+    feed-forward, disturbance tilt and feedback scale)
     + policy correction -> shaping (tilt-rate limit per tick, total tilt limit) ->
     camera-to-command latency -> servo lag ->
     plate tilt -> x'' = -k g sin(tilt + bias)
@@ -23,13 +24,14 @@ what it can observe.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import NamedTuple, Optional
 
 import numpy as np
 
 from ball_balance.control import config as control_config
 from ball_balance.control.estimation import EstimatorConfig
+from ball_balance.control.pid import Pid
 from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
 from ball_balance.policy.batch_kalman import BatchBallKalman
 from ball_balance.policy.observation import ObservationBuilder, correction_weight, low_gain_share
@@ -150,44 +152,6 @@ def reference_table(kind: str, n_ticks: int) -> np.ndarray:
         s = ref.sample(n * CONTROL_DT_S)
         out[n] = (s.p, s.v, s.a)
     return out
-
-
-class BatchPid:
-    """ball_balance.control.pid.AxisPid over a batch (same rule: deadband, zone, speed gate,
-    anti-windup, derivative filter)."""
-
-    def __init__(self, shape, values: dict, k_g: float, u_max: float):
-        self.kp, self.ki, self.kd = values["kp"], values["ki"], values["kd"]
-        self.i_limit, self.deadband, self.i_zone = values["i_limit_rad"], values["deadband_m"], values["i_zone_m"]
-        self.t_aw, self.k_g, self.u_max = values["antiwindup_time_s"], k_g, u_max
-        self.d_filter_s = values.get("derivative_filter_s", 0.0)
-        self.i_max_ve = values.get("i_max_vel_error_m_s", 0.0)
-        self.integral = np.zeros(shape)
-        self.ve_filtered = None
-
-    def step(self, e_raw, ve, a_ref, dt, gain_scale=1.0, u_bias=0.0):
-        """AxisPid.step for every element; gain_scale (batch, 1) and u_bias (batch, 2) as there."""
-        e = np.where(np.abs(e_raw) < self.deadband, 0.0, e_raw - np.sign(e_raw) * self.deadband)
-        if self.d_filter_s > 0.0 and self.ve_filtered is not None:
-            ve = self.ve_filtered + dt / (self.d_filter_s + dt) * (ve - self.ve_filtered)
-        self.ve_filtered = np.array(ve, dtype=float)
-        u_pd = gain_scale * (self.kp * e + self.kd * ve) - a_ref / self.k_g + u_bias
-        settled = np.abs(ve) < self.i_max_ve if self.i_max_ve > 0.0 else True
-        candidate = self.integral + np.where((np.abs(e) < self.i_zone) & settled, e * dt, 0.0)
-        u_raw = u_pd + gain_scale * self.ki * candidate
-        pushing = ((u_raw > self.u_max) & (e > 0)) | ((u_raw < -self.u_max) & (e < 0))
-        self.integral = np.where(pushing, self.integral, candidate)
-        i_max = self.i_limit / self.ki if self.ki > 0 else np.inf
-        self.integral = np.clip(self.integral, -i_max, i_max)
-        u_raw = u_pd + gain_scale * self.ki * self.integral
-        u = np.clip(u_raw, -self.u_max, self.u_max)
-        if self.ki > 0 and self.t_aw > 0:
-            # back-calculation: unwind only the integral pushing into the limit, to zero at most
-            into = np.sign(u_raw - u)
-            unwind = (u != u_raw) & (np.abs(e) < self.i_zone) & (self.integral * into > 0)
-            bleed = np.abs(u_raw - u) / (gain_scale * self.ki * self.t_aw) * dt
-            self.integral = np.where(unwind, into * np.maximum(0.0, np.abs(self.integral) - bleed), self.integral)
-        return u
 
 
 class BatchPlantEstimator:
@@ -500,10 +464,11 @@ class PlateBatch:
         self.last_push_s = np.full(b, -np.inf)
         self.sq_err = np.zeros(b)
         self.n_err = np.zeros(b)
-        self.pid = BatchPid((b, 2), self.pid_values, self.nom.k_g, self.nom.u_max_rad)
+        gains = replace(control_config.pid_gains(self.pid_values), u_max_rad=self.nom.u_max_rad)
+        self.pid = Pid(gains, self.nom.k_g, (b, 2))
         self.delay = BatchDelayEstimator(b, self._delay_estimator())
         # the PID teacher's own integral and derivative filter, stepped every tick on the truth
-        self.teacher_pid = BatchPid((b, 2), self.pid_values, self.nom.k_g, self.nom.u_max_rad)
+        self.teacher_pid = Pid(gains, self.nom.k_g, (b, 2))
         self.u_teacher = np.zeros((b, 2))
         capacity = int(np.ceil(self.estimator_cfg.window_s * self.nom.camera_rate_hz)) + 8
         self.estimator = BatchPlantEstimator(b, self.estimator_cfg, self.nom.k_g, capacity)
@@ -595,7 +560,7 @@ class PlateBatch:
         k_est = self.estimator.k_g[:, None]
         scale = np.minimum(1.0, self.nom.k_g / k_est) if self.scale_feedback else 1.0
         self.u_pid = self.pid.step(self.e, self.ve, self.a_ref * (self.nom.k_g / k_est), CONTROL_DT_S,
-                                   gain_scale=scale, u_bias=self.estimator.offset / k_est)
+                                   gain_scale=scale, u_bias_rad=self.estimator.offset / k_est)
         self.u_pid = np.where(self.engaged[:, None], self.u_pid, 0.0)
         self.age = np.where(have, age, 0.0)
         if self.teacher in ("pid", "pid_mpc"):
@@ -654,7 +619,7 @@ class PlateBatch:
         k_true = self.k_g_true
         scale = np.minimum(1.0, self.nom.k_g / k_true) if self.scale_feedback else 1.0
         u = self.teacher_pid.step(x - ref[:, 0], v - ref[:, 1], ref[:, 2] * (self.nom.k_g / k_true), CONTROL_DT_S,
-                                  gain_scale=scale, u_bias=-self.bias)
+                                  gain_scale=scale, u_bias_rad=-self.bias)
         return np.where(self.engaged[:, None], u, 0.0)
 
     def _pd_teacher(self) -> np.ndarray:

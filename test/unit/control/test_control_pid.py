@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 from control_plant import K_G, DelayedPlant
 
-from ball_balance.control.pid import AxisPid, PidGains, PlatePid
-from ball_balance.control.references import Stationary
+from ball_balance.control.pid import Pid, PidGains, PlatePid
+from ball_balance.control.references import Circle, Stationary
 
 
 def test_ball_right_of_reference_gets_positive_tilt_that_drives_it_toward_minus_x():
@@ -16,14 +16,14 @@ def test_ball_right_of_reference_gets_positive_tilt_that_drives_it_toward_minus_
 
 
 def test_output_is_clipped():
-    pid = AxisPid(PidGains(u_max_rad=0.1), K_G)
+    pid = Pid(PidGains(u_max_rad=0.1), K_G)
     assert pid.step(10.0, 10.0, 0.0, 0.02) == 0.1
     assert pid.step(-10.0, -10.0, 0.0, 0.02) == -0.1
 
 
 def test_integral_does_not_wind_up_while_saturated():
     gains = PidGains(ki=2.0, u_max_rad=0.1, i_limit_rad=0.05, i_zone_m=1.0)
-    pid = AxisPid(gains, K_G)
+    pid = Pid(gains, K_G)
     for _ in range(500):  # 10 s pinned at saturation
         pid.step(0.2, 0.0, 0.0, 0.02)
     assert abs(gains.ki * pid.integral) <= 0.05 + 1e-12
@@ -33,7 +33,7 @@ def test_integral_does_not_wind_up_while_saturated():
 
 def test_derivative_filter_smooths_the_velocity_and_reset_forgets_it():
     g = PidGains(kp=0.0, ki=0.0, kd=1.0, derivative_filter_s=0.06)
-    pid = AxisPid(g, K_G)
+    pid = Pid(g, K_G)
     assert pid.step(0.0, 0.01, 0.0, 0.02) == pytest.approx(0.01)   # the first sample passes
     # a velocity step: a quarter (0.02 / (0.06 + 0.02)) of it at once, then first-order
     assert pid.step(0.0, 0.05, 0.0, 0.02) == pytest.approx(0.01 + 0.25 * 0.04)
@@ -49,14 +49,14 @@ def test_derivative_filter_smooths_the_velocity_and_reset_forgets_it():
 
 def test_gain_scale_scales_the_feedback_but_not_the_feed_forward():
     g = PidGains(kp=2.0, ki=0.0, kd=0.5, derivative_filter_s=0.0)
-    full = AxisPid(g, K_G).step(0.01, 0.02, 0.0, 0.02)
-    assert AxisPid(g, K_G).step(0.01, 0.02, 0.0, 0.02, gain_scale=0.5) == pytest.approx(0.5 * full)
-    ff = AxisPid(g, K_G).step(0.0, 0.0, -0.3, 0.02, gain_scale=0.5)
+    full = Pid(g, K_G).step(0.01, 0.02, 0.0, 0.02)
+    assert Pid(g, K_G).step(0.01, 0.02, 0.0, 0.02, gain_scale=0.5) == pytest.approx(0.5 * full)
+    ff = Pid(g, K_G).step(0.0, 0.0, -0.3, 0.02, gain_scale=0.5)
     assert ff == pytest.approx(0.3 / K_G)
 
 
 def test_deadband_stops_integration_on_tiny_errors():
-    pid = AxisPid(PidGains(deadband_m=0.002), K_G)
+    pid = Pid(PidGains(deadband_m=0.002), K_G)
     for _ in range(100):
         pid.step(0.0015, 0.0, 0.0, 0.02)
     assert pid.integral == 0.0
@@ -64,8 +64,8 @@ def test_deadband_stops_integration_on_tiny_errors():
 
 def test_derivative_uses_measured_velocity():
     g = PidGains(kp=0.0, ki=0.0, kd=1.0, derivative_filter_s=0.0)
-    assert AxisPid(g, K_G).step(0.0, 0.3, 0.0, 0.02) == 0.15  # clipped at default u_max
-    assert AxisPid(g, K_G).step(0.0, 0.1, 0.0, 0.02) == 0.1
+    assert Pid(g, K_G).step(0.0, 0.3, 0.0, 0.02) == 0.15  # clipped at default u_max
+    assert Pid(g, K_G).step(0.0, 0.1, 0.0, 0.02) == 0.1
 
 
 def test_closed_loop_settles_from_off_centre_release():
@@ -83,7 +83,7 @@ def test_saturation_by_a_big_error_never_charges_the_integral_against_it():
     clamp (the bug left the ball 10-15 mm off target for seconds after a big move)."""
     gains = PidGains(kp=2.0, ki=0.4, kd=0.75, u_max_rad=0.15, i_limit_rad=0.03, i_zone_m=0.02,
                      antiwindup_time_s=0.2, derivative_filter_s=0.0)
-    pid = AxisPid(gains, K_G)
+    pid = Pid(gains, K_G)
     pid.integral = 0.01                      # a little integral toward +u from before the move
     for _ in range(100):                     # 2 s saturated at +u_max by a 0.09 m error
         assert pid.step(0.09, 0.05, 0.0, 0.02) == 0.15
@@ -101,13 +101,13 @@ def test_the_integral_grows_only_near_the_references_speed():
     """A ball crossing the integration zone fast (returning from a push) must not charge the
     integral; the same error at the reference's speed (a constant offset) does."""
     gains = PidGains(derivative_filter_s=0.0, i_max_vel_error_m_s=0.03)
-    returning, offset = AxisPid(gains, K_G), AxisPid(gains, K_G)
+    returning, offset = Pid(gains, K_G), Pid(gains, K_G)
     for _ in range(25):                      # 0.5 s at 10 mm, the one at 0.1 m/s, the other at rest
         returning.step(0.01, -0.1, 0.0, 0.02)
         offset.step(0.01, 0.0, 0.0, 0.02)
     assert returning.integral == 0.0
     assert offset.integral == pytest.approx(0.01 * 0.5)
-    ungated = AxisPid(PidGains(derivative_filter_s=0.0, i_max_vel_error_m_s=0.0), K_G)
+    ungated = Pid(PidGains(derivative_filter_s=0.0, i_max_vel_error_m_s=0.0), K_G)
     ungated.step(0.01, -0.1, 0.0, 0.02)
     assert ungated.integral > 0.0            # 0: integrates whatever the speed
 
@@ -123,3 +123,43 @@ def test_after_a_saturating_release_the_ball_settles_close_to_the_target():
         plant.advance(u, 0.02)
     assert saturated > 5                     # the case under test: the output did saturate
     assert np.linalg.norm(plant.p) < 0.003   # (the integral at its opposite clamp left ~12 mm)
+
+
+def _random_inputs(rng, shape, ticks):
+    """Errors that cross the integration zone and saturate, with a feedback scale per plate."""
+    for k in range(ticks):
+        scale = 0.3 if k % 40 < 10 else 0.015
+        yield (rng.normal(0, scale, shape), rng.normal(0, 0.05, shape), rng.normal(0, 0.2, shape),
+               rng.uniform(0.5, 1.0, shape[:-1] + (1,)), rng.normal(0, 0.01, shape))
+
+
+@pytest.mark.parametrize("gains", [PidGains(), PidGains(deadband_m=0.002, derivative_filter_s=0.0, ki=2.0),
+                                   PidGains(ki=0.0, i_max_vel_error_m_s=0.0, antiwindup_time_s=0.0)])
+def test_a_batch_of_plates_is_each_plate_stepped_alone(gains):
+    """The law over a (3, 2) batch gives, bit for bit, what three plates' laws give alone and
+    what six single axes give: every element is an independent axis."""
+    batch = Pid(gains, K_G, (3, 2))
+    plates = [Pid(gains, K_G, (2,)) for _ in range(3)]
+    axes = [[Pid(gains, K_G) for _ in range(2)] for _ in range(3)]
+    saturated = 0
+    for e, ve, a, scale, bias in _random_inputs(np.random.default_rng(3), (3, 2), 300):
+        u = batch.step(e, ve, a, 0.02, gain_scale=scale, u_bias_rad=bias)
+        alone = np.array([plates[i].step(e[i], ve[i], a[i], 0.02, float(scale[i, 0]), bias[i]) for i in range(3)])
+        single = np.array([[axes[i][j].step(e[i, j], ve[i, j], a[i, j], 0.02, float(scale[i, 0]), bias[i, j])
+                            for j in range(2)] for i in range(3)])
+        assert np.array_equal(u, alone) and np.array_equal(u, single)
+        assert np.array_equal(batch.integral, [p.integral for p in plates])
+        saturated += int(np.count_nonzero(batch.saturated))
+    assert saturated > 50                    # the anti-windup paths were exercised
+
+
+def test_plate_pid_steps_the_law_on_the_error_to_the_reference():
+    ref = Circle(0.1, 8.0).sample(1.0)
+    plate, law = PlatePid(PidGains(), K_G), Pid(PidGains(), K_G, (2,))
+    pos, vel, bias = np.array([0.05, 0.02]), np.array([0.1, -0.1]), np.array([0.002, -0.001])
+    for _ in range(3):
+        u = plate.step(pos, vel, ref, 0.02, 0.8, bias)
+        assert u == tuple(law.step(pos - ref.p, vel - ref.v, ref.a, 0.02, 0.8, bias))
+    plate.set_gains(PidGains(kp=0.0, ki=0.0, kd=0.0))
+    plate.reset()
+    assert plate.gains.kp == 0.0 and plate.step(pos, vel, ref, 0.02) == pytest.approx(tuple(-ref.a / K_G))

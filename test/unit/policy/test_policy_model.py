@@ -70,14 +70,13 @@ def test_configured_pid_matches_the_one_the_model_was_trained_on():
     assert law.runner.where.endswith("residual_tilt.onnx")
     # the PID under the residual is the one it was trained on, the integral's speed gate included
     assert md.training["base_pid"]["i_max_vel_error_m_s"] > 0.0
-    assert all(axis.gains.i_max_vel_error_m_s == md.training["base_pid"]["i_max_vel_error_m_s"]
-               for axis in law.pid.axes)
+    assert law.pid.gains.i_max_vel_error_m_s == md.training["base_pid"]["i_max_vel_error_m_s"]
 
 
 def test_model_trained_before_the_integral_speed_gate_runs_on_the_pid_without_it():
     law = load_tilt_law(policy_values(policy_model=str(DATA / "before_speed_gate.onnx")))
     assert policy_values()["i_max_vel_error_m_s"] > 0.0
-    assert all(axis.gains.i_max_vel_error_m_s == 0.0 for axis in law.pid.axes)
+    assert law.pid.gains.i_max_vel_error_m_s == 0.0
 
 
 def test_model_trained_on_another_pid_is_refused():

@@ -7,31 +7,13 @@ import pytest
 from ball_balance.benchmark.episode import controller_values
 from ball_balance.control import config as control_config
 from ball_balance.control.estimation import PlantEstimator
-from ball_balance.control.pid import AxisPid
 from ball_balance.policy.env import (
     CONTROL_DT_S,
     BatchDelayEstimator,
-    BatchPid,
     BatchPlantEstimator,
     DomainRanges,
     PlateBatch,
 )
-
-
-def test_batch_pid_is_the_axis_pid():
-    values = controller_values("pid", "stationary")
-    gains, k_g = control_config.pid_gains(values), control_config.k_g(values)
-    rng = np.random.default_rng(3)
-    batch = BatchPid((5, 2), values, k_g, gains.u_max_rad)
-    axes = [[AxisPid(gains, k_g) for _ in range(2)] for _ in range(5)]
-    scale = np.linspace(0.5, 1.0, 5)[:, None]
-    for _ in range(300):
-        e, ve, a = rng.normal(0, 0.03, (5, 2)), rng.normal(0, 0.1, (5, 2)), rng.normal(0, 0.2, (5, 2))
-        bias = rng.normal(0, 0.01, (5, 2))
-        got = batch.step(e, ve, a, 0.02, gain_scale=scale, u_bias=bias)
-        want = np.array([[axes[i][j].step(e[i, j], ve[i, j], a[i, j], 0.02, float(scale[i, 0]), bias[i, j])
-                          for j in range(2)] for i in range(5)])
-        np.testing.assert_allclose(got, want, atol=1e-12)
 
 
 def test_the_policy_is_trained_on_the_pid_nodes_pid():
@@ -43,7 +25,8 @@ def test_the_policy_is_trained_on_the_pid_nodes_pid():
         assert policy[name] == pid[name], name
     env = PlateBatch(2, seed=0, duration_s=1.0)
     env.reset()
-    assert env.pid.d_filter_s == pid["derivative_filter_s"] and env.pid.deadband == pid["deadband_m"]
+    assert env.pid.gains == dataclasses.replace(control_config.pid_gains(pid), u_max_rad=env.nom.u_max_rad)
+    assert env.pid.k_g == control_config.k_g(pid)
     assert env.estimator_cfg == control_config.estimator_config(policy)
 
 
