@@ -77,29 +77,37 @@ class _DelayAlignment:
 
     The start value is a guess, not evidence: the first alignment replaces it outright, later
     ones are blended in (`blend`). Nothing changes while the commands barely move (std below
-    `min_excitation_rad`): a still plate says nothing about delay.
+    `min_excitation_rad`): a still plate says nothing about delay. One estimate per plate of
+    `batch_shape` (() a single plate: `estimate_s` a float, `converged` a bool).
     """
 
-    def __init__(self, initial_s: float, blend: float, min_excitation_rad: float):
-        self.estimate_s = initial_s
-        self.converged = False          # True once a first alignment has been taken in
+    def __init__(self, initial_s: float, blend: float, min_excitation_rad: float, batch_shape: Tuple[int, ...] = ()):
+        self.estimate_s = np.full(batch_shape, float(initial_s))[()]
+        self.converged = np.zeros(batch_shape, bool)[()]   # True once a first alignment has been taken in
         self.blend, self.min_excitation = blend, min_excitation_rad
 
     @staticmethod
-    def _best(costs) -> float:
-        """Index of the least cost, refined by a parabola through its neighbours."""
-        best = int(np.argmin(costs))
-        frac = 0.0
-        if 0 < best < len(costs) - 1:
-            c0, c1, c2 = costs[best - 1], costs[best], costs[best + 1]
-            denom = c0 - 2 * c1 + c2
-            frac = 0.5 * (c0 - c2) / denom if denom > 0 else 0.0
+    def _best(costs) -> np.ndarray:
+        """Index of the least cost along the last axis, refined by a parabola through its neighbours."""
+        costs = np.asarray(costs, dtype=float)
+        last = costs.shape[-1] - 1
+        best = np.argmin(costs, axis=-1)
+
+        def cost_at(index):
+            return np.take_along_axis(costs, np.clip(index, 0, last)[..., None], -1)[..., 0]
+
+        c0, c1, c2 = cost_at(best - 1), cost_at(best), cost_at(best + 1)
+        denom = c0 - 2 * c1 + c2
+        inner = (best > 0) & (best < last) & (denom > 0)
+        frac = np.where(inner, 0.5 * (c0 - c2) / np.where(inner, denom, 1.0), 0.0)
         return best + frac
 
-    def _take(self, measured_s: float) -> None:
-        weight = self.blend if self.converged else 1.0
-        self.estimate_s += weight * (measured_s - self.estimate_s)
-        self.converged = True
+    def _take(self, measured_s, taken=True) -> None:
+        """Take the alignment `measured_s` in where `taken` (per plate)."""
+        weight = np.where(self.converged, self.blend, 1.0)
+        self.estimate_s = np.where(taken, self.estimate_s + weight * (measured_s - self.estimate_s),
+                                   self.estimate_s)[()]
+        self.converged = (self.converged | taken)[()]
 
 
 class DelayEstimator(_DelayAlignment):
@@ -116,43 +124,57 @@ class DelayEstimator(_DelayAlignment):
     waiting for the full window and blending from the start value leaves a 0.2 s delay
     estimated at 0.03 s for 3.3 s and at 0.17 s after 4 s, and the MPC, planning for the
     wrong delay, drops the ball (docs/benchmarks/control.md, "Delay estimate start").
+
+    `batch_shape` () estimates one plate's delay (the pipeline's); (batch,) a delay per plate
+    of a batch stepped together (the training plant, ball_balance/policy/env.py), each plate
+    exactly as if alone.
     """
 
     def __init__(self, initial_s: float, period_s: float, max_delay_s: float = 0.3, window_s: float = 3.0,
                  update_every: int = 25, blend: float = 0.5, min_excitation_rad: float = 0.003,
-                 min_window_s: float = 0.6):
-        super().__init__(initial_s, blend, min_excitation_rad)
+                 min_window_s: float = 0.6, batch_shape: Tuple[int, ...] = ()):
+        super().__init__(initial_s, blend, min_excitation_rad, batch_shape)
         self.period_s = period_s
         self.max_lag = int(round(max_delay_s / period_s))
-        n = int(round(window_s / period_s)) + self.max_lag + 1
-        self._cmd: Deque[np.ndarray] = deque(maxlen=n)
-        self._meas: Deque[np.ndarray] = deque(maxlen=n)
+        self.capacity = int(round(window_s / period_s)) + self.max_lag + 1
         self.update_every = update_every
         self.min_window = max(2, int(round(min(min_window_s, window_s) / period_s)))
-        self._count = 0
+        # commanded and measured tilt pairs, a ring of `capacity` ticks per plate
+        self._cmd = np.zeros((*batch_shape, self.capacity, 2))
+        self._meas = np.zeros((*batch_shape, self.capacity, 2))
+        self._length = 0                # ticks stored (at most capacity)
+        self._count = 0                 # ticks added (the next one's ring slot: _count % capacity)
 
     def reset(self) -> None:
-        self._cmd.clear()
-        self._meas.clear()
+        self._length = 0
 
-    def add(self, u_cmd, tilt_measured) -> float:
-        """One control tick's commanded and measured tilt pairs [rad]; returns the estimate [s]."""
-        self._cmd.append(np.asarray(u_cmd, dtype=float))
-        self._meas.append(np.asarray(tilt_measured, dtype=float))
+    def add(self, u_cmd, tilt_measured):
+        """One control tick's commanded and measured tilt pairs (u_x, u_y) [rad] (shape batch_shape + (2,));
+        returns the estimate [s]."""
+        slot = self._count % self.capacity
+        self._cmd[..., slot, :] = u_cmd
+        self._meas[..., slot, :] = tilt_measured
+        self._length = min(self._length + 1, self.capacity)
         self._count += 1
-        if self._count % self.update_every == 0 and len(self._cmd) - self.max_lag >= self.min_window:
+        if self._count % self.update_every == 0 and self._length - self.max_lag >= self.min_window:
             self._update()
         return self.estimate_s
 
     def _update(self) -> None:
-        cmd, meas = np.array(self._cmd), np.array(self._meas)
-        window = len(cmd) - self.max_lag
-        if np.std(cmd[-window:]) < self.min_excitation:
-            return
-        target = meas[-window:]
-        costs = [np.mean((target - cmd[len(cmd) - window - lag:len(cmd) - lag]) ** 2)
-                 for lag in range(self.max_lag + 1)]
-        self._take(self._best(costs) * self.period_s)
+        length = self._length
+        order = np.arange(self._count - length, self._count) % self.capacity   # oldest first
+        cmd, meas = self._cmd[..., order, :], self._meas[..., order, :]
+        window = length - self.max_lag
+
+        def per_plate(pairs):   # (..., ticks, 2) -> (..., 2 ticks): each plate's sums in one order
+            return pairs.reshape(*pairs.shape[:-2], -1)
+
+        # "not below" rather than ">=": commands gone NaN still count as moving
+        excited = ~(per_plate(cmd[..., -window:, :]).std(axis=-1) < self.min_excitation)
+        lagged = np.stack([cmd[..., length - window - lag:length - lag, :] for lag in range(self.max_lag + 1)],
+                          axis=-3)                                   # (..., lags, window, 2)
+        costs = np.mean(per_plate((meas[..., None, -window:, :] - lagged) ** 2), axis=-1)   # (..., lags)
+        self._take(self._best(costs) * self.period_s, excited)
 
 
 class StampedDelayEstimator(_DelayAlignment):

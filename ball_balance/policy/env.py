@@ -281,56 +281,6 @@ class BatchPlantEstimator:
             self.offset[ok] = np.clip(d_new, -cfg.offset_max_m_s2, cfg.offset_max_m_s2)
 
 
-class BatchDelayEstimator:
-    """ball_balance.control.prediction.DelayEstimator over a batch of plates: the same
-    least-squares alignment of the measured plate tilt with the commanded tilt over a sliding
-    window, every `update_every` ticks, for every plate at once (its settings copied from a
-    DelayEstimator, the one source of them)."""
-
-    def __init__(self, batch: int, single):
-        self.b, self.period_s, self.max_lag = batch, single.period_s, single.max_lag
-        self.n = single._cmd.maxlen
-        self.update_every, self.blend, self.min_excitation = single.update_every, single.blend, single.min_excitation
-        self.min_window = single.min_window
-        self.estimate_s = np.full(batch, float(single.estimate_s))
-        self.converged = np.zeros(batch, bool)
-        self.cmd = np.zeros((batch, self.n, 2))     # oldest first, the newest in the last row
-        self.meas = np.zeros((batch, self.n, 2))
-        self.length = 0
-        self.count = 0
-
-    def add(self, u_cmd, tilt_measured) -> np.ndarray:
-        """One tick's commanded and measured tilts (b, 2) [rad]; returns the estimates (b,) [s]."""
-        self.cmd[:, :-1], self.meas[:, :-1] = self.cmd[:, 1:], self.meas[:, 1:]
-        self.cmd[:, -1], self.meas[:, -1] = u_cmd, tilt_measured
-        self.length = min(self.length + 1, self.n)
-        self.count += 1
-        if self.count % self.update_every == 0 and self.length - self.max_lag >= self.min_window:
-            self._update()
-        return self.estimate_s
-
-    def _update(self) -> None:
-        n, length = self.n, self.length
-        cmd, meas = self.cmd[:, n - length:], self.meas[:, n - length:]
-        window = length - self.max_lag
-        excited = cmd[:, -window:].reshape(self.b, -1).std(1) >= self.min_excitation
-        target = meas[:, -window:]
-        costs = np.stack([np.mean((target - cmd[:, length - window - lag:length - lag]) ** 2, axis=(1, 2))
-                          for lag in range(self.max_lag + 1)], 1)
-        best = np.argmin(costs, 1)
-        rows = np.arange(self.b)
-        c0 = costs[rows, np.maximum(best - 1, 0)]
-        c1 = costs[rows, best]
-        c2 = costs[rows, np.minimum(best + 1, self.max_lag)]
-        denom = c0 - 2 * c1 + c2
-        inner = (best > 0) & (best < self.max_lag) & (denom > 0)
-        frac = np.where(inner, 0.5 * (c0 - c2) / np.where(inner, denom, 1.0), 0.0)
-        measured = (best + frac) * self.period_s
-        weight = np.where(self.converged, self.blend, 1.0)
-        self.estimate_s = np.where(excited, self.estimate_s + weight * (measured - self.estimate_s), self.estimate_s)
-        self.converged |= excited
-
-
 class PlateBatch:
     """`batch` episodes of `duration_s`, stepped together. Use:
 
@@ -398,11 +348,12 @@ class PlateBatch:
         state_gain, prev_gain = PlateMpc(cfg).first_move_gains()
         return MpcFirstMove(cfg.horizon, state_gain, prev_gain, cfg.k_g, cfg.u_max_rad, cfg.du_max_rad_s * cfg.dt_s)
 
-    def _delay_estimator(self):
+    def _delay_estimator(self, batch_shape=()):
         from ball_balance.control.prediction import DelayEstimator
 
         v = self.pid_values
-        return DelayEstimator(v["actuation_delay_s"], CONTROL_DT_S, min_window_s=v["actuation_delay_min_window_s"])
+        return DelayEstimator(v["actuation_delay_s"], CONTROL_DT_S, min_window_s=v["actuation_delay_min_window_s"],
+                              batch_shape=batch_shape)
 
     @property
     def actuation_delay_s(self) -> np.ndarray:
@@ -466,7 +417,7 @@ class PlateBatch:
         self.n_err = np.zeros(b)
         gains = replace(control_config.pid_gains(self.pid_values), u_max_rad=self.nom.u_max_rad)
         self.pid = Pid(gains, self.nom.k_g, (b, 2))
-        self.delay = BatchDelayEstimator(b, self._delay_estimator())
+        self.delay = self._delay_estimator((b,))
         # the PID teacher's own integral and derivative filter, stepped every tick on the truth
         self.teacher_pid = Pid(gains, self.nom.k_g, (b, 2))
         self.u_teacher = np.zeros((b, 2))

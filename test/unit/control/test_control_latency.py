@@ -119,6 +119,30 @@ def test_delay_estimator_keeps_its_value_without_excitation():
     assert est.estimate_s == 0.05
 
 
+def test_delay_estimator_over_a_batch_is_each_plate_estimated_alone():
+    """A delay per plate of a batch, bit for bit what each plate's estimator gives alone, a
+    plate that stops moving (no update) included."""
+    from ball_balance.control.prediction import DelayEstimator
+
+    b, lags = 4, [0, 3, 7, 12]
+    single = [DelayEstimator(0.03, 0.02) for _ in range(b)]
+    batch = DelayEstimator(0.03, 0.02, batch_shape=(b,))
+    rng = np.random.default_rng(0)
+    cmds = []
+    for n in range(600):
+        w = np.arange(1, b + 1) * n * 0.02
+        u = 0.02 * np.stack([np.sin(0.7 * w), np.cos(0.5 * w)], 1)
+        if n > 400:
+            u[0] = 0.0
+        cmds.append(u)
+        meas = np.stack([cmds[max(0, n - lags[i])][i] for i in range(b)]) + rng.normal(0, 1e-4, (b, 2))
+        got = batch.add(u, meas)
+        assert np.array_equal(got, [single[i].add(u[i], meas[i]) for i in range(b)])
+    assert np.array_equal(batch.converged, [e.converged for e in single])
+    np.testing.assert_allclose(got[1:], np.array(lags[1:]) * 0.02, atol=0.005)
+    assert isinstance(single[0].estimate_s, float)   # one plate: a number, as the pipeline uses it
+
+
 def _lagged_commands(lag: int, n: int = 400):
     rng = np.random.default_rng(1)
     commands = np.cumsum(rng.normal(0, 0.01, (n, 2)), axis=0)

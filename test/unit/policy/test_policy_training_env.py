@@ -9,7 +9,6 @@ from ball_balance.control import config as control_config
 from ball_balance.control.estimation import PlantEstimator
 from ball_balance.policy.env import (
     CONTROL_DT_S,
-    BatchDelayEstimator,
     BatchPlantEstimator,
     DomainRanges,
     PlateBatch,
@@ -78,28 +77,6 @@ def test_batch_plant_estimator_is_the_plant_estimator():
     np.testing.assert_allclose(batch.k_g, [e.k_g for e in single], rtol=2e-3)
     np.testing.assert_allclose(batch.offset, [e.offset for e in single], atol=2e-3)
     np.testing.assert_allclose(batch.k_g, k_true, rtol=0.05)
-
-
-def test_batch_delay_estimator_is_the_delay_estimator():
-    """The batched command -> plate delay estimate follows control/prediction.py's on the same
-    commanded and measured tilts, a plate that stops moving (no update) included."""
-    from ball_balance.control.prediction import DelayEstimator
-
-    b, lags = 4, [0, 3, 7, 12]
-    single = [DelayEstimator(0.03, 0.02) for _ in range(b)]
-    batch = BatchDelayEstimator(b, DelayEstimator(0.03, 0.02))
-    rng = np.random.default_rng(0)
-    cmds = []
-    for n in range(600):
-        w = np.arange(1, b + 1) * n * 0.02
-        u = 0.02 * np.stack([np.sin(0.7 * w), np.cos(0.5 * w)], 1)
-        if n > 400:
-            u[0] = 0.0
-        cmds.append(u)
-        meas = np.stack([cmds[max(0, n - lags[i])][i] for i in range(b)]) + rng.normal(0, 1e-4, (b, 2))
-        got = batch.add(u, meas)
-        np.testing.assert_allclose(got, [single[i].add(u[i], meas[i]) for i in range(b)], atol=1e-12)
-    np.testing.assert_allclose(got[1:], np.array(lags[1:]) * 0.02, atol=0.005)
 
 
 def test_plant_prediction_is_the_pipelines():
