@@ -1,0 +1,84 @@
+"""What the Foxglove node decides, without ROS or the Foxglove SDK: when to subscribe to a topic,
+which messages to forward, which topic names it accepts.
+
+The node (ball_balance/nodes/foxglove_node.py) advertises one Foxglove channel per topic once the
+topic has a publisher, but subscribes to the topic only while a Foxglove client watches its
+channel: a graph nobody watches costs nothing. `Watchers` keeps who watches which channel and
+says what the node must do when a client subscribes or leaves. A latched topic (transient
+local: /tf_static, /robot_description) is subscribed anew for every client that joins, so that
+its publishers send their kept messages again and the newcomer receives them too.
+"""
+from __future__ import annotations
+
+from typing import Dict, Iterable, Optional, Set
+
+SUBSCRIBE = "subscribe"      # the first client watches: subscribe to the topic
+RESUBSCRIBE = "resubscribe"  # another client joins a latched topic: subscribe anew (the kept messages again)
+UNSUBSCRIBE = "unsubscribe"  # the last client left: drop the subscription
+
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+
+
+class Watchers:
+    """The clients watching each channel (by id); one instance per node, used by one thread."""
+
+    def __init__(self):
+        self._clients: Dict[int, Set[int]] = {}
+
+    def watching(self, channel_id: int) -> int:
+        """How many clients watch the channel."""
+        return len(self._clients.get(channel_id, ()))
+
+    def joined(self, channel_id: int, client_id: int, latched: bool) -> Optional[str]:
+        """A client subscribed to the channel: SUBSCRIBE, RESUBSCRIBE or None (nothing to do)."""
+        clients = self._clients.setdefault(channel_id, set())
+        if client_id in clients:
+            return None
+        clients.add(client_id)
+        if len(clients) == 1:
+            return SUBSCRIBE
+        return RESUBSCRIBE if latched else None
+
+    def left(self, channel_id: int, client_id: int) -> Optional[str]:
+        """A client unsubscribed from the channel or disconnected: UNSUBSCRIBE or None."""
+        clients = self._clients.get(channel_id)
+        if not clients or client_id not in clients:
+            return None
+        clients.discard(client_id)
+        return None if clients else UNSUBSCRIBE
+
+
+class RateLimit:
+    """Lets a message through when at least 1/max_rate_hz has passed since the last one let through.
+
+    max_rate_hz 0 lets every message through. Times are in nanoseconds of a monotonic clock.
+    """
+
+    def __init__(self, max_rate_hz: float):
+        self.min_period_ns = int(1e9 / max_rate_hz) if max_rate_hz > 0 else 0
+        self._last_ns: Optional[int] = None
+
+    def allow(self, now_ns: int) -> bool:
+        if self._last_ns is not None and now_ns - self._last_ns < self.min_period_ns:
+            return False
+        self._last_ns = now_ns
+        return True
+
+
+def is_image(type_name: str) -> bool:
+    """True for the image types the image rate limit applies to."""
+    return type_name in IMAGE_TYPES
+
+
+def topic_list_problem(topics: Iterable[str]) -> Optional[str]:
+    """Why a list of topic names is unusable (for the `topics` parameter), or None."""
+    topics = list(topics)
+    if not topics:
+        return "must name at least one topic"
+    for name in topics:
+        if not isinstance(name, str) or not name.startswith("/") or name.endswith("/") or " " in name:
+            return f"has {name!r}: give absolute topic names such as /ball_state"
+    repeated = sorted({name for name in topics if topics.count(name) > 1})
+    if repeated:
+        return f"names {', '.join(repeated)} more than once"
+    return None

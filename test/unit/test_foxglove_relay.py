@@ -1,0 +1,50 @@
+"""The Foxglove node's decisions without ROS: when to (re)subscribe, which frames to forward,
+which topic lists to accept."""
+from ball_balance import foxglove_relay as relay
+
+
+def test_a_topic_is_subscribed_while_at_least_one_client_watches_it():
+    watchers = relay.Watchers()
+    assert watchers.joined(channel_id=1, client_id=10, latched=False) == relay.SUBSCRIBE
+    assert watchers.joined(1, 11, latched=False) is None       # already subscribed
+    assert watchers.joined(1, 11, latched=False) is None       # the same client again
+    assert watchers.watching(1) == 2
+    assert watchers.left(1, 10) is None
+    assert watchers.left(1, 11) == relay.UNSUBSCRIBE
+    assert watchers.left(1, 11) is None                        # unknown client: nothing to do
+    assert watchers.left(2, 10) is None                        # unknown channel
+    assert watchers.joined(1, 12, latched=False) == relay.SUBSCRIBE  # watched again
+
+
+def test_a_latched_topic_is_subscribed_anew_for_each_client_that_joins():
+    watchers = relay.Watchers()
+    assert watchers.joined(5, 1, latched=True) == relay.SUBSCRIBE
+    assert watchers.joined(5, 2, latched=True) == relay.RESUBSCRIBE
+    assert watchers.joined(5, 2, latched=True) is None
+    assert watchers.left(5, 1) is None
+    assert watchers.left(5, 2) == relay.UNSUBSCRIBE
+
+
+def test_rate_limit_lets_one_message_through_per_period():
+    limit = relay.RateLimit(max_rate_hz=10.0)  # 100 ms
+    times_ms = [0, 30, 99, 100, 150, 250, 260, 1000]
+    passed = [t for t in times_ms if limit.allow(t * 1_000_000)]
+    assert passed == [0, 100, 250, 1000]
+
+
+def test_rate_limit_zero_lets_every_message_through():
+    limit = relay.RateLimit(0.0)
+    assert all(limit.allow(t) for t in (0, 0, 1, 1))
+
+
+def test_images_are_the_rate_limited_types():
+    assert relay.is_image("sensor_msgs/msg/Image") and relay.is_image("sensor_msgs/msg/CompressedImage")
+    assert not relay.is_image("sensor_msgs/msg/CameraInfo") and not relay.is_image("ball_tracker_msgs/msg/BallState")
+
+
+def test_topic_lists_must_be_absolute_names_each_once():
+    assert relay.topic_list_problem(["/ball_state", "/tf"]) is None
+    assert "at least one" in relay.topic_list_problem([])
+    assert "'ball_state'" in relay.topic_list_problem(["ball_state"])
+    assert "'/camera/'" in relay.topic_list_problem(["/camera/"])
+    assert "/tf more than once" in relay.topic_list_problem(["/tf", "/ball_state", "/tf"])
