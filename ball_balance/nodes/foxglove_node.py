@@ -1,0 +1,197 @@
+"""`ball_balance_foxglove`: the graph's topics over the Foxglove WebSocket protocol (docs/foxglove.md).
+
+Foxglove or Lichtblick connect to ws://127.0.0.1:8765 (`host`, `port`) and see the topics named
+in `topics` as the ROS graph carries them:
+- one channel per topic, advertised once the topic has a publisher: message encoding `cdr`
+  (the publisher's bytes, never decoded here), schema `ros2msg` named `pkg/msg/Type`, the .msg
+  text of the installed interface package with its nested types appended (the schema rosbag2
+  writes, ball_balance.cli.bag_format);
+- a topic is subscribed only while a client watches its channel (ball_balance.foxglove_relay),
+  with a QoS that matches every publisher (reliable only if all are, transient local only if
+  all are), re-matched when the publishers change;
+- images (sensor_msgs Image, CompressedImage) at most `max_image_rate_hz` frames a second.
+The Foxglove SDK (`foxglove-sdk`) runs the server on its own threads; its client events come
+here through a queue and a guard condition, so every ROS call stays on the executor's thread.
+"""
+from __future__ import annotations
+
+import queue
+import time
+from typing import Dict, Optional
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from ball_balance.cli.bag import matching_policies
+from ball_balance.cli.bag_format import message_definition
+from ball_balance.cli.errors import CliError
+from ball_balance.cli.messages import get_interface
+from ball_balance.foxglove_relay import (
+    RESUBSCRIBE,
+    SUBSCRIBE,
+    UNSUBSCRIBE,
+    RateLimit,
+    Watchers,
+    is_image,
+    topic_list_problem,
+)
+from controller_manager_py.parameters import Param, declare_parameters
+from controller_manager_py.ros.node_main import StartupError, main_for
+
+DEFAULT_TOPICS = ("/camera/image_raw", "/camera/camera_info", "/tf", "/tf_static", "/ball_balance_visualization",
+                  "/ball_state", "/joint_states", "/diagnostics", "/ball_reference", "/plate_cmd",
+                  "/robot_description")
+
+SCHEMA = [
+    Param("host", "127.0.0.1", "address the WebSocket server listens on (0.0.0.0: every interface)",
+          read_only=True, user_facing=True),
+    Param("port", 8765, "WebSocket port (0: a free one, named in the start-up line)", "", 0, 65535,
+          read_only=True, user_facing=True),
+    Param("topics", DEFAULT_TOPICS, "topics served, each once it has a publisher", read_only=True,
+          user_facing=True, check=topic_list_problem),
+    Param("max_image_rate_hz", 15.0, "frames a second at most, per image topic (0: every frame)", "Hz",
+          0.0, 1000.0, read_only=True, user_facing=True),
+    Param("graph_poll_s", 1.0, "how often the ROS graph is read for new topics and changed publishers", "s",
+          0.1, 10.0, read_only=True),
+]
+DEPTH = 10  # keep-last depth of the subscriptions: several latched /tf_static publishers fit
+
+
+class _Topic:
+    """One served topic: its Foxglove channel once advertised, its subscription while watched."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.type_name: Optional[str] = None
+        self.interface = None
+        self.channel = None
+        self.policies: Optional[tuple] = None  # (reliability, durability) matching the publishers
+        self.subscription = None
+        self.limit: Optional[RateLimit] = None
+
+    @property
+    def latched(self) -> bool:
+        return self.policies is not None and self.policies[1] == "transient_local"
+
+
+class _ClientEvents:
+    """The SDK's server listener: queues client (un)subscriptions and wakes the executor."""
+
+    def __init__(self, events: queue.SimpleQueue, wake):
+        self.events, self.wake = events, wake
+
+    def on_subscribe(self, client, channel) -> None:
+        self.events.put((True, channel.id, client.id))
+        self.wake.trigger()
+
+    def on_unsubscribe(self, client, channel) -> None:
+        self.events.put((False, channel.id, client.id))
+        self.wake.trigger()
+
+
+class FoxgloveNode(Node):
+    def __init__(self):
+        super().__init__("ball_balance_foxglove")
+        self.params = declare_parameters(self, SCHEMA)
+        import foxglove
+
+        self.foxglove = foxglove
+        self.topics: Dict[str, _Topic] = {name: _Topic(name) for name in self.params["topics"]}
+        self.by_channel: Dict[int, _Topic] = {}
+        self.watchers = Watchers()
+        self.events: queue.SimpleQueue = queue.SimpleQueue()
+        self.wake = self.create_guard_condition(self.on_client_events)
+        host, port = self.params["host"], self.params["port"]
+        try:
+            self.server = foxglove.start_server(name="ball_balance", host=host, port=port,
+                                                server_listener=_ClientEvents(self.events, self.wake))
+        except Exception as error:  # noqa: BLE001 - the SDK raises RuntimeError for a busy or bad address
+            raise StartupError(f"cannot serve on {host}:{port}: {error}") from None
+        self.get_logger().info(f"Foxglove WebSocket server on ws://{host}:{self.server.port} "
+                               f"({len(self.topics)} topics, each once it has a publisher)")
+        self.create_timer(self.params["graph_poll_s"], self.on_graph_poll)
+        self.on_graph_poll()
+
+    # ---- graph (executor thread) ----------------------------------------------------------------
+    def on_graph_poll(self) -> None:
+        """Advertise topics that got a publisher; re-match the QoS where the publishers changed."""
+        types = dict(self.get_topic_names_and_types())
+        for topic in list(self.topics.values()):  # advertise() drops a topic it cannot serve
+            if not types.get(topic.name):
+                continue
+            publishers = self.get_publishers_info_by_topic(topic.name)
+            if not publishers:
+                continue  # its QoS is not known yet: wait, as rosbag2 does
+            if topic.channel is None and not self.advertise(topic, types[topic.name][0]):
+                continue
+            policies = matching_policies(publishers)
+            if policies != topic.policies:
+                topic.policies = policies
+                if topic.subscription is not None:
+                    self.get_logger().info(f"re-matched the QoS of {topic.name}: {'/'.join(policies)}")
+                    self.subscribe(topic)
+
+    def advertise(self, topic: _Topic, type_name: str) -> bool:
+        try:
+            topic.interface = get_interface(type_name)
+            definition = message_definition(type_name)
+        except CliError as error:
+            self.get_logger().error(f"not serving {topic.name}: {error}")
+            del self.topics[topic.name]
+            return False
+        schema = self.foxglove.Schema(name=type_name, encoding="ros2msg", data=definition.encode())
+        topic.type_name = type_name
+        topic.channel = self.foxglove.Channel(topic.name, message_encoding="cdr", schema=schema)
+        topic.limit = RateLimit(self.params["max_image_rate_hz"]) if is_image(type_name) else None
+        self.by_channel[topic.channel.id()] = topic
+        self.get_logger().info(f"advertised {topic.name} ({type_name})")
+        return True
+
+    # ---- clients (executor thread, woken by the SDK's listener) -----------------------------------
+    def on_client_events(self) -> None:
+        while True:
+            try:
+                subscribed, channel_id, client_id = self.events.get_nowait()
+            except queue.Empty:
+                return
+            topic = self.by_channel.get(channel_id)
+            if topic is None:
+                continue
+            if subscribed:
+                action = self.watchers.joined(channel_id, client_id, topic.latched)
+            else:
+                action = self.watchers.left(channel_id, client_id)
+            if action in (SUBSCRIBE, RESUBSCRIBE):
+                self.subscribe(topic)
+            elif action == UNSUBSCRIBE:
+                self.unsubscribe(topic)
+
+    def subscribe(self, topic: _Topic) -> None:
+        """(Re)create the topic's subscription with its publishers' policies."""
+        self.unsubscribe(topic)
+        reliability, durability = topic.policies
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH,
+                         reliability=ReliabilityPolicy[reliability.upper()],
+                         durability=DurabilityPolicy[durability.upper()])
+        topic.subscription = self.create_subscription(topic.interface, topic.name, self.forwarder(topic), qos,
+                                                      raw=True)
+
+    def unsubscribe(self, topic: _Topic) -> None:
+        if topic.subscription is not None:
+            self.destroy_subscription(topic.subscription)
+            topic.subscription = None
+
+    @staticmethod
+    def forwarder(topic: _Topic):
+        """The subscription's callback: the CDR bytes to the channel, nothing else per message."""
+        log, limit = topic.channel.log, topic.limit
+        if limit is None:
+            return log
+        return lambda data: log(data) if limit.allow(time.monotonic_ns()) else None
+
+    def destroy_node(self) -> None:
+        self.server.stop()
+        super().destroy_node()
+
+
+main = main_for(FoxgloveNode)
