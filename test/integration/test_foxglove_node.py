@@ -4,14 +4,13 @@ ball state and a MuJoCo-rendered camera frame from the CDR bytes and ros2msg sch
 serves, field for field as this test published them over DDS.
 
 The npm packages are installed from the folder's package-lock.json into build/foxglove_client
-(`npm ci`, once per lock file). Without `node` and `npm` the tests are skipped.
+(`npm ci`, once per lock file: test/foxglove_ws_client.py). Without `node` and `npm` the tests
+are skipped.
 """
 import hashlib
 import json
 import re
-import shutil
 import socket
-import subprocess
 
 import pytest
 from ball_tracker_msgs.msg import BallState
@@ -20,39 +19,18 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 from tf2_msgs.msg import TFMessage
 
+import foxglove_ws_client
 from ball_balance.hardware.sim_ros import IMAGE_SENSOR_DATA
 from ball_balance.ros.images import encode_image
 from ball_balance.tf.ros import STATIC_BROADCASTER_QOS
-from harness import ROOT, DomainLease, Graph, Launcher, executable, ros_env, stop_groups
+from harness import DomainLease, Graph, Launcher, executable, ros_env, stop_groups
 
 pytestmark = [pytest.mark.integration,
-              pytest.mark.skipif(not (shutil.which("node") and shutil.which("npm")),
+              pytest.mark.skipif(bool(foxglove_ws_client.missing_tools()),
                                  reason="needs Node.js (`node` and `npm`) for the independent Foxglove client")]
-CLIENT = ROOT / "test" / "integration" / "foxglove_client"
-CLIENT_BUILD = ROOT / "build" / "foxglove_client"
 PUBLISH_PERIOD_S = 0.1
 START_TIMEOUT_S = 60.0   # the node's first line on a loaded machine
 CLIENT_TIMEOUT_S = 60    # the client's own deadline; it prints what it has by then
-
-
-def install_client() -> str:
-    """`npm ci` of the client's lock file into build/foxglove_client; returns its node_modules."""
-    import fcntl
-
-    CLIENT_BUILD.mkdir(parents=True, exist_ok=True)
-    sources = [CLIENT / "package.json", CLIENT / "package-lock.json"]
-    digest = hashlib.sha256(b"".join(p.read_bytes() for p in sources)).hexdigest()
-    stamp = CLIENT_BUILD / ".installed"
-    with open(CLIENT_BUILD / ".lock", "w") as lock:  # parallel test runs install once
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not (stamp.exists() and stamp.read_text() == digest):
-            for source in sources:
-                shutil.copy(source, CLIENT_BUILD / source.name)
-            result = subprocess.run(["npm", "ci", "--no-audit", "--no-fund", "--prefix", str(CLIENT_BUILD)],
-                                    capture_output=True, text=True, timeout=300)
-            assert result.returncode == 0, f"npm ci failed:\n{result.stdout}\n{result.stderr}"
-            stamp.write_text(digest)
-    return str(CLIENT_BUILD / "node_modules")
 
 
 def expected_ball(i: int) -> dict:
@@ -119,8 +97,8 @@ class Served:
 
     def start_client(self, *args: str, name: str = "client"):
         env = ros_env(self.launcher.domain_id, NODE_PATH=self.node_modules)
-        return self.launcher.start(["node", str(CLIENT / "client.js"), "--url", self.url,
-                                    "--timeout", str(CLIENT_TIMEOUT_S), *args], name=name, env=env)
+        return self.launcher.start(foxglove_ws_client.command(self.url, "--timeout", str(CLIENT_TIMEOUT_S), *args),
+                                   name=name, env=env)
 
     def result(self, client) -> dict:
         """The client's JSON, once it printed it (spinning, so that this process keeps publishing)."""
@@ -134,7 +112,7 @@ class Served:
 
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
-    node_modules = install_client()
+    node_modules = foxglove_ws_client.install()
     lease = DomainLease()
     launcher = Launcher(lease.domain_id, tmp_path_factory.mktemp("foxglove"))
     graph = Graph(lease.domain_id)

@@ -9,10 +9,14 @@
 //
 //   node client.js --url ws://127.0.0.1:8765 --count 5 --topic /ball_state --topic /tf_static:1 \
 //       --timeout 30 [--hold 20]
+//   node client.js --url ws://127.0.0.1:8765 --watch 30 --topic /ball_state --topic /tf ...
 // A topic's own count follows its name after a colon (else --count). Once every topic has its
 // count, the JSON is printed and the client exits 0, or with --hold stays connected (still
 // subscribed) for that many seconds first. At the deadline it prints what arrived, with
 // "error" saying what is missing, and exits 1; bad arguments exit 2.
+// --watch S decodes every message for S seconds (or until SIGINT), then prints "received"
+// (messages per topic) and, under "messages", the last one of each topic, and exits 0 (a
+// viewer's load, for benchmarks/foxglove_bench.py).
 "use strict";
 
 const crypto = require("crypto");
@@ -22,7 +26,7 @@ const { parse } = require("@foxglove/rosmsg");
 const { MessageReader } = require("@foxglove/rosmsg2-serialization");
 
 function parseArgs(argv) {
-  const args = { url: "ws://127.0.0.1:8765", topics: [], count: 3, timeout: 30, hold: 0, counts: {} };
+  const args = { url: "ws://127.0.0.1:8765", topics: [], count: 3, timeout: 30, hold: 0, watch: 0, counts: {} };
   for (let i = 0; i < argv.length; i += 2) {
     const [flag, value] = [argv[i], argv[i + 1]];
     if (value === undefined) throw new Error(`${flag} needs a value`);
@@ -31,6 +35,7 @@ function parseArgs(argv) {
     else if (flag === "--count") args.count = Number(value);
     else if (flag === "--timeout") args.timeout = Number(value);
     else if (flag === "--hold") args.hold = Number(value);
+    else if (flag === "--watch") args.watch = Number(value);
     else throw new Error(`unknown argument ${flag}`);
   }
   if (args.topics.length === 0) throw new Error("name at least one --topic");
@@ -65,8 +70,8 @@ function main() {
     process.stderr.write(`client.js: ${error.message}\n`);
     process.exit(2);
   }
-  const result = { serverInfo: null, channels: {}, messages: {} };
-  for (const topic of args.topics) result.messages[topic] = [];
+  const result = { serverInfo: null, channels: {}, messages: {}, received: {} };
+  for (const topic of args.topics) [result.messages[topic], result.received[topic]] = [[], 0];
   const readers = new Map(); // subscription id -> {topic, reader}
   // The Foxglove SDK's server names the protocol `foxglove.sdk.v1`, the same protocol as
   // ws-protocol's `foxglove.websocket.v1` under a new name; the client leaves the choice to the
@@ -83,8 +88,9 @@ function main() {
     const exit = () => setTimeout(() => process.exit(code), code === 0 ? args.hold * 1000 : 0);
     process.stdout.write(`${JSON.stringify(result)}\n`, exit);
   };
-  const complete = (topic) => result.messages[topic].length >= args.counts[topic];
-  const deadline = setTimeout(() => {
+  const complete = (topic) => args.watch === 0 && result.messages[topic].length >= args.counts[topic];
+  if (args.watch > 0) process.on("SIGINT", () => finish(0));
+  const deadline = args.watch > 0 ? setTimeout(() => finish(0), args.watch * 1000) : setTimeout(() => {
     const missing = args.topics.filter((t) => !complete(t));
     finish(1, `timed out after ${args.timeout} s waiting for messages on ${missing.join(", ")}`);
   }, args.timeout * 1000);
@@ -111,8 +117,11 @@ function main() {
     const entry = readers.get(subscriptionId);
     if (!entry) return;
     if (complete(entry.topic)) return;
-    result.messages[entry.topic].push(plain(entry.reader.readMessage(data)));
-    if (args.topics.every(complete)) {
+    const message = plain(entry.reader.readMessage(data));
+    result.received[entry.topic] += 1;
+    if (args.watch > 0) result.messages[entry.topic] = [message];
+    else result.messages[entry.topic].push(message);
+    if (args.watch === 0 && args.topics.every(complete)) {
       clearTimeout(deadline);
       finish(0);
     }
