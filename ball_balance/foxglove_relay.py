@@ -49,19 +49,26 @@ class Watchers:
 
 
 class RateLimit:
-    """Lets a message through when at least 1/max_rate_hz has passed since the last one let through.
+    """Lets at most max_rate_hz messages a second through, on average and over any long stretch.
 
+    Messages are let through on a schedule of one per period; one may come up to a quarter of a
+    period early, so that a stream at twice the rate with some jitter keeps every other message
+    instead of every third. After a gap the schedule restarts from the message let through, and
+    two messages are never let through less than 3/4 of a period apart (a burst yields one).
     max_rate_hz 0 lets every message through. Times are in nanoseconds of a monotonic clock.
     """
 
     def __init__(self, max_rate_hz: float):
-        self.min_period_ns = int(1e9 / max_rate_hz) if max_rate_hz > 0 else 0
-        self._last_ns: Optional[int] = None
+        self.period_ns = int(1e9 / max_rate_hz) if max_rate_hz > 0 else 0
+        self._next_ns: Optional[int] = None  # when the next message is due
 
     def allow(self, now_ns: int) -> bool:
-        if self._last_ns is not None and now_ns - self._last_ns < self.min_period_ns:
+        if self._next_ns is not None and now_ns < self._next_ns - self.period_ns // 4:
             return False
-        self._last_ns = now_ns
+        if self._next_ns is None:
+            self._next_ns = now_ns + self.period_ns
+        else:
+            self._next_ns = max(self._next_ns + self.period_ns, now_ns + self.period_ns)
         return True
 
 

@@ -1,5 +1,7 @@
 """The Foxglove node's decisions without ROS: when to (re)subscribe, which frames to forward,
 which topic lists to accept."""
+import random
+
 from ball_balance import foxglove_relay as relay
 
 
@@ -25,11 +27,29 @@ def test_a_latched_topic_is_subscribed_anew_for_each_client_that_joins():
     assert watchers.left(5, 2) == relay.UNSUBSCRIBE
 
 
-def test_rate_limit_lets_one_message_through_per_period():
-    limit = relay.RateLimit(max_rate_hz=10.0)  # 100 ms
-    times_ms = [0, 30, 99, 100, 150, 250, 260, 1000]
-    passed = [t for t in times_ms if limit.allow(t * 1_000_000)]
-    assert passed == [0, 100, 250, 1000]
+def test_rate_limit_keeps_every_other_frame_of_a_jittery_stream_at_twice_the_rate():
+    limit = relay.RateLimit(max_rate_hz=15.0)
+    rng = random.Random(0)
+    arrivals_ns = [round(k * 1e9 / 30 + rng.uniform(-3e6, 3e6)) for k in range(300)]  # 30 Hz, +-3 ms
+    passed = [k for k, t in enumerate(arrivals_ns) if limit.allow(t)]
+    assert passed == list(range(0, 300, 2))
+
+
+def test_rate_limit_holds_the_rate_over_any_stretch():
+    limit = relay.RateLimit(max_rate_hz=10.0)
+    rng = random.Random(1)
+    arrivals_ns = sorted(rng.randrange(0, 20 * 10**9) for _ in range(2000))  # 100 a second, at random
+    passed = [t for t in arrivals_ns if limit.allow(t)]
+    assert 190 <= len(passed) <= 201
+    for start in range(0, 20 * 10**9, 10**8):  # every 1 s window: at most 10 (+1 at its edge)
+        assert sum(start <= t < start + 10**9 for t in passed) <= 11
+    assert min(b - a for a, b in zip(passed, passed[1:])) >= 75 * 10**6  # never closer than 3/4 of a period
+
+
+def test_rate_limit_lets_one_message_of_a_burst_through():
+    limit = relay.RateLimit(max_rate_hz=10.0)
+    assert limit.allow(10**9) and not limit.allow(10**9) and not limit.allow(10**9 + 1000)
+    assert limit.allow(2 * 10**9)  # after a gap, at once
 
 
 def test_rate_limit_zero_lets_every_message_through():
