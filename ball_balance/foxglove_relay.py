@@ -7,9 +7,13 @@ channel: a graph nobody watches costs nothing. `Watchers` keeps who watches whic
 says what the node must do when a client subscribes or leaves. A latched topic (transient
 local: /tf_static, /robot_description) is subscribed anew for every client that joins, so that
 its publishers send their kept messages again and the newcomer receives them too.
+
+`clock_ns` reads a /clock message's time from its CDR bytes: with simulated time, the node
+tells its clients the graph's time and stamps what it forwards with it.
 """
 from __future__ import annotations
 
+import struct
 from typing import Dict, Iterable, Optional, Set
 
 SUBSCRIBE = "subscribe"      # the first client watches: subscribe to the topic
@@ -28,6 +32,11 @@ class Watchers:
     def watching(self, channel_id: int) -> int:
         """How many clients watch the channel."""
         return len(self._clients.get(channel_id, ()))
+
+    @property
+    def any(self) -> bool:
+        """True while some client watches some channel."""
+        return any(self._clients.values())
 
     def joined(self, channel_id: int, client_id: int, latched: bool) -> Optional[str]:
         """A client subscribed to the channel: SUBSCRIBE, RESUBSCRIBE or None (nothing to do)."""
@@ -70,6 +79,23 @@ class RateLimit:
         else:
             self._next_ns = max(self._next_ns + self.period_ns, now_ns + self.period_ns)
         return True
+
+
+# CDR encapsulation (2 bytes of representation id, 2 of options) -> byte order of the body
+_CDR_BYTE_ORDER = {b"\x00\x00": ">", b"\x00\x01": "<"}
+
+
+def clock_ns(cdr: bytes) -> int:
+    """The time of a serialized rosgraph_msgs/Clock (builtin_interfaces/Time clock), in ns.
+
+    The body is int32 sec, uint32 nanosec right after the 4-byte encapsulation header.
+    Raises ValueError for bytes that are not a plain CDR Clock.
+    """
+    order = _CDR_BYTE_ORDER.get(bytes(cdr[:2]))
+    if order is None or len(cdr) < 12:
+        raise ValueError(f"not a serialized rosgraph_msgs/Clock: {bytes(cdr[:12]).hex()}")
+    sec, nanosec = struct.unpack_from(f"{order}iI", cdr, 4)
+    return sec * 1_000_000_000 + nanosec
 
 
 def is_image(type_name: str) -> bool:

@@ -9,7 +9,10 @@ in `topics` as the ROS graph carries them:
 - a topic is subscribed only while a client watches its channel (ball_balance.foxglove_relay),
   with a QoS that matches every publisher (reliable only if all are, transient local only if
   all are), re-matched when the publishers change;
-- images (sensor_msgs Image, CompressedImage) at most `max_image_rate_hz` frames a second.
+- images (sensor_msgs Image, CompressedImage) at most `max_image_rate_hz` frames a second;
+- time: while /clock has a publisher (simulated time), the server sends its clients the graph's
+  time from /clock (the protocol's `time` capability) and stamps every message it forwards
+  with it; otherwise messages carry the wall-clock time they arrived.
 The Foxglove SDK (`foxglove-sdk`) runs the server on its own threads; its client events come
 here through a queue and a guard condition, so the graph and the subscriptions are handled on
 the executor's thread. The messages are not: the subscriptions belong to a hidden node no
@@ -24,6 +27,7 @@ from typing import Dict, Optional
 
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 
 from ball_balance.cli.bag import matching_policies
 from ball_balance.cli.bag_format import message_definition
@@ -35,6 +39,7 @@ from ball_balance.foxglove_relay import (
     UNSUBSCRIBE,
     RateLimit,
     Watchers,
+    clock_ns,
     is_image,
     topic_list_problem,
 )
@@ -58,8 +63,21 @@ SCHEMA = [
           0.1, 10.0, read_only=True),
 ]
 DEPTH = 10  # keep-last depth of the subscriptions: several latched /tf_static publishers fit
+CLOCK_TOPIC = "/clock"
 TAKE_PERIOD_S = 0.01  # how often the watched subscriptions are emptied (the delay it adds: at most this)
 TAKE_BURST = 10  # at most this many messages of one topic per round: a camera must not hold up the others
+
+
+def _qos(policies: tuple, depth: int) -> QoSProfile:
+    reliability, durability = policies
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=ReliabilityPolicy[reliability.upper()],
+                      durability=DurabilityPolicy[durability.upper()])
+
+
+class _ServerTime:
+    """The graph's simulated time from /clock (ns), or None: the wall clock (the SDK's default)."""
+
+    ns: Optional[int] = None
 
 
 class _Topic:
@@ -86,7 +104,7 @@ class _Taker:
 
     Why not subscription callbacks: rclpy's executor costs a wait-set rebuild and a Python
     round trip per message. With 100 Hz /joint_states and /tf watched (200 small messages a
-    second) the node took 21 % of a core through callbacks and 5.5 % taken this way (2 CPUs,
+    second) the node took 21 % of a core through callbacks and 7.6 % taken this way (2 CPUs,
     load average 13); `ros2py bag record` takes its messages the same way for the same reason.
     """
 
@@ -153,9 +171,16 @@ class FoxgloveNode(Node):
         self.watchers = Watchers()
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.wake = self.create_guard_condition(self.on_client_events)
+        self.time = _ServerTime()
+        self.clock_publishers: list = []
+        self.clock_subscription = None
+        self.bad_clocks = 0
         host, port = self.params["host"], self.params["port"]
+        from foxglove.websocket import Capability
+
         try:
             self.server = foxglove.start_server(name="ball_balance", host=host, port=port,
+                                                capabilities=[Capability.Time],
                                                 server_listener=_ClientEvents(self.events, self.wake))
         except Exception as error:  # noqa: BLE001 - the SDK raises RuntimeError for a busy or bad address
             raise StartupError(f"cannot serve on {host}:{port}: {error}") from None
@@ -173,6 +198,8 @@ class FoxgloveNode(Node):
     def on_graph_poll(self) -> None:
         """Advertise topics that got a publisher; re-match the QoS where the publishers changed."""
         types = dict(self.get_topic_names_and_types())
+        self.clock_publishers = self.get_publishers_info_by_topic(CLOCK_TOPIC) if CLOCK_TOPIC in types else []
+        self.follow_clock()
         for topic in list(self.topics.values()):  # advertise() drops a topic it cannot serve
             if not types.get(topic.name):
                 continue
@@ -223,13 +250,42 @@ class FoxgloveNode(Node):
             elif action == UNSUBSCRIBE:
                 self.unsubscribe(topic)
 
+    def follow_clock(self) -> None:
+        """Subscribe to /clock while it has a publisher; without one, the wall clock.
+
+        Subscribed even while no client watches: DDS keeps the newest time in the reader (depth
+        1) at no cost to Python, and when a client starts watching, the taker's first round
+        takes that time before any message it forwards. The taker takes /clock only while some
+        client watches (reroute)."""
+        wanted = bool(self.clock_publishers)
+        if wanted == (self.clock_subscription is not None):
+            return
+        if wanted:
+            qos = _qos(matching_policies(self.clock_publishers), depth=1)  # only the newest time matters
+            self.clock_subscription = self.reader.create_subscription(Clock, CLOCK_TOPIC, lambda data: None, qos,
+                                                                      raw=True)
+            self.get_logger().info("following /clock: clients get the graph's simulated time")
+        else:
+            self.reader.destroy_subscription(self.clock_subscription)
+            self.clock_subscription = None
+            self.time.ns = None
+            self.get_logger().info("/clock has no publisher: clients get the wall-clock time")
+        self.reroute()
+
+    def on_clock(self, data: bytes) -> None:
+        """The taker's /clock route: the graph's time to the clients and to what is forwarded."""
+        try:
+            self.time.ns = clock_ns(data)
+        except ValueError as error:
+            self.bad_clocks += 1
+            self.get_logger().error(f"{error} ({self.bad_clocks} so far)", throttle_duration_sec=10.0)
+            return
+        self.server.broadcast_time(self.time.ns)
+
     def subscribe(self, topic: _Topic) -> None:
         """(Re)create the topic's subscription with its publishers' policies."""
         self.unsubscribe(topic)
-        reliability, durability = topic.policies
-        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=DEPTH,
-                         reliability=ReliabilityPolicy[reliability.upper()],
-                         durability=DurabilityPolicy[durability.upper()])
+        qos = _qos(topic.policies, DEPTH)
         # no callback: the taker takes the messages (the reader node is never spun)
         topic.subscription = self.reader.create_subscription(topic.interface, topic.name, lambda data: None, qos,
                                                              raw=True)
@@ -243,15 +299,19 @@ class FoxgloveNode(Node):
             self.reroute()
 
     def reroute(self) -> None:
-        self.taker.route((t.subscription, t.forward) for t in self.topics.values() if t.subscription is not None)
+        """The taker's routes: /clock first (while a client watches), so that a round's messages
+        carry its newest time."""
+        following = self.clock_subscription is not None and self.watchers.any
+        clock = [(self.clock_subscription, self.on_clock)] if following else []
+        self.taker.route(clock + [(t.subscription, t.forward) for t in self.topics.values()
+                                  if t.subscription is not None])
 
-    @staticmethod
-    def forwarder(topic: _Topic):
+    def forwarder(self, topic: _Topic):
         """What the taker calls per message: the CDR bytes to the channel, nothing else."""
-        log, limit = topic.channel.log, topic.limit
+        log, limit, clock = topic.channel.log, topic.limit, self.time
         if limit is None:
-            return log
-        return lambda data: log(data) if limit.allow(time.monotonic_ns()) else None
+            return lambda data: log(data, log_time=clock.ns)
+        return lambda data: log(data, log_time=clock.ns) if limit.allow(time.monotonic_ns()) else None
 
     def destroy_node(self) -> None:
         self.taker.stop()

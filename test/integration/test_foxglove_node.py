@@ -1,7 +1,8 @@
 """ball_balance_foxglove seen by an independent Foxglove client: the `@foxglove/ws-protocol`
 client from npm, run with Node (test/integration/foxglove_client/client.js), decodes the
 ball state and a MuJoCo-rendered camera frame from the CDR bytes and ros2msg schemas the node
-serves, field for field as this test published them over DDS.
+serves, field for field as this test published them over DDS, stamped with the simulated
+time of /clock that the node also sends as the server's time.
 
 The npm packages are installed from the folder's package-lock.json into build/foxglove_client
 (`npm ci`, once per lock file: test/foxglove_ws_client.py). Without `node` and `npm` the tests
@@ -15,7 +16,8 @@ import socket
 import pytest
 from ball_tracker_msgs.msg import BallState
 from geometry_msgs.msg import TransformStamped
-from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Image
 from tf2_msgs.msg import TFMessage
 
@@ -62,6 +64,8 @@ class Served:
         node = graph.node
         self.ball_pub = node.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
         self.image_pub = node.create_publisher(Image, "/camera/image_raw", IMAGE_SENSOR_DATA)
+        self.clock_pub = node.create_publisher(Clock, "/clock", QoSProfile(depth=1))  # as the simulation's
+        self.clocks_ns = set()
         static_pub = node.create_publisher(TFMessage, "/tf_static", STATIC_BROADCASTER_QOS)
         static_pub.publish(TFMessage(transforms=[self.static_transform()]))
         self.count = 0
@@ -71,12 +75,12 @@ class Served:
                                    name="foxglove")
         found = []
 
-        def started() -> bool:
+        def started() -> bool:  # and following the simulated time of /clock
             found[:] = re.findall(r"ws://127\.0\.0\.1:(\d+)", self.node.output())
             assert self.node.running, self.node.output()
-            return bool(found)
+            return bool(found) and "following /clock" in self.node.output()
 
-        graph.spin_until(started, START_TIMEOUT_S, "the node's start-up line")
+        graph.spin_until(started, START_TIMEOUT_S, "the node's start-up line and /clock")
         self.url = f"ws://127.0.0.1:{found[0]}"
 
     @staticmethod
@@ -89,10 +93,13 @@ class Served:
         return transform
 
     def publish(self) -> None:
+        """The i-th tick: /clock, the ball state and the frame, all at the same simulated time."""
         i = self.count
         self.count += 1
-        self.ball_pub.publish(ball_msg(expected_ball(i)))
         stamp = ball_msg(expected_ball(i)).header.stamp
+        self.clocks_ns.add(stamp.sec * 1_000_000_000 + stamp.nanosec)
+        self.clock_pub.publish(Clock(clock=stamp))
+        self.ball_pub.publish(ball_msg(expected_ball(i)))
         self.image_pub.publish(encode_image(self.frame, stamp, "camera_optical_frame"))
 
     def start_client(self, *args: str, name: str = "client"):
@@ -129,7 +136,11 @@ def test_an_independent_client_decodes_the_ball_state_and_the_camera(served):
     result = served.result(client)
     assert "error" not in result, result
     assert client.wait(timeout=10) == 0
-    assert result["serverInfo"]["name"] == "ball_balance"
+    assert result["serverInfo"]["name"] == "ball_balance" and "time" in result["serverInfo"]["capabilities"]
+    # the graph's simulated time, from /clock: the server's time and every message's log time
+    assert int(result["time"]) in served.clocks_ns
+    for topic, log_times in result["logTimes"].items():
+        assert {int(t) for t in log_times} <= served.clocks_ns, topic
     assert result["channels"] == {
         "/ball_state": {"schemaName": "ball_tracker_msgs/msg/BallState", "encoding": "cdr",
                         "schemaEncoding": "ros2msg"},

@@ -1,6 +1,9 @@
 """The Foxglove node's decisions without ROS: when to (re)subscribe, which frames to forward,
 which topic lists to accept."""
 import random
+import struct
+
+import pytest
 
 from ball_balance import foxglove_relay as relay
 
@@ -16,6 +19,15 @@ def test_a_topic_is_subscribed_while_at_least_one_client_watches_it():
     assert watchers.left(1, 11) is None                        # unknown client: nothing to do
     assert watchers.left(2, 10) is None                        # unknown channel
     assert watchers.joined(1, 12, latched=False) == relay.SUBSCRIBE  # watched again
+
+
+def test_any_says_whether_some_client_watches_something():
+    watchers = relay.Watchers()
+    assert not watchers.any
+    watchers.joined(3, 1, latched=False)
+    assert watchers.any
+    watchers.left(3, 1)
+    assert not watchers.any
 
 
 def test_a_latched_topic_is_subscribed_anew_for_each_client_that_joins():
@@ -68,3 +80,12 @@ def test_topic_lists_must_be_absolute_names_each_once():
     assert "'ball_state'" in relay.topic_list_problem(["ball_state"])
     assert "'/camera/'" in relay.topic_list_problem(["/camera/"])
     assert "/tf more than once" in relay.topic_list_problem(["/tf", "/ball_state", "/tf"])
+
+
+def test_clock_time_is_read_from_either_byte_order():
+    assert relay.clock_ns(b"\x00\x01\x00\x00" + struct.pack("<iI", 12, 500_000_000)) == 12_500_000_000
+    assert relay.clock_ns(b"\x00\x00\x00\x00" + struct.pack(">iI", 3, 7)) == 3_000_000_007
+    with pytest.raises(ValueError, match="not a serialized rosgraph_msgs/Clock"):
+        relay.clock_ns(b"\x00\x01\x00\x00\x01")
+    with pytest.raises(ValueError):
+        relay.clock_ns(b"\x00\x10\x00\x00" + bytes(8))  # an XCDR2 encapsulation: not what rmw writes

@@ -4,8 +4,10 @@
 // advertised (@foxglove/rosmsg parses it, @foxglove/rosmsg2-serialization reads the bytes, as
 // the Foxglove app does), and prints one JSON object on stdout:
 //   {"serverInfo": {...}, "channels": {topic: {schemaName, encoding, schemaEncoding}},
-//    "messages": {topic: [decoded message, ...]}}
-// Byte arrays are printed as {"length": n, "sha256": hex}; 64-bit integers as strings.
+//    "messages": {topic: [decoded message, ...]}, "logTimes": {topic: [ns, ...]},
+//    "time": ns of the server's latest time message, or null}
+// Byte arrays are printed as {"length": n, "sha256": hex}; 64-bit integers (and the times) as
+// strings.
 //
 //   node client.js --url ws://127.0.0.1:8765 --count 5 --topic /ball_state --topic /tf_static:1 \
 //       --timeout 30 [--hold 20]
@@ -70,8 +72,10 @@ function main() {
     process.stderr.write(`client.js: ${error.message}\n`);
     process.exit(2);
   }
-  const result = { serverInfo: null, channels: {}, messages: {}, received: {} };
-  for (const topic of args.topics) [result.messages[topic], result.received[topic]] = [[], 0];
+  const result = { serverInfo: null, channels: {}, messages: {}, logTimes: {}, received: {}, time: null };
+  for (const topic of args.topics) {
+    [result.messages[topic], result.logTimes[topic], result.received[topic]] = [[], [], 0];
+  }
   const readers = new Map(); // subscription id -> {topic, reader}
   // The Foxglove SDK's server names the protocol `foxglove.sdk.v1`, the same protocol as
   // ws-protocol's `foxglove.websocket.v1` under a new name; the client leaves the choice to the
@@ -103,6 +107,9 @@ function main() {
   client.on("serverInfo", (info) => {
     result.serverInfo = info;
   });
+  client.on("time", ({ timestamp }) => {
+    result.time = timestamp.toString();
+  });
   client.on("advertise", (channels) => {
     for (const channel of channels) {
       if (!args.topics.includes(channel.topic) || result.channels[channel.topic]) continue;
@@ -113,14 +120,18 @@ function main() {
       readers.set(client.subscribe(channel.id), { topic: channel.topic, reader });
     }
   });
-  client.on("message", ({ subscriptionId, data }) => {
+  client.on("message", ({ subscriptionId, timestamp, data }) => {
     const entry = readers.get(subscriptionId);
     if (!entry) return;
     if (complete(entry.topic)) return;
     const message = plain(entry.reader.readMessage(data));
     result.received[entry.topic] += 1;
-    if (args.watch > 0) result.messages[entry.topic] = [message];
-    else result.messages[entry.topic].push(message);
+    if (args.watch > 0) {
+      [result.messages[entry.topic], result.logTimes[entry.topic]] = [[message], [timestamp.toString()]];
+    } else {
+      result.messages[entry.topic].push(message);
+      result.logTimes[entry.topic].push(timestamp.toString());
+    }
     if (args.watch === 0 && args.topics.every(complete)) {
       clearTimeout(deadline);
       finish(0);
