@@ -89,6 +89,8 @@ NODES = [
      _balance_node_schema("ball_balance.nodes.policy_node:PolicyControllerNode")),
     ("ball_balance_visualizer", "ball_balance_visualizer", "ball_balance.nodes.visualizer_node:VisualizerNode",
      _module_schema("ball_balance.nodes.visualizer_node")),
+    ("ball_balance_foxglove", "ball_balance_foxglove", "ball_balance.nodes.foxglove_node:FoxgloveNode",
+     _module_schema("ball_balance.nodes.foxglove_node")),
     ("robot_state_publisher", "robot_state_publisher",
      "ball_balance.nodes.robot_state_publisher_node:RobotStatePublisherNode",
      _module_schema("ball_balance.nodes.robot_state_publisher_node")),
