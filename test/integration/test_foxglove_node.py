@@ -109,12 +109,12 @@ class Served:
 
     def result(self, client) -> dict:
         """The client's JSON, once it printed it (spinning, so that this process keeps publishing)."""
-        def printed():
-            return any(line.startswith("{") for line in client.output().splitlines())
+        def json_lines():  # whole lines only: the client may be writing the last one
+            return [line for line in client.output().split("\n")[:-1] if line.startswith("{")]
 
-        self.graph.spin_until(lambda: printed() or not client.running, CLIENT_TIMEOUT_S + 30, "the client's JSON")
-        self.graph.spin_until(printed, 5, f"the client's JSON (it printed: {client.output()!r})")
-        return json.loads([line for line in client.output().splitlines() if line.startswith("{")][-1])
+        self.graph.spin_until(lambda: json_lines() or not client.running, CLIENT_TIMEOUT_S + 30, "the client's JSON")
+        self.graph.spin_until(json_lines, 5, f"the client's JSON (it printed: {client.output()!r})")
+        return json.loads(json_lines()[-1])
 
 
 @pytest.fixture(scope="module")
