@@ -64,6 +64,20 @@ TAKE_BURST = 10
 SWITCH_INTERVAL_S = 0.0005
 
 
+def take_waiting(subscription, limit: int):
+    """Up to `limit` waiting messages of an rclpy subscription created with `raw=True`, as
+    (serialized bytes, message info), without the executor; stops at an empty queue or at a
+    subscription destroyed meanwhile (re-matched, unwatched, shutdown)."""
+    for _ in range(limit):
+        try:
+            with subscription.handle:
+                taken = subscription.handle.take_message(subscription.msg_type, True)
+        except Exception:  # noqa: BLE001 - destroyed meanwhile
+            return
+        if taken is None:
+            return
+        yield taken
+
 class WriteCache:
     """Messages taken but not yet written, at most max_bytes of them.
 
@@ -250,16 +264,8 @@ class Recorder:
                 subscription = topic.subscription
                 if subscription is None:
                     continue
-                for _ in range(TAKE_BURST):
-                    try:
-                        with subscription.handle:
-                            taken = subscription.handle.take_message(subscription.msg_type, True)
-                    except Exception:  # noqa: BLE001 - destroyed meanwhile (re-match, shutdown)
-                        break
-                    if taken is None:
-                        break
-                    data = taken[0]
-                    if not offer((topic, data, time.time_ns(), taken[1].get("source_timestamp", 0)), len(data)):
+                for data, info in take_waiting(subscription, TAKE_BURST):
+                    if not offer((topic, data, time.time_ns(), info.get("source_timestamp", 0)), len(data)):
                         topic.dropped += 1
             self._stop.wait(max(0.0, TAKE_PERIOD_S - (time.monotonic() - started)))
 

@@ -29,7 +29,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from ball_balance.cli.bag import matching_policies
+from ball_balance.cli.bag import matching_policies, take_waiting
 from ball_balance.cli.bag_format import message_definition
 from ball_balance.cli.errors import CliError
 from ball_balance.cli.messages import get_interface
@@ -132,15 +132,8 @@ class _Taker:
                 continue
             started = time.monotonic()
             for subscription, forward in routes:
-                for _ in range(TAKE_BURST):
-                    try:
-                        with subscription.handle:
-                            taken = subscription.handle.take_message(subscription.msg_type, True)
-                    except Exception:  # noqa: BLE001 - destroyed meanwhile (unwatched, re-matched, shutdown)
-                        break
-                    if taken is None:
-                        break
-                    forward(taken[0])
+                for data, _ in take_waiting(subscription, TAKE_BURST):
+                    forward(data)
             self._stop.wait(max(0.0, TAKE_PERIOD_S - (time.monotonic() - started)))
 
 
