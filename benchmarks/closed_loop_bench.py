@@ -32,6 +32,7 @@ runs both.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -167,6 +168,9 @@ def main(argv=None) -> int:
                              "6 s, camera 60 Hz, vision mode, 30 s) for --controllers, --domains and --seed")
     parser.add_argument("--baseline", default="pid",
                         help="the controller the others are compared with on the same seeds (default: pid)")
+    parser.add_argument("--tracker-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="a tracker parameter over config/ball_tracker.yaml, e.g. "
+                             "disturbance_time_constant_s:=1.0 (repeatable; fast and vision modes)")
     parser.add_argument("--combine", nargs="+", metavar="DIR",
                         help="print one table from the closed_loop.csv of earlier runs (e.g. run in parallel) "
                              "and write it to --out; runs nothing")
@@ -190,6 +194,7 @@ def main(argv=None) -> int:
     shown = demo_spec(controllers[0]) if args.demo else EpisodeSpec(duration_s=args.duration, mode=args.mode)
     print(f"closed-loop benchmark: {len(cells)} cells x {args.episodes} episodes = {total} episodes of "
           f"{shown.duration_s:.0f} s, mode {shown.mode}", flush=True)
+    tracker_params = tuple(tracker_param(text) for text in args.tracker_param)
     results = []
     t_start = time.monotonic()
     for i, (controller, reference, domain, protocol) in enumerate(cells):
@@ -200,6 +205,7 @@ def main(argv=None) -> int:
                 spec = reference_protocol(spec)
             elif protocol == "demo":
                 spec = demo_spec(controller, domain, args.seed + k)
+            spec = dataclasses.replace(spec, tracker_overrides=tracker_params)
             results.append(run_live(spec, Path(args.out)) if args.live else run_episode(spec))
         done = (i + 1) * args.episodes
         print(f"  [{done}/{total}] {controller} {protocol} {reference} {domain}: "
@@ -208,6 +214,15 @@ def main(argv=None) -> int:
     print()
     report(aggregate(results), episode_rows(results), args.baseline, out)
     return 0
+
+
+def tracker_param(text: str):
+    """("name", value) from "name:=value", the value read as YAML would read it (a number, a bool)."""
+    name, sep, value = text.partition(":=")
+    if not sep or not name:
+        raise SystemExit(f"--tracker-param {text!r}: expected NAME:=VALUE")
+    import yaml
+    return name, yaml.safe_load(value)
 
 
 if __name__ == "__main__":

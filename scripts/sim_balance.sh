@@ -12,6 +12,7 @@
 #   scripts/sim_balance.sh --duration 30 --out DIR --video-s 10 --debug-image   # + camera.mp4 with overlay
 #   scripts/sim_balance.sh --truth-fed                          # no camera/tracker: /ball_state from truth
 #   scripts/sim_balance.sh --param kp:=2.0                      # any controller parameter
+#   scripts/sim_balance.sh --tracker-param disturbance_time_constant_s:=1.0   # any tracker parameter
 #   scripts/sim_balance.sh --sim-param camera_rate_hz=60        # any simulation parameter (config/sim.yaml)
 #   scripts/sim_balance.sh --force 2 90       # a constant force on the ball, as a plate 2 deg off level, towards +y
 #   scripts/sim_balance.sh --plate-offset 2 0 # the plate mounted 2 deg off level about its x axis (rolls to -y)
@@ -54,7 +55,8 @@ TRUTH_FED=0
 DEBUG_IMAGE=false
 CTRL_PARAMS=()
 SIM_PARAMS=()
-usage() { sed -n '2,32p' "$0" | sed 's/^# \{0,1\}//'; }
+TRACKER_PARAMS=()
+usage() { sed -n '2,33p' "$0" | sed 's/^# \{0,1\}//'; }
 # the optional second number of --force and --plate-offset (a negative angle is a number, not an option)
 optional_number() { [[ -n "${1:-}" && "$1" != --* ]]; }
 needs() { (($1 >= 2)) || { echo "sim_balance.sh: $2 needs a value (see --help)" >&2; exit 2; }; }
@@ -74,6 +76,7 @@ while (($#)); do
     --truth-fed) TRUTH_FED=1; shift ;;
     --debug-image) DEBUG_IMAGE=true; shift ;;
     --param) CTRL_PARAMS+=(-p "$2"); shift 2 ;;
+    --tracker-param) needs $# "$1"; TRACKER_PARAMS+=(-p "$2"); shift 2 ;;
     --sim-param) SIM_PARAMS+=(--param "$2"); shift 2 ;;
     --force)
       needs $# "$1"; SIM_PARAMS+=(--param "ball_force_deg=$2"); shift 2
@@ -123,7 +126,7 @@ echo "sim_balance.sh: $CONTROLLER controller, domain $DOMAIN seed $SEED, ball re
 start sim "$ROOT/scripts/sim_arm.sh" "${SIM_ARGS[@]}"
 if ((! TRUTH_FED)); then
   start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
-    -p "publish_debug_image:=$DEBUG_IMAGE" ${RT_OFF[@]+"${RT_OFF[@]}"}
+    -p "publish_debug_image:=$DEBUG_IMAGE" ${RT_OFF[@]+"${RT_OFF[@]}"} ${TRACKER_PARAMS[@]+"${TRACKER_PARAMS[@]}"}
 fi
 # joint_states_timeout_s 5 s (1 s for a real arm): on a loaded 2-core machine the controller saw
 # /joint_states gaps of 1.0-2.3 s wall time from a live manager

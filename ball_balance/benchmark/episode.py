@@ -272,11 +272,15 @@ def step_times(times, tolerance_s: float) -> list:
     return out
 
 
-def _observation(x, y, vx, vy, valid, markers, age_s, position_std_m):
-    """BallObservation, with the tracker's position uncertainty where the type carries it."""
+def _observation(x, y, vx, vy, valid, markers, age_s, position_std_m, level_offset_rad=None):
+    """BallObservation, with the tracker's position uncertainty and level offset where the type
+    carries them."""
+    extra = {}
     if "position_std_m" in _OBSERVATION_FIELDS:
-        return BallObservation(x, y, vx, vy, valid, markers, age_s, position_std_m=position_std_m)
-    return BallObservation(x, y, vx, vy, valid, markers, age_s)
+        extra["position_std_m"] = position_std_m
+    if "level_offset_rad" in _OBSERVATION_FIELDS:
+        extra["level_offset_rad"] = level_offset_rad
+    return BallObservation(x, y, vx, vy, valid, markers, age_s, **extra)
 
 
 _OBSERVATION_FIELDS = {f.name for f in dataclasses.fields(BallObservation)}
@@ -443,12 +447,12 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
                     image = hand_over_markers(image, world, hidden)
                 r = tracker.process(image, stamp)
                 fields_ = (r.x, r.y, r.vx, r.vy, r.tracking_valid, r.markers_found,
-                           float(getattr(r, "position_std_m", 0.0)))
+                           float(getattr(r, "position_std_m", 0.0)), getattr(r, "level_offset_rad", None))
                 if video_every and len(frames) < 10000 and tick % video_every == 0:
                     frames.append((image, r))
             elif spec.mode == "truth":
                 tr = world.ball_truth()
-                fields_ = (tr.x, tr.y, tr.vx, tr.vy, True, 4 - len(hidden), 0.0)
+                fields_ = (tr.x, tr.y, tr.vx, tr.vy, True, 4 - len(hidden), 0.0, None)
             else:
                 zx, zy = world.detected_ball()
                 visible = tuple(m for m in range(4) if m not in hidden)
@@ -461,15 +465,16 @@ def run_episode(spec: EpisodeSpec, video_every: int = 0) -> EpisodeResult:
                     accel, lever = plate_cmds.inputs(stamp)
                 est = kalman.step(stamp, (zx, zy), accel, lever)
                 std = fast_position_std_m(visible, world.config.camera, tracker_cfg.corner_noise_px)
-                fields_ = (est.x, est.y, est.vx, est.vy, est.valid, len(visible), std)
+                level = kalman.level_offset_rad(plate_cmds.k_g) if kalman.disturbance_state else None
+                fields_ = (est.x, est.y, est.vx, est.vy, est.valid, len(visible), std, level)
             pending.append((t + spec.vision_delay_s, fields_, stamp))
         while pending and pending[0][0] <= t + 1e-9:
             _, fields_, stamp = pending.pop(0)
             latest = (fields_, stamp)
         obs = None
         if latest is not None:
-            (x, y, vx, vy, valid, markers, std), stamp = latest
-            obs = _observation(x, y, vx, vy, valid, markers, t - stamp, std)
+            (x, y, vx, vy, valid, markers, std, level), stamp = latest
+            obs = _observation(x, y, vx, vy, valid, markers, t - stamp, std, level)
         t0 = time.perf_counter()
         result = pipeline.step(t, obs, world.joint_positions())
         solve_times.append(time.perf_counter() - t0)

@@ -120,11 +120,22 @@ class PlantEstimator:
         self.fits = 0
         self.skipped = 0
         self.restarts = 0            # windows restarted after a disturbance (push)
+        self._offset_given = False   # d comes from take_level_offset
 
     def reset(self) -> None:
         """Forget the window (not the estimate: the plant has not changed)."""
         self._samples.clear()
         self.tilts.clear()
+
+    def take_level_offset(self, level_rad: Sequence[float]) -> None:
+        """The disturbance from the tracker's filter, as its plate-level offset per axis [rad]:
+        d = k_g sin(level), which the controllers cancel with the tilt `level` whatever k_g is
+        (the tracker's filter sees the detections themselves). The window's fit then keeps d
+        as given and estimates k_g alone."""
+        if self.cfg.adapt_offset and all(math.isfinite(v) for v in level_rad):
+            self.offset = np.clip(self.k_g * np.sin(np.asarray(level_rad, dtype=float)),
+                                  -self.cfg.offset_max_m_s2, self.cfg.offset_max_m_s2)
+            self._offset_given = True
 
     def add_tilt(self, t_s: float, tilt: Sequence[float]) -> None:
         self.tilts.record(t_s, float(tilt[0]), float(tilt[1]))
@@ -221,6 +232,6 @@ class PlantEstimator:
             k_new = self.k_g + alpha * (theta[6] - self.k_g)
             self.k_g = float(np.clip(k_new, cfg.gain_min_ratio * self.k_g_nominal,
                                      cfg.gain_max_ratio * self.k_g_nominal))
-        if cfg.adapt_offset:
+        if cfg.adapt_offset and not self._offset_given:
             d_new = self.offset + alpha * (theta[[2, 5]] - self.offset)
             self.offset = np.clip(d_new, -cfg.offset_max_m_s2, cfg.offset_max_m_s2)

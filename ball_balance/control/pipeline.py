@@ -198,6 +198,7 @@ class ControlPipeline:
         # fresh engagement (engage_accel_m_s2); None until the first state after one
         self._tracked: Optional[Reference] = reference
         self.refused_count = 0
+        self._tracker_level = False      # the last state carried the tracker's level offset
 
     def set_reference(self, reference: Reference) -> None:
         self.reference = reference
@@ -288,7 +289,9 @@ class ControlPipeline:
             self.plant.add_tilt(now_s, tilt_measured)   # the tilt the ball really felt
         else:
             self.plant.add_tilt(now_s + self.actuation_delay_s, tilt_cmd)
-        level = level_offset_rad(self.plant.offset, self.plant.k_g)
+        # the tracker's filter expects -k_g u + d: with an estimate of d of its own it takes the
+        # tilt as commanded; else the tilt less the level offset of the controller's estimate
+        level = np.zeros(2) if self._tracker_level else level_offset_rad(self.plant.offset, self.plant.k_g)
         plate_cmd = (float(self.u[0] - level[0]), float(self.u[1] - level[1]))
         return TickResult(q_new.copy(), (float(self.u[0]), float(self.u[1])), mode, ref, predicted, refused, target,
                           plate_cmd)
@@ -325,6 +328,9 @@ class ControlPipeline:
         vel = np.array([obs.vx, obs.vy])
         delay = self.actuation_delay_s
         stamp = now_s - obs.age_s
+        self._tracker_level = obs.level_offset_rad is not None
+        if self._tracker_level:
+            self.plant.take_level_offset(obs.level_offset_rad)
         if stamp > self._last_stamp:   # a new ball state: one more sample for the plant estimate
             self._last_stamp = stamp
             self.plant.add_state(stamp, pos)

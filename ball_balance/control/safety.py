@@ -31,7 +31,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
-from typing import Optional
+from typing import Optional, Tuple
 
 
 class Mode(enum.Enum):
@@ -40,6 +40,12 @@ class Mode(enum.Enum):
     ENGAGED = "engaged"
     HOLDING = "holding"
     RETURNING = "returning"
+
+
+# the tracker's level offset (BallObservation.level_offset_rad) arrives on this topic, and one
+# stamped this much away from the ball state it is paired with is not used
+LEVEL_OFFSET_TOPIC = "/ball_level_offset"
+LEVEL_OFFSET_MAX_AGE_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -68,6 +74,10 @@ class BallObservation:
     # 1-sigma error of (x, y) caused by the plate pose [m]; 0.0 = not known (markers rule),
     # inf = no usable pose
     position_std_m: float = 0.0
+    # the plate-level offset per axis [rad] the tracker's filter estimates: the tilt (in the
+    # commands' convention) that holds the ball still against a constant disturbance; None when
+    # the tracker does not estimate it (the controller's plant estimate then does)
+    level_offset_rad: Optional[Tuple[float, float]] = None
 
 
 class SafetySupervisor:

@@ -49,6 +49,9 @@ Inputs (controller node, non-real-time executor):
                of the frame with the same stamp gives the state's position_std_m; without it
                the min_markers rule decides (as in the nodes). A pose arriving after its update
                step applies from the next step.
+  /ball_level_offset  geometry_msgs/Vector3Stamped (optional): the tracker's constant
+               disturbance as a plate-level offset [rad], cancelled in place of the plant
+               estimate's (as in the nodes: balance_node_base).
 Outputs:
   six `<joint>/position` command interfaces (config/ur_controllers_policy.yaml lists none: the
   joints are the robot's, ball_balance.robot.JOINT_NAMES);
@@ -84,7 +87,7 @@ from ball_balance.control.kinematics import Chain, KinematicsError
 from ball_balance.control.pipeline import CONTROLLERS, ControlPipeline
 from ball_balance.control.plausibility import BallStateGate, gate_config
 from ball_balance.control.references import ReferenceError
-from ball_balance.control.safety import BallObservation, Mode
+from ball_balance.control.safety import LEVEL_OFFSET_MAX_AGE_S, LEVEL_OFFSET_TOPIC, BallObservation, Mode
 from ball_balance.plate_geometry import PLATE_FRAME, PLATE_SIDE_M
 from ball_balance.policy.params import POLICY_PARAMS
 from ball_balance.robot import JOINT_NAMES
@@ -184,6 +187,7 @@ class BallBalanceController(ControllerInterface):
         self.refused_ball_states = 0
         self._ball: Optional[BallSample] = None       # the slot: written by callbacks, read by update()
         self._pose_std: OrderedDict = OrderedDict()  # /plate_pose stamp (ns) -> position_std_m
+        self._level: Optional[tuple] = None          # (stamp s, (u_x, u_y)) of the last /ball_level_offset
         self._tilt_out = None                        # (time_s, (u_x, u_y), ref or None) for the publishers
         self._published_tilt = None
         self._fresh = True                           # the pipeline has not stepped yet
@@ -239,6 +243,8 @@ class BallBalanceController(ControllerInterface):
         self._subscriptions = [
             node.create_subscription(BallState, "/ball_state", self.on_ball_state, newest),
             node.create_subscription(PoseWithCovarianceStamped, "/plate_pose", self.on_plate_pose,
+                                     qos_profile_sensor_data),
+            node.create_subscription(Vector3Stamped, LEVEL_OFFSET_TOPIC, self.on_level_offset,
                                      qos_profile_sensor_data)]
         self._plate_cmd_pub = node.create_publisher(Vector3Stamped, "/plate_cmd", 10)
         self._reference_pub = node.create_publisher(PointStamped, "/ball_reference", 10)
@@ -273,6 +279,16 @@ class BallBalanceController(ControllerInterface):
             return stamp_s
         time_s, steady_s = seen
         return time_s + min(_time.monotonic() - steady_s, self._control_period_s)
+
+    def on_level_offset(self, msg) -> None:
+        if math.isfinite(msg.vector.x) and math.isfinite(msg.vector.y):
+            self._level = (msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9, (msg.vector.x, msg.vector.y))
+
+    def _level_for(self, stamp_s: float):
+        level = self._level
+        if level is None or abs(stamp_s - level[0]) > LEVEL_OFFSET_MAX_AGE_S:
+            return None
+        return level[1]
 
     def on_ball_state(self, msg) -> None:
         # (the controller node's own clock is not the manager's: the manager does not use /clock)
@@ -376,7 +392,8 @@ class BallBalanceController(ControllerInterface):
                 obs = None
                 if ball is not None:
                     obs = BallObservation(ball.x, ball.y, ball.vx, ball.vy, ball.valid, ball.markers,
-                                          max(0.0, time - ball.stamp_s), position_std_m=ball.position_std_m)
+                                          max(0.0, time - ball.stamp_s), position_std_m=ball.position_std_m,
+                                          level_offset_rad=self._level_for(ball.stamp_s))
                 self._step_in = (q if np.all(np.isfinite(q)) else None, obs)
                 if worker is not None:
                     worker.trigger(time, period)

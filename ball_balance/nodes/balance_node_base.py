@@ -10,12 +10,17 @@ Inputs
                  position_std_m (vision/pose_quality.py), which decides whether a frame with
                  hidden markers is good enough. Without a /plate_pose publisher (a tracker that
                  does not publish it) the min_markers rule decides.
+  /ball_level_offset geometry_msgs/Vector3Stamped (optional; a tracker with
+                 disturbance_time_constant_s > 0): its filter's constant disturbance as a
+                 plate-level offset [rad], which the controllers cancel in place of their own
+                 estimate's; one within LEVEL_OFFSET_MAX_AGE_S of the ball state is used.
   /joint_states  sensor_msgs/JointState (newest only): the arm's current joint positions.
 Outputs
   /plate_cmd      geometry_msgs/Vector3Stamped, frame plate_center: x = u_x, y = u_y [rad]
                   (z = 0), for the tracker's Kalman feed-forward: the commanded tilt less the
-                  estimated disturbance's level offset (the tilt as the ball feels it;
-                  control/pipeline.py TickResult.plate_cmd).
+                  estimated disturbance's level offset (the tilt as the ball feels it), or as
+                  commanded when the tracker estimates the disturbance itself
+                  (control/pipeline.py TickResult.plate_cmd).
   /ball_reference geometry_msgs/PointStamped, frame plate_center: the target at the message's
                   stamp (z = 0; the control itself aims at it a latency ahead) while engaged;
                   not published otherwise.
@@ -81,7 +86,7 @@ from ball_balance.control.kinematics import Chain, KinematicsError
 from ball_balance.control.pipeline import ControlPipeline
 from ball_balance.control.plausibility import BallStateGate, Heartbeat, SourceLock, gate_config
 from ball_balance.control.references import ReferenceError
-from ball_balance.control.safety import BallObservation, Mode
+from ball_balance.control.safety import LEVEL_OFFSET_MAX_AGE_S, LEVEL_OFFSET_TOPIC, BallObservation, Mode
 from ball_balance.plate_geometry import PLATE_FRAME, PLATE_SIDE_M
 from ball_balance.robot import JOINT_NAMES, RobotDescriptionError, robot_description_path
 from ball_balance.vision.pose_quality import ball_position_std_m
@@ -166,6 +171,8 @@ class BalanceControllerNode(Node):
         self.create_subscription(BallState, BALL_TOPIC, self.on_ball_state, NEWEST_ONLY_SENSOR)
         self.create_subscription(PoseWithCovarianceStamped, PLATE_POSE_TOPIC, self.on_plate_pose,
                                  qos_profile_sensor_data)
+        self._level: Optional[tuple] = None          # (stamp ns, (u_x, u_y)) of the last /ball_level_offset
+        self.create_subscription(Vector3Stamped, LEVEL_OFFSET_TOPIC, self.on_level_offset, qos_profile_sensor_data)
         self.create_subscription(JointState, "/joint_states", self.on_joint_states, NEWEST_ONLY)
         self.plate_cmd_pub = self.create_publisher(Vector3Stamped, "/plate_cmd", 10)
         self.reference_pub = self.create_publisher(PointStamped, "/ball_reference", 10)
@@ -227,6 +234,16 @@ class BalanceControllerNode(Node):
             self._waiting_for_pose, self._waiting_since_s = msg, steady
             return
         self._use(msg, std or 0.0, steady)
+
+    def on_level_offset(self, msg: Vector3Stamped) -> None:
+        if math.isfinite(msg.vector.x) and math.isfinite(msg.vector.y):
+            self._level = (_stamp_ns(msg.header.stamp), (msg.vector.x, msg.vector.y))
+
+    def _level_for(self, stamp_ns: int):
+        """The tracker's level offset for a ball state stamped stamp_ns, None without a recent one."""
+        if self._level is None or abs(stamp_ns - self._level[0]) > LEVEL_OFFSET_MAX_AGE_S * 1e9:
+            return None
+        return self._level[1]
 
     def on_plate_pose(self, msg: PoseWithCovarianceStamped) -> None:
         std = ball_position_std_m(msg.pose.covariance)
@@ -418,7 +435,8 @@ class BalanceControllerNode(Node):
         obs = None
         if self._ball is not None:
             age = max(0.0, now_s - _stamp_ns(self._ball.header.stamp) * 1e-9)
-            obs = self._observation(self._ball, age, self._ball_std_m)
+            obs = self._observation(self._ball, age, self._ball_std_m,
+                                    self._level_for(_stamp_ns(self._ball.header.stamp)))
         result = self.pipeline.step(now_s, obs, self._q)
         self.ticks += 1
         self.log_mode(result)
@@ -429,9 +447,9 @@ class BalanceControllerNode(Node):
                 raise
 
     @staticmethod
-    def _observation(msg: BallState, age_s: float, std_m: float) -> BallObservation:
+    def _observation(msg: BallState, age_s: float, std_m: float, level_offset_rad=None) -> BallObservation:
         return BallObservation(msg.x, msg.y, msg.vx, msg.vy, msg.tracking_valid, msg.markers_found, age_s,
-                               position_std_m=std_m)
+                               position_std_m=std_m, level_offset_rad=level_offset_rad)
 
     def log_mode(self, result) -> None:
         if result.mode != self._mode:

@@ -34,6 +34,11 @@ Outputs
                  every variance +inf when the frame gave no usable pose
                  (ball_balance/vision/pose_quality.py; its ball_position_std_m() reduces
                  the covariance to the ball-position error it causes).
+  /ball_level_offset geometry_msgs/Vector3Stamped, sensor data QoS, one per frame with the
+                 identical stamp, only with `disturbance_time_constant_s` > 0: the filter's
+                 constant disturbance as a plate-level offset (x = u_x, y = u_y, rad, the
+                 /plate_cmd convention): the tilt that holds the ball still. The controllers
+                 cancel it.
   ~/debug_image  sensor_msgs/Image bgr8 overlay, only with `publish_debug_image`.
   ~/statistics/{full,names,values} (pal_statistics_msgs, the controller manager's
                  StatisticsRegistry): per-stage times (ms) and counters (plate_cmd_delay_ms: the
@@ -63,6 +68,7 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 
+from ball_balance.control.safety import LEVEL_OFFSET_TOPIC
 from ball_balance.plate_geometry import PLATE_FRAME
 from ball_balance.ros.images import decode_image, encode_image, image_from_cdr
 from ball_balance.rotations import matrix_to_quaternion
@@ -132,6 +138,8 @@ class BallTrackerNode(Node):
 
         self.state_pub = self.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
         self.pose_pub = self.create_publisher(PoseWithCovarianceStamped, "/plate_pose", qos_profile_sensor_data)
+        self.level_pub = (self.create_publisher(Vector3Stamped, LEVEL_OFFSET_TOPIC, qos_profile_sensor_data)
+                          if config.disturbance_time_constant_s > 0.0 else None)
         self.stale_frames = 0                   # taken from a deeper queue behind a newer one, never tracked
         self.out_of_order_frames = 0            # stamped before the last tracked frame
         self.skipped_frames = 0                 # gaps in the publisher's sequence numbers
@@ -330,6 +338,11 @@ class BallTrackerNode(Node):
         start = time.monotonic()
         # the pose first: a controller that pairs them steps as soon as the state arrives
         self.pose_pub.publish(plate_pose(result, stamp_msg, camera_frame))
+        if self.level_pub is not None and result.level_offset_rad is not None:
+            level = Vector3Stamped()
+            level.header.stamp, level.header.frame_id = stamp_msg, PLATE_FRAME
+            level.vector.x, level.vector.y = result.level_offset_rad
+            self.level_pub.publish(level)
         self.state_pub.publish(ball_state(result, stamp_msg))
         now = self.get_clock().now().nanoseconds
         self._frame_times["publish"] = time.monotonic() - start

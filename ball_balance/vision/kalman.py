@@ -86,6 +86,7 @@ CHI2_1_MEDIAN = 0.45493642311957283   # median of a chi-square variable with one
 # velocity cost 1 mm in extreme_dr when it took over there too
 MANEUVER_MAX_NIS = 1.0
 _TRACKER_DEFAULTS = {p.name: p.default for p in TRACKER_SCHEMA}   # KalmanConfig's defaults
+DISTURBANCE_STD_M_S2 = 0.3   # d's 1-sigma at the first track: a plate up to about 3 degrees off level
 
 
 @dataclass(frozen=True)
@@ -286,6 +287,7 @@ class KalmanConfig:
     adaptive_meas_noise: bool = _TRACKER_DEFAULTS["adaptive_meas_noise"]
     meas_noise_max_m: float = _TRACKER_DEFAULTS["meas_noise_max_m"]
     meas_noise_window_frames: int = _TRACKER_DEFAULTS["meas_noise_window_frames"]
+    disturbance_time_constant_s: float = _TRACKER_DEFAULTS["disturbance_time_constant_s"]
 
     @classmethod
     def from_tracker(cls, cfg) -> KalmanConfig:
@@ -298,7 +300,8 @@ class KalmanConfig:
         noises, gate and coasting, no adaptation, no push detection; without a known
         acceleration its process noise is accel_noise_m_s2 anyway."""
         return dataclasses.replace(self, cmd_accel_noise_m_s2=self.accel_noise_m_s2, estimate_input_gain=False,
-                                   adaptive_meas_noise=False, model_mismatch_time_constant_s=0.0, maneuver_sigma=0.0)
+                                   adaptive_meas_noise=False, model_mismatch_time_constant_s=0.0, maneuver_sigma=0.0,
+                                   disturbance_time_constant_s=0.0)
 
 
 class BallKalman:
@@ -319,6 +322,15 @@ class BallKalman:
         self.gain_bounds = cfg.input_gain_bounds
         self.gain_rate = cfg.input_gain_rate_per_s
         self.dim = 5 if cfg.estimate_input_gain else 4
+        # the disturbance d = (d_x, d_y) [m/s^2], the last two states, a random walk whose jerk
+        # density is the model's white acceleration over the time constant squared: d is then
+        # the part of the acceleration error that persists longer than about that
+        self.disturbance_state = cfg.disturbance_time_constant_s > 0.0
+        self.q_d = (cfg.cmd_accel_noise_m_s2 / cfg.disturbance_time_constant_s) ** 2 if self.disturbance_state else 0.0
+        if self.disturbance_state:
+            self.d_index = self.dim
+            self.dim += 2
+        self._disturbance = (np.zeros(2), DISTURBANCE_STD_M_S2 ** 2)   # kept over dropped tracks
         self.model_mismatch_time_constant_s = cfg.model_mismatch_time_constant_s
         self.nis = 1.0                # running mean of the normalised innovation squared (per axis)
         self.maneuver_sigma = cfg.maneuver_sigma
@@ -355,6 +367,21 @@ class BallKalman:
         return float(np.sqrt(self.kf.R[0, 0]))
 
     @property
+    def disturbance_m_s2(self) -> Tuple[float, float]:
+        """d: the ball's acceleration the known one does not explain [m/s^2] (0 without the state)."""
+        if not self.disturbance_state:
+            return 0.0, 0.0
+        d = self.kf.x[self.d_index:self.d_index + 2] if self.initialised else self._disturbance[0]
+        return float(d[0]), float(d[1])
+
+    def level_offset_rad(self, k_g: float) -> Tuple[float, float]:
+        """d as a plate-level offset per axis [rad]: the tilt u at which the ball stays still,
+        s k_g sin(u) = d, for the known acceleration -k_g sin(u) (PlateCommandInput.k_g)."""
+        scale = self.input_gain * k_g
+        d = self.disturbance_m_s2
+        return (math.asin(min(1.0, max(-1.0, d[0] / scale))), math.asin(min(1.0, max(-1.0, d[1] / scale))))
+
+    @property
     def input_gain(self) -> float:
         """s: the acceleration the ball shows per unit of the known one (1 without the estimate)."""
         if not self.gain_state:
@@ -367,6 +394,9 @@ class BallKalman:
             self.reset_count += 1
             if self.gain_state:
                 self._gain = (float(self.kf.x[4]), float(self.kf.P[4, 4]))
+            if self.disturbance_state:
+                i = self.d_index
+                self._disturbance = (np.array(self.kf.x[i:i + 2], dtype=float), float(self.kf.P[i, i]))
         self.initialised = False
         self.coasted = 0
         self.t_last = None
@@ -379,6 +409,9 @@ class BallKalman:
         if self.gain_state:
             x.append(self._gain[0])
             P.append(self._gain[1])
+        if self.disturbance_state:
+            x += list(self._disturbance[0])
+            P += [self._disturbance[1]] * 2
         kf.x = np.array(x)
         kf.P = np.diag(P)
         self.initialised, self.coasted, self.t_last = True, 0, t
@@ -393,6 +426,17 @@ class BallKalman:
         Q = np.zeros((self.dim, self.dim))
         Q[:4, :4] = q * np.block([[dt ** 4 / 4 * I2, dt ** 3 / 2 * I2], [dt ** 3 / 2 * I2, dt ** 2 * I2]])
         a = None if accel is None else np.asarray(accel, dtype=np.float64)
+        if self.disturbance_state and a is not None:
+            # x' = ... + d dt^2/2, v' = ... + d dt, d' = d + w; without a known acceleration the
+            # ball's acceleration is all process noise and d keeps its value
+            i = self.d_index
+            F[0:2, i:i + 2] = dt ** 2 / 2 * I2
+            F[2:4, i:i + 2] = dt * I2
+            jerk = self.q_d * np.array([[dt ** 5 / 20, dt ** 4 / 8, dt ** 3 / 6],
+                                        [dt ** 4 / 8, dt ** 3 / 3, dt ** 2 / 2],
+                                        [dt ** 3 / 6, dt ** 2 / 2, dt]])
+            for axis in ((0, 2, i), (1, 3, i + 1)):
+                Q[np.ix_(axis, axis)] += jerk
         if self.gain_state:
             if a is not None:                        # x' = ... + s a dt^2/2, v' = ... + s a dt
                 F[0:2, 4] = a * dt ** 2 / 2
@@ -406,7 +450,8 @@ class BallKalman:
         if a is None:
             kf.predict()
         else:
-            kf.B = np.block([[dt ** 2 / 2 * I2], [dt * I2]])
+            kf.B = np.zeros((self.dim, 2))
+            kf.B[0:2], kf.B[2:4] = dt ** 2 / 2 * I2, dt * I2
             kf.predict(u=a)
 
     def _widen_last_prediction(self) -> None:

@@ -78,6 +78,9 @@ class TrackerResult:
     plate_pose: Optional[Tuple[np.ndarray, np.ndarray]] = None
     pose_covariance: Optional[np.ndarray] = None
     position_std_m: float = math.inf
+    # the filter's constant disturbance as a plate-level offset per axis [rad] (the tilt that
+    # holds the ball still), None unless it is estimated (disturbance_time_constant_s > 0)
+    level_offset_rad: Optional[Tuple[float, float]] = None
     blob: Optional[BallBlob] = None
     measurement_m: Optional[Tuple[float, float]] = None
     timings_s: Dict[str, float] = field(default_factory=dict)
@@ -179,6 +182,8 @@ class BallTracker:
         estimate = self.kalman.step(stamp_s, z, accel, lever)
         result.x, result.y, result.vx, result.vy = estimate.x, estimate.y, estimate.vx, estimate.vy
         result.ball_found, result.tracking_valid = estimate.fresh, estimate.valid
+        if self.kalman.disturbance_state:
+            result.level_offset_rad = self.kalman.level_offset_rad(self.plate_cmds.k_g)
         t5 = clock()
         timings["filter"] = t5 - t4
         timings["total"] = t5 - t0

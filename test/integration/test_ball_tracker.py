@@ -226,6 +226,28 @@ def test_debug_overlay_and_non_finite_plate_cmd(launcher, graph, scene):
     assert tracker.running
 
 
+def test_a_ball_held_still_under_a_tilt_reads_as_that_level_offset(launcher, graph, scene):
+    # the commanded tilt (/plate_cmd) says the ball should roll, the frames say it stays: a
+    # constant disturbance holds it, whose level offset, on /ball_level_offset with the frame's
+    # stamp, is that tilt
+    from geometry_msgs.msg import Vector3Stamped
+
+    launcher.start(tracker_cmd("use_plate_cmd:=true", "disturbance_time_constant_s:=1.0",
+                               "estimate_plate_cmd_delay:=false"), name="ball_tracker")
+    image, _ = scene.render(BALL_XY)
+    feeder = FrameFeeder(graph, [image_msg(image, 0)])
+    feeder.info = camera_info(scene)
+    cmd_pub = graph.node.create_publisher(Vector3Stamped, "/plate_cmd", 10)
+    cmd = Vector3Stamped()
+    cmd.vector.x = 0.03
+    graph.node.create_timer(0.05, lambda: cmd_pub.publish(cmd))
+    offsets = []
+    graph.node.create_subscription(Vector3Stamped, "/ball_level_offset", offsets.append, qos_profile_sensor_data)
+    graph.spin_until(lambda: offsets and abs(offsets[-1].vector.x - 0.03) < 0.005 and abs(offsets[-1].vector.y) < 0.005,
+                     90, "a level offset near (0.03, 0) rad")
+    assert stamp_key(offsets[-1]) in feeder.stamps and offsets[-1].header.frame_id == "plate_center"
+
+
 @pytest.mark.parametrize("params, needle", [
     (["calibration_file:=/nonexistent/cam.yaml"], "calibration_file"),
     (["source:=camera", "camera_device:=/dev/video_missing"], "camera_device"),

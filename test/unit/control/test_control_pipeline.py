@@ -8,7 +8,7 @@ import pytest
 from control_plant import K_G, DelayedPlant
 from test_control_kinematics import LEVEL_HOME, UR_JOINTS, URDF
 
-from ball_balance.control.estimation import EstimatorConfig
+from ball_balance.control.estimation import EstimatorConfig, level_offset_rad
 from ball_balance.control.kinematics import Chain, PlateKinematics, ShaperConfig
 from ball_balance.control.pipeline import TILT_LAWS, ControlPipeline, PipelineConfig, make_tilt_law, register_tilt_law
 from ball_balance.control.references import Circle, Stationary
@@ -266,3 +266,19 @@ def test_plate_cmd_is_the_tilt_the_ball_feels_under_the_estimated_disturbance():
     result = pipe.step(25 * DT, _observe(plant), q_prev)
     level = np.arcsin(pipe.plant.offset / pipe.plant.k_g)
     np.testing.assert_allclose(result.plate_cmd, np.array(result.u) - level, atol=1e-12)
+
+
+def test_the_trackers_level_offset_is_cancelled_and_the_tilt_sent_as_commanded():
+    # a tracker that estimates the disturbance (its filter sees the detections) gives it as a
+    # plate-level offset: the controller cancels that tilt and tells the tracker the tilt itself
+    pipe = _pipeline("pid")
+    plant = DelayedPlant(x0=(0.0, 0.0))
+    level = (0.03, -0.02)
+    q_prev = np.array(LEVEL_HOME)
+    result = None
+    for i in range(25):
+        result = pipe.step(i * DT, _observe(plant, level_offset_rad=level), q_prev)
+        q_prev = result.q_cmd
+    np.testing.assert_allclose(level_offset_rad(pipe.plant.offset, pipe.plant.k_g), level, atol=1e-12)
+    assert result.plate_cmd == result.u
+    np.testing.assert_allclose(result.u, level, atol=2e-3)   # the ball at the target: the offset is the tilt

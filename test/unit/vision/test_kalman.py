@@ -368,3 +368,56 @@ def test_with_two_confirming_frames_scattered_noise_is_not_a_push_and_a_push_sti
     # confirming only from a measurement noise of 2 mm: at 1 mm one detection is a push again
     assert run(2, pushed=False, confirm_noise_m=0.002) == run(1, pushed=False)
     assert run(2, pushed=False, confirm_noise_m=0.0009) == 0
+
+
+def _ball_under_a_loop(kf, disturbance_of_t, duration_s, noise_m=0.0005, push_at_s=None, seed=0):
+    """A ball held at the centre by a PD loop whose acceleration (-9 p - 4 v, the commanded
+    tilt's) is the filter's known acceleration, with the disturbance disturbance_of_t(t) on top;
+    the filter sees it at 30 Hz. Returns the times and the filter's d (n, 2)."""
+    rng = np.random.default_rng(seed)
+    p, v = np.zeros(2), np.zeros(2)
+    times, estimates = [], []
+    for k in range(int(duration_s * 30)):
+        t = k / 30
+        if push_at_s is not None and abs(t - push_at_s) < 1 / 60:
+            v = v + np.array([0.15, 0.0])
+        known = -9.0 * p - 4.0 * v
+        a = known + np.asarray(disturbance_of_t(t))
+        p, v = p + v / 30 + 0.5 * a / 900, v + a / 30
+        kf.step(t, tuple(p + rng.normal(0.0, noise_m, 2)), tuple(known))
+        times.append(t)
+        estimates.append(kf.disturbance_m_s2)
+    return np.array(times), np.array(estimates)
+
+
+def test_a_constant_disturbance_is_estimated_and_a_step_of_it_found():
+    kf = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=1.0, estimate_input_gain=False))
+    step = np.array([0.3, -0.1])                 # about 3 and 1 degrees of level offset at 0.6 g
+    t, d = _ball_under_a_loop(kf, lambda t: step if t >= 1.0 else np.zeros(2), 8.0)
+    np.testing.assert_allclose(d[t >= 5.0].mean(axis=0), step, atol=0.02)
+    assert np.all(np.abs(d[(t >= 0.5) & (t < 1.0)]) < 0.05)   # (the first frames say little)
+
+
+def test_the_level_offset_is_the_tilt_that_holds_the_ball_whatever_the_gain_takes():
+    # with the input gain estimated too, a still ball cannot tell s from d (s a + d = 0 either
+    # way); the level offset asin(d / (s k_g)) is the tilt holding it all the same
+    k_g = 5.886
+    kf = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=1.0))
+    step = np.array([0.3, -0.1])
+    _ball_under_a_loop(kf, lambda t: step if t >= 1.0 else np.zeros(2), 8.0)
+    np.testing.assert_allclose(kf.level_offset_rad(k_g), np.arcsin(step / k_g), atol=0.004)
+
+
+def test_a_clean_plant_reads_no_disturbance_and_a_push_is_not_one():
+    kf = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=1.0))
+    t, d = _ball_under_a_loop(kf, lambda t: np.zeros(2), 8.0, push_at_s=4.0)
+    assert np.all(np.abs(d[(t >= 2.0) & (t < 4.0)].mean(axis=0)) < 0.01)
+    assert np.all(np.abs(d[t >= 4.0]) < 0.1)     # the push's frames, at most 1 degree, passing
+    assert np.all(np.abs(d[t >= 6.0].mean(axis=0)) < 0.02)
+
+
+def test_without_the_disturbance_state_the_filter_is_unchanged():
+    off = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=0.0))
+    assert not off.disturbance_state and off.dim == 5 and off.disturbance_m_s2 == (0.0, 0.0)
+    on = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=1.0))
+    assert on.dim == 7 and on.fast is not None and not on.fast.disturbance_state
