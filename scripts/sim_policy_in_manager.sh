@@ -11,6 +11,7 @@
 #   scripts/sim_policy_in_manager.sh --tilt-law mpc --params-file my_values.yaml   # another law, its values
 #   scripts/sim_policy_in_manager.sh --reference circle --radius 0.1 --period 10 --duration 20
 #   scripts/sim_policy_in_manager.sh --truth-fed           # no camera/tracker: /ball_state from truth
+#   scripts/sim_policy_in_manager.sh --tracker-param disturbance_time_constant_s:=1.0   # any tracker parameter
 #
 # Exit code: the monitor's (0: the ball stayed on the plate, 1: it dropped), 3 when a process of
 # the graph (or the controller's spawning) failed first, 2 for bad arguments.
@@ -37,7 +38,8 @@ TRUTH_FED=0
 REFERENCE=""
 RADIUS=""
 PERIOD=""
-usage() { sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; }
+TRACKER_PARAMS=()
+usage() { sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'; }
 while (($#)); do
   case "$1" in
     --tilt-law) TILT_LAW="$2"; shift 2 ;;
@@ -51,6 +53,7 @@ while (($#)); do
     --duration) DURATION="$2"; shift 2 ;;
     --out) OUT="$2"; shift 2 ;;
     --truth-fed) TRUTH_FED=1; shift ;;
+    --tracker-param) TRACKER_PARAMS+=(-p "$2"); shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "sim_policy_in_manager.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
@@ -97,7 +100,7 @@ start sim "$ROOT/scripts/sim_arm.sh" --sim-config "$SIM_CONFIG" --domain "$DOMAI
   --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y" --param start_paused=true
 if ((! TRUTH_FED)); then
   start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
-    ${RT_OFF[@]+"${RT_OFF[@]}"}
+    ${RT_OFF[@]+"${RT_OFF[@]}"} ${TRACKER_PARAMS[@]+"${TRACKER_PARAMS[@]}"}
 fi
 # load and configure (the model is checked here: a misfit fails with one line)
 if ! spawner "$CONTROLLER" -t ball_balance_controllers/BallBalanceController -p "$PARAMS_FILE" --inactive \
