@@ -44,6 +44,7 @@ sys.path.insert(0, str(ROOT / "controller_manager_py"))  # its own package folde
 from ball_balance.benchmark.episode import (  # noqa: E402
     REFERENCES,
     EpisodeSpec,
+    controller_schema,
     demo_spec,
     reference_protocol,
     release_point,
@@ -62,6 +63,7 @@ from ball_balance.benchmark.report import (  # noqa: E402
     write_csv,
 )
 from ball_balance.sim.config import DOMAIN_ALIASES, DOMAIN_SETS, DOMAINS  # noqa: E402
+from ball_balance.vision.config import TRACKER_SCHEMA  # noqa: E402
 
 # domain groups for --domains
 DESIGN_DOMAINS = ["standard", "slippery", "sticky", "heavy_ball", "low_gravity", "high_gravity", "noisy_vision",
@@ -171,6 +173,8 @@ def main(argv=None) -> int:
     parser.add_argument("--tracker-param", action="append", default=[], metavar="NAME:=VALUE",
                         help="a tracker parameter over config/ball_tracker.yaml, e.g. "
                              "disturbance_time_constant_s:=1.0 (repeatable; fast and vision modes)")
+    parser.add_argument("--controller-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="a controller parameter over the defaults, e.g. ki:=0.0 (repeatable)")
     parser.add_argument("--combine", nargs="+", metavar="DIR",
                         help="print one table from the closed_loop.csv of earlier runs (e.g. run in parallel) "
                              "and write it to --out; runs nothing")
@@ -194,7 +198,11 @@ def main(argv=None) -> int:
     shown = demo_spec(controllers[0]) if args.demo else EpisodeSpec(duration_s=args.duration, mode=args.mode)
     print(f"closed-loop benchmark: {len(cells)} cells x {args.episodes} episodes = {total} episodes of "
           f"{shown.duration_s:.0f} s, mode {shown.mode}", flush=True)
-    tracker_params = tuple(tracker_param(text) for text in args.tracker_param)
+    tracker_params = tuple(name_value(text, "--tracker-param") for text in args.tracker_param)
+    controller_params = tuple(name_value(text, "--controller-param") for text in args.controller_param)
+    check_names(tracker_params, TRACKER_SCHEMA, "--tracker-param", "the tracker")
+    for controller in controllers:
+        check_names(controller_params, controller_schema(controller), "--controller-param", controller)
     results = []
     t_start = time.monotonic()
     for i, (controller, reference, domain, protocol) in enumerate(cells):
@@ -205,7 +213,8 @@ def main(argv=None) -> int:
                 spec = reference_protocol(spec)
             elif protocol == "demo":
                 spec = demo_spec(controller, domain, args.seed + k)
-            spec = dataclasses.replace(spec, tracker_overrides=tracker_params)
+            spec = dataclasses.replace(spec, tracker_overrides=tracker_params,
+                                       overrides=spec.overrides + controller_params)
             results.append(run_live(spec, Path(args.out)) if args.live else run_episode(spec))
         done = (i + 1) * args.episodes
         print(f"  [{done}/{total}] {controller} {protocol} {reference} {domain}: "
@@ -216,11 +225,18 @@ def main(argv=None) -> int:
     return 0
 
 
-def tracker_param(text: str):
+def check_names(params, schema, option: str, owner: str) -> None:
+    known = {p.name for p in schema}
+    unknown = [name for name, _ in params if name not in known]
+    if unknown:
+        raise SystemExit(f"{option}: {', '.join(unknown)} is not a parameter of {owner} (docs/parameters.md)")
+
+
+def name_value(text: str, option: str):
     """("name", value) from "name:=value", the value read as YAML would read it (a number, a bool)."""
     name, sep, value = text.partition(":=")
     if not sep or not name:
-        raise SystemExit(f"--tracker-param {text!r}: expected NAME:=VALUE")
+        raise SystemExit(f"{option} {text!r}: expected NAME:=VALUE")
     import yaml
     return name, yaml.safe_load(value)
 

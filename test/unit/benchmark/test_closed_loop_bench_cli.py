@@ -35,3 +35,14 @@ def test_tuning_and_held_out_groups_cover_every_domain_once_and_all_runs_both():
     assert tuning == list(DOMAIN_SETS["tuning"]) and len(tuning) == 17
     assert held_out == list(DOMAIN_SETS["held_out"]) and not set(tuning) & set(held_out)
     assert sorted(bench.names("all", set(bench.DOMAINS), "domain", bench.DOMAIN_GROUPS)) == sorted(tuning + held_out)
+
+
+def test_parameter_overrides_are_read_as_yaml_and_unknown_names_refused():
+    assert bench.name_value("ki:=0.0", "--controller-param") == ("ki", 0.0)
+    assert bench.name_value("estimate_input_gain:=false", "--tracker-param") == ("estimate_input_gain", False)
+    with pytest.raises(SystemExit, match="expected NAME:=VALUE"):
+        bench.name_value("ki=0", "--controller-param")
+    schema = bench.controller_schema("pid")
+    bench.check_names((("ki", 0.0),), schema, "--controller-param", "pid")
+    with pytest.raises(SystemExit, match="nosuch is not a parameter of pid"):
+        bench.check_names((("nosuch", 1),), schema, "--controller-param", "pid")
