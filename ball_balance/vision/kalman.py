@@ -87,6 +87,13 @@ CHI2_1_MEDIAN = 0.45493642311957283   # median of a chi-square variable with one
 MANEUVER_MAX_NIS = 1.0
 _TRACKER_DEFAULTS = {p.name: p.default for p in TRACKER_SCHEMA}   # KalmanConfig's defaults
 DISTURBANCE_STD_M_S2 = 0.3   # d's 1-sigma at the first track: a plate up to about 3 degrees off level
+# A change of d (a force that starts, turns or ends) shows as innovations that keep one sign:
+# their whitened sum over DISTURBANCE_CHANGE_WINDOW_S, squared and over its frames, is
+# chi-square with 2 degrees of freedom while the model holds; beyond DISTURBANCE_CHANGE_CHI2
+# (a 0.1 % false alarm per test) d has changed by an unknown amount (1-sigma
+# DISTURBANCE_STD_M_S2) about half a window ago, and the filter's covariance says so
+DISTURBANCE_CHANGE_WINDOW_S = 0.3
+DISTURBANCE_CHANGE_CHI2 = 13.815510557964274
 
 
 @dataclass(frozen=True)
@@ -331,6 +338,9 @@ class BallKalman:
             self.d_index = self.dim
             self.dim += 2
         self._disturbance = (np.zeros(2), DISTURBANCE_STD_M_S2 ** 2)   # kept over dropped tracks
+        self._innovations: Deque[Tuple[float, np.ndarray]] = deque()   # (stamp, whitened), the last window
+        self._window_start_s: Optional[float] = None
+        self.disturbance_changes = 0  # changes of d found (total)
         self.model_mismatch_time_constant_s = cfg.model_mismatch_time_constant_s
         self.nis = 1.0                # running mean of the normalised innovation squared (per axis)
         self.maneuver_sigma = cfg.maneuver_sigma
@@ -401,6 +411,8 @@ class BallKalman:
         self.coasted = 0
         self.t_last = None
         self._excess = (0, np.zeros(2), 1.0)
+        self._innovations.clear()
+        self._window_start_s = None
 
     def _start(self, z: Tuple[float, float], t: float) -> None:
         kf = self.kf
@@ -551,6 +563,8 @@ class BallKalman:
                 alpha = min(1.0, dt_step / self.model_mismatch_time_constant_s)
                 self.nis += alpha * (min(distance, self.gate_sigma) ** 2 / 2.0 - self.nis)
             if distance <= self.gate_sigma:
+                if self.disturbance_state:
+                    self._find_disturbance_change(t, z, known=accel is not None, pushed=t <= self._hold_until)
                 self.kf.update(np.asarray(z, dtype=np.float64))
                 if self.gain_state:
                     self.kf.x[4] = min(max(self.kf.x[4], self.gain_bounds[0]), self.gain_bounds[1])
@@ -564,6 +578,42 @@ class BallKalman:
             self.reset()
             return estimate
         return self._estimate(fresh=False, valid=True, gated=gated)
+
+    def _find_disturbance_change(self, t: float, z: Tuple[float, float], known: bool, pushed: bool) -> None:
+        """Before the update with detection z: test the innovations of the last
+        DISTURBANCE_CHANGE_WINDOW_S for a change of d and, on one, widen the covariance by
+        that of a change of 1-sigma DISTURBANCE_STD_M_S2 that happened T ago (half the
+        window): d by it, the velocity by it times T, the position by it times T^2/2, all
+        correlated, so the innovations that follow move d, and not the velocity, by what the
+        change was. Without a known acceleration d is not in the model, and during a push's
+        hold the innovations are the push's: the window starts again."""
+        window = self._innovations
+        if not known or pushed:
+            window.clear()
+            self._window_start_s = None
+            return
+        kf = self.kf
+        innovation = np.asarray(z, dtype=np.float64) - kf.H @ kf.x
+        S = kf.H @ kf.P @ kf.H.T + kf.R
+        window.append((t, np.linalg.solve(np.linalg.cholesky(S), innovation)))
+        while t - window[0][0] > DISTURBANCE_CHANGE_WINDOW_S:
+            window.popleft()
+        if self._window_start_s is None:
+            self._window_start_s = t
+        if t - self._window_start_s < DISTURBANCE_CHANGE_WINDOW_S:
+            return
+        total = np.sum([whitened for _, whitened in window], axis=0)
+        if float(total @ total) / len(window) <= DISTURBANCE_CHANGE_CHI2:
+            return
+        span_s = t - window[0][0]
+        T = span_s / 2.0
+        J = np.array([T * T / 2.0, T, 1.0])
+        for axis in (0, 1):
+            rows = [axis, 2 + axis, self.d_index + axis]
+            kf.P[np.ix_(rows, rows)] += DISTURBANCE_STD_M_S2 ** 2 * np.outer(J, J)
+        self.disturbance_changes += 1
+        window.clear()
+        self._window_start_s = None
 
     def _push_seen(self, z: Tuple[float, float], distance: float) -> bool:
         """Whether this detection shows a push: beyond maneuver_sigma (maneuver_confirm_frames 1,

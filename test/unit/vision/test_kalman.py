@@ -421,3 +421,16 @@ def test_without_the_disturbance_state_the_filter_is_unchanged():
     assert not off.disturbance_state and off.dim == 5 and off.disturbance_m_s2 == (0.0, 0.0)
     on = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=1.0))
     assert on.dim == 7 and on.fast is not None and not on.fast.disturbance_state
+
+
+def test_a_quiet_disturbance_state_finds_a_step_within_a_second_and_no_change_on_a_clean_plant():
+    # a slow random walk (20 s) would take seconds; the change test widens d's covariance
+    slow = dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=20.0, estimate_input_gain=False)
+    kf = BallKalman(slow)
+    step = np.array([0.2, -0.1])
+    t, d = _ball_under_a_loop(kf, lambda t: step if t >= 2.0 else np.zeros(2), 6.0)
+    assert kf.disturbance_changes >= 1
+    np.testing.assert_allclose(d[(t >= 3.0) & (t < 6.0)].mean(axis=0), step, atol=0.03)
+    clean = BallKalman(slow)
+    _, d = _ball_under_a_loop(clean, lambda t: np.zeros(2), 20.0)
+    assert clean.disturbance_changes == 0 and np.all(np.abs(d[-30:]) < 0.01)
