@@ -42,7 +42,9 @@ Outputs
   ~/debug_image  sensor_msgs/Image bgr8 overlay, only with `publish_debug_image`.
   ~/statistics/{full,names,values} (pal_statistics_msgs, the controller manager's
                  StatisticsRegistry): per-stage times (ms) and counters (plate_cmd_delay_ms: the
-                 command -> plate delay the filter uses, estimate_plate_cmd_delay); names latched
+                 command -> plate delay the filter uses, estimate_plate_cmd_delay; with the
+                 disturbance state level_offset_{x,y}_deg, the plate's level offset in degrees,
+                 and disturbance_changes); names latched
                  (transient local), full/values sent per frame only while someone subscribes.
 A camera that stops (no frame for `camera_timeout_s`, a dead driver) is reported once with a
 warning, and its return with an info line.
@@ -408,6 +410,11 @@ class BallTrackerNode(Node):
                          "position_std_mm": lambda: 1e3 * self._last_result.position_std_m,
                          # the command -> plate delay the filter uses (estimated or configured)
                          "plate_cmd_delay_ms": lambda: 1e3 * t.plate_cmds.delay_s})
+        if k.disturbance_state:   # a user learns here that the plate is not level
+            def level_deg(axis):
+                return lambda: math.degrees(k.level_offset_rad(t.plate_cmds.k_g)[axis])
+            counters.update({"level_offset_x_deg": level_deg(0), "level_offset_y_deg": level_deg(1),
+                             "disturbance_changes": lambda: k.disturbance_changes})
         frame = [(f"{what}_ms", frame_ms(what)) for what in self._frame_times]
         return [(f"{stage}_ms", stage_ms(stage)) for stage in STAGES] + frame + list(counters.items())
 

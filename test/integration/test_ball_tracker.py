@@ -246,6 +246,14 @@ def test_a_ball_held_still_under_a_tilt_reads_as_that_level_offset(launcher, gra
     graph.spin_until(lambda: offsets and abs(offsets[-1].vector.x - 0.03) < 0.005 and abs(offsets[-1].vector.y) < 0.005,
                      90, "a level offset near (0.03, 0) rad")
     assert stamp_key(offsets[-1]) in feeder.stamps and offsets[-1].header.frame_id == "plate_center"
+    # and in ~/statistics, in degrees, for a user to read
+    names = graph.collect(StatisticsNames, "/ball_tracker/statistics/names", timeout=10,
+                          qos=QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                         durability=DurabilityPolicy.TRANSIENT_LOCAL))[0]
+    x_deg = names.names.index("level_offset_x_deg")
+    graph.collect(StatisticsValues, "/ball_tracker/statistics/values", timeout=10,
+                  predicate=lambda m: m.names_version == names.names_version
+                  and abs(m.values[x_deg] - math.degrees(0.03)) < 0.3)
 
 
 @pytest.mark.parametrize("params, needle", [
