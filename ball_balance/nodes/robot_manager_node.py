@@ -184,6 +184,8 @@ class RobotManagerNode(LifecycleNode):
                 reason = await getattr(self, f"_prepare_{transition.label}")()
             except ManagerCallError as error:
                 reason = str(error)
+            except Exception as error:  # noqa: BLE001 - a bug fails the transition, not the node
+                reason = f"internal error: {error!r}"
             self._prepared = reason or ""
             result = self._commit(transition)
             self.state = lc.outcome(transition, result, lc.SUCCESS)
@@ -194,7 +196,10 @@ class RobotManagerNode(LifecycleNode):
         ok = result == lc.SUCCESS
         text = (f"{transition.label}: {lc.STATE_LABELS[start]} -> {self.state_label}" if ok
                 else f"{transition.label} failed: {reason}")
-        (self.get_logger().info if ok else self.get_logger().error)(text)
+        if ok:
+            self.get_logger().info(text)
+        else:
+            self.get_logger().error(text)
         self.publish_event(OK if ok else WARN, "state_change" if ok else "transition_failed", source, text)
         return ok, "" if ok else reason
 
@@ -380,13 +385,14 @@ class RobotManagerNode(LifecycleNode):
         level = p["level_controller"]
         if not level:
             return
+        balancing = [n for n in names(p["controllers"]) if n != level]
+        await self.cm.switch(activate=[] if level in names(p["controllers"]) else [level],
+                             deactivate=balancing, strictness=STRICT)
+        # where the level controller holds the arm now (the balancing moved it until the switch)
         current = await self._joint_positions()
         if current is None:
             self.get_logger().warning("deactivate: no /joint_states within 5 s; the plate is not levelled")
             return
-        balancing = [n for n in names(p["controllers"]) if n != level]
-        await self.cm.switch(activate=[] if level in names(p["controllers"]) else [level],
-                             deactivate=balancing, strictness=STRICT)
         target = list(p["level_positions"])
         duration = levelling_duration(current, target, p["level_max_speed_rad_s"], p["level_min_duration_s"])
         controller = (await self.cm.controllers()).get(level)
@@ -405,8 +411,10 @@ class RobotManagerNode(LifecycleNode):
                     break
                 await sleep(self, max(0.001, start + t - time.monotonic()), self.group)
                 self.level_fwd_pub.publish(Float64MultiArray(data=q))
-        self.get_logger().info(f"deactivate: plate levelled in {duration:.1f} s" if not self.estop
-                               else "deactivate: levelling interrupted by the emergency stop")
+        if self.estop:
+            self.get_logger().warning("deactivate: levelling interrupted by the emergency stop")
+        else:
+            self.get_logger().info(f"deactivate: plate levelled in {duration:.1f} s")
 
     async def _joint_positions(self):
         self.joint_state = None
@@ -434,7 +442,7 @@ class RobotManagerNode(LifecycleNode):
     async def _stop(self) -> None:
         try:
             await self._stop_commanding()
-        except ManagerCallError as error:
+        except Exception as error:  # noqa: BLE001 - ManagerCallError, or a bug: the watchdog tries again
             self.get_logger().error(f"emergency stop: {error}; trying again")
             return
         self._stop_confirmed = True
