@@ -71,6 +71,8 @@ SCHEMA = (
           "forward position controller (positions streamed); empty: no levelling", user_facing=True),
     Param("level_positions", list(robot.HOME_POSITIONS_RAD), "joint positions of the level plate", unit="rad"),
     Param("level_min_duration_s", 2.0, "shortest levelling motion", unit="s", min=0.1, max=60.0),
+    Param("level_tolerance_rad", 1e-3, "deactivate waits until every joint is this close to level_positions",
+          unit="rad", min=1e-5, max=0.5),
     Param("level_max_speed_rad_s", 0.3, "fastest joint speed of the levelling motion", unit="rad/s",
           min=0.01, max=3.0),
     Param("camera_required", True, "configure needs camera frames, intrinsics and a plate pose (false: a graph "
@@ -401,9 +403,6 @@ class RobotManagerNode(LifecycleNode):
             for t, q in levelling_path(current, target, duration, 50):
                 msg.points.append(JointTrajectoryPoint(positions=q, time_from_start=_duration(t)))
             self.level_traj_pub.publish(msg)
-            end = time.monotonic() + duration + 0.2
-            while time.monotonic() < end and not self.estop:
-                await sleep(self, 0.05, self.group)
         else:   # a forward position controller: the path streamed at 50 Hz
             start = time.monotonic()
             for t, q in levelling_path(current, target, duration, max(2, int(duration * 50))):
@@ -411,25 +410,36 @@ class RobotManagerNode(LifecycleNode):
                     break
                 await sleep(self, max(0.001, start + t - time.monotonic()), self.group)
                 self.level_fwd_pub.publish(Float64MultiArray(data=q))
+        # arrived (on a loaded machine simulated time may run slower than the wall clock)
+        tolerance = p["level_tolerance_rad"]
+        reached = await self._joint_positions(
+            lambda q: max(abs(a - b) for a, b in zip(q, target, strict=True)) < tolerance,
+            timeout_s=5.0 * duration + 10.0)
         if self.estop:
             self.get_logger().warning("deactivate: levelling interrupted by the emergency stop")
+        elif reached is None:
+            self.get_logger().warning(f"deactivate: the plate did not reach level within {5.0 * duration + 10.0:.0f} s")
         else:
-            self.get_logger().info(f"deactivate: plate levelled in {duration:.1f} s")
+            self.get_logger().info(f"deactivate: plate levelled ({duration:.1f} s path)")
 
-    async def _joint_positions(self):
+    async def _joint_positions(self, until=lambda q: True, timeout_s: float = 5.0):
+        """The arm's joint positions from /joint_states once `until(positions)` holds (None after
+        timeout_s of wall time, or at an emergency stop)."""
         self.joint_state = None
         sub = self._subscribe(JointState, "/joint_states", self.on_joint_states, 10)
         try:
-            end = time.monotonic() + 5.0
-            while self.joint_state is None and time.monotonic() < end:
+            end = time.monotonic() + timeout_s
+            while time.monotonic() < end and not (self.estop and self.busy == "deactivate"):
+                msg = self.joint_state
+                if msg is not None:
+                    index = {n: i for i, n in enumerate(msg.name)}
+                    q = [msg.position[index[n]] for n in robot.JOINT_NAMES]
+                    if until(q):
+                        return q
                 await sleep(self, 0.02, self.group)
         finally:
             self.destroy_subscription(sub)
-        msg = self.joint_state
-        if msg is None:
-            return None
-        index = {n: i for i, n in enumerate(msg.name)}
-        return [msg.position[index[n]] for n in robot.JOINT_NAMES]
+        return None
 
     # ---- emergency stop ---------------------------------------------------------------------
     def _start_stop(self) -> None:
