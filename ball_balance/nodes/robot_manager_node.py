@@ -76,7 +76,8 @@ SCHEMA = (
     Param("level_max_speed_rad_s", 0.3, "fastest joint speed of the levelling motion", unit="rad/s",
           min=0.01, max=3.0),
     Param("camera_required", True, "configure needs camera frames, intrinsics and a plate pose (false: a graph "
-          "without a camera, e.g. the truth-fed simulation)", user_facing=True),
+          "without a camera, e.g. the truth-fed simulation, or one paused until activation); the camera-lost "
+          "watchdog runs whenever frames have arrived", user_facing=True),
     Param("image_topic", "/camera/image_raw", "camera frames (sensor data QoS)"),
     Param("camera_info_topic", "/camera/camera_info", "camera intrinsics (sensor data QoS)"),
     Param("ball_state_topic", "/ball_state", "the tracker's output"),
@@ -116,8 +117,7 @@ class RobotManagerNode(LifecycleNode):
         self._stop_task = None
         self._last_stop_try = -math.inf
         self.cm = ManagerClient(self, p["controller_manager"], p["service_timeout_s"], group)
-        self.watchdog = Watchdog(WatchdogLimits(p["manager_timeout_s"], p["camera_lost_timeout_s"],
-                                                p["camera_required"]),
+        self.watchdog = Watchdog(WatchdogLimits(p["manager_timeout_s"], p["camera_lost_timeout_s"]),
                                  heartbeat_topic=f"{self.cm.manager}/statistics/values", camera_topic=p["image_topic"])
         self.controller_states = {}    # name -> label, from the manager's ~/activity
         self.last_info = None
