@@ -110,6 +110,7 @@ class RobotManagerNode(LifecycleNode):
         self.group = group = ReentrantCallbackGroup()
         self.state = lc.UNCONFIGURED
         self.busy = ""                 # the transition being prepared ('' when none)
+        self.busy_state = lc.UNKNOWN   # its transition state (get_state answers it meanwhile, as rcl does)
         self._prepared = None          # None: not prepared; '' success; text: the failure
         self.estop = False
         self.estop_reason = ""
@@ -178,7 +179,7 @@ class RobotManagerNode(LifecycleNode):
             return False, str(error)
         if self.busy:
             return False, f"{self.busy} is in progress"
-        self.busy = transition.label
+        self.busy, self.busy_state = transition.label, transition.via
         start = self.state
         try:
             self._publish_transition(transition, start, transition.via)
@@ -481,7 +482,8 @@ class RobotManagerNode(LifecycleNode):
         return response
 
     def on_get_state(self, request, response):
-        response.current_state = lc_msg.State(id=self.state, label=self.state_label)
+        state = self.busy_state if self.busy else self.state
+        response.current_state = lc_msg.State(id=state, label=lc.STATE_LABELS[state])
         return response
 
     def on_get_available_states(self, request, response):

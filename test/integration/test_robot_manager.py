@@ -240,6 +240,26 @@ def test_the_emergency_stop_holds_the_arm_until_reset_and_reset_moves_nothing(ri
     assert rig.state() == "inactive"
 
 
+def test_ros2py_lifecycle_drives_it_by_hand_and_survives_a_late_answer(rig):
+    assert not (rig.latch and rig.latch[-1])
+
+    def ros2py(*args):
+        result = rig.launcher.run([executable("ros2py"), "lifecycle", *args, "--spin-time", "30"], timeout=180)
+        return result.returncode, result.stdout
+
+    assert ros2py("get", "/robot_manager") == (0, "inactive [2]\n")
+    code, out = ros2py("list", "/robot_manager")
+    assert code == 0 and "- activate [3]\n\tStart: inactive\n\tGoal: activating\n" in out, out
+    code, out = ros2py("set", "/robot_manager", "fly")
+    assert code == 1 and out.startswith("Unknown transition requested, available ones are:\n- cleanup [2]"), out
+    assert ros2py("set", "/robot_manager", "activate") == (0, "Transitioning successful\n")
+    # an answer later than --timeout (deactivate levels the plate for at least a second): get_state
+    # says whether the transition went through
+    code, out = ros2py("set", "/robot_manager", "deactivate", "--timeout", "0.5")
+    assert (code, out.splitlines()[-1]) == (0, "Transitioning successful"), out
+    assert rig.state() == "inactive"
+
+
 def _manager_pid(rig) -> int:
     match = re.search(r"ros2_control_node (\d+)", rig.sim.output())
     assert match, rig.sim.output()
