@@ -14,6 +14,7 @@ EXECUTABLES = {
     "ball_balance_visualizer": "ball_balance.nodes.visualizer_node:main",
     "ball_balance_foxglove": "ball_balance.nodes.foxglove_node:main",
     "robot_state_publisher": "ball_balance.nodes.robot_state_publisher_node:main",
+    "robot_manager": "ball_balance.nodes.robot_manager_node:main",
     "ros2py": "ball_balance.cli.main:main",
     "camera_snapshot": "ball_balance.nodes.camera_snapshot_node:main",
 }
