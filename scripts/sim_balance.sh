@@ -16,6 +16,12 @@
 #   scripts/sim_balance.sh --sim-param camera_rate_hz=60        # any simulation parameter (config/sim.yaml)
 #   scripts/sim_balance.sh --force 2 90       # a constant force on the ball, as a plate 2 deg off level, towards +y
 #   scripts/sim_balance.sh --plate-offset 2 0 # the plate mounted 2 deg off level about its x axis (rolls to -y)
+#   scripts/sim_balance.sh --live-view-port 8081   # the live view's port (default 8080; 0: a free one)
+#   scripts/sim_balance.sh --no-live-view          # without the live view in the browser
+#
+# The live view (docs/live_view.md) serves the run on http://127.0.0.1:8080/; the script prints
+# the address once it listens. A live view that cannot start (port taken) is reported and the
+# graph runs on without it.
 #
 # --force DEG [DIR_DEG]: F = m g sin(DEG) on the ball's centre towards DIR_DEG (plate axes, from +x
 # towards +y; default 0), from the start; change it while running (docs/simulation.md):
@@ -56,7 +62,9 @@ DEBUG_IMAGE=false
 CTRL_PARAMS=()
 SIM_PARAMS=()
 TRACKER_PARAMS=()
-usage() { sed -n '2,33p' "$0" | sed 's/^# \{0,1\}//'; }
+LIVE_VIEW=1
+LIVE_VIEW_PORT="${BALL_BALANCE_LIVE_VIEW_PORT:-8080}"
+usage() { sed -n '2,39p' "$0" | sed 's/^# \{0,1\}//'; }
 # the optional second number of --force and --plate-offset (a negative angle is a number, not an option)
 optional_number() { [[ -n "${1:-}" && "$1" != --* ]]; }
 needs() { (($1 >= 2)) || { echo "sim_balance.sh: $2 needs a value (see --help)" >&2; exit 2; }; }
@@ -78,6 +86,8 @@ while (($#)); do
     --param) CTRL_PARAMS+=(-p "$2"); shift 2 ;;
     --tracker-param) needs $# "$1"; TRACKER_PARAMS+=(-p "$2"); shift 2 ;;
     --sim-param) SIM_PARAMS+=(--param "$2"); shift 2 ;;
+    --live-view-port) needs $# "$1"; LIVE_VIEW_PORT="$2"; shift 2 ;;
+    --no-live-view) LIVE_VIEW=0; shift ;;
     --force)
       needs $# "$1"; SIM_PARAMS+=(--param "ball_force_deg=$2"); shift 2
       if optional_number "${1:-}"; then SIM_PARAMS+=(--param "ball_force_dir_deg=$1"); shift; fi ;;
@@ -90,10 +100,11 @@ while (($#)); do
     *) echo "sim_balance.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
+# the live view's gains: the PID's are set at run time; the MPC's are shown (read-only)
 case "$CONTROLLER" in
-  pid) EXE=ball_balance_controller; YAML="$ROOT/config/pid.yaml"; ARM_FLAGS=() ;;
-  mpc) EXE=ball_balance_mpc; YAML="$ROOT/config/mpc.yaml"; ARM_FLAGS=(--trajectory) ;;
-  policy) EXE=ball_balance_policy; YAML="$ROOT/config/policy.yaml"; ARM_FLAGS=() ;;
+  pid) EXE=ball_balance_controller; YAML="$ROOT/config/pid.yaml"; ARM_FLAGS=(); GAINS="[kp, ki, kd]" ;;
+  mpc) EXE=ball_balance_mpc; YAML="$ROOT/config/mpc.yaml"; ARM_FLAGS=(--trajectory); GAINS="[mpc_q_pos, mpc_q_vel, mpc_r_u]" ;;
+  policy) EXE=ball_balance_policy; YAML="$ROOT/config/policy.yaml"; ARM_FLAGS=(); GAINS="[kp, ki, kd]" ;;
   *) echo "sim_balance.sh: --controller must be pid, mpc or policy, got '$CONTROLLER'" >&2; exit 2 ;;
 esac
 float() { [[ "$1" == *.* || "$1" == *e* ]] && echo "$1" || echo "$1.0"; }
@@ -133,6 +144,13 @@ fi
 start controller "$EXE" --ros-args --params-file "$YAML" -p use_sim_time:=true -p joint_states_timeout_s:=5.0 \
   ${RT_OFF[@]+"${RT_OFF[@]}"} ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"}
 start visualizer ball_balance_visualizer --ros-args -p use_sim_time:=true ${VIS_PARAMS[@]+"${VIS_PARAMS[@]}"}
+if ((LIVE_VIEW)); then
+  LIVE_IMAGE=/camera/image_raw
+  [[ "$DEBUG_IMAGE" == true ]] && LIVE_IMAGE=/ball_tracker/debug_image
+  start live_view optional ball_balance_live_view --ros-args -p "port:=$LIVE_VIEW_PORT" -p "controller_node:=$EXE" \
+    -p "gain_names:=$GAINS" -p "image_topic:=$LIVE_IMAGE"
+  announce_url "$LOGS/live_view.log" "live view (open it in a browser)" &
+fi
 # the simulation starts paused: it runs once the tracker (or the truth feed), the controller and
 # the monitor are up
 start resume resume_when /ball_state=Publisher /plate_cmd=Publisher /sim/ball_truth=Subscription
