@@ -147,9 +147,7 @@ start visualizer ball_balance_visualizer --ros-args -p use_sim_time:=true ${VIS_
 if ((LIVE_VIEW)); then
   LIVE_IMAGE=/camera/image_raw
   [[ "$DEBUG_IMAGE" == true ]] && LIVE_IMAGE=/ball_tracker/debug_image
-  start live_view optional ball_balance_live_view --ros-args -p "port:=$LIVE_VIEW_PORT" -p "controller_node:=$EXE" \
-    -p "gain_names:=$GAINS" -p "image_topic:=$LIVE_IMAGE"
-  announce_url "$LOGS/live_view.log" "live view (open it in a browser)" &
+  start_live_view "$LIVE_VIEW_PORT" -p "controller_node:=$EXE" -p "gain_names:=$GAINS" -p "image_topic:=$LIVE_IMAGE"
 fi
 # the simulation starts paused: it runs once the tracker (or the truth feed), the controller and
 # the monitor are up

@@ -36,6 +36,14 @@ announce_url() {
   return 1
 }
 
+# start_live_view PORT ARGS...: the live view in the browser (docs/live_view.md) as an optional
+# node with `--ros-args -p port:=PORT ARGS...`; its address is printed once it listens.
+start_live_view() {
+  local port="$1"; shift
+  start live_view optional ball_balance_live_view --ros-args -p "port:=$port" "$@"
+  announce_url "$LOGS/live_view.log" "live view (open it in a browser)" &
+}
+
 # fd 3: the script's own stderr, for lines from helper processes (`start` sends their output
 # to their log)
 exec 3>&2
