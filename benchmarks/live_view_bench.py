@@ -59,13 +59,29 @@ def descendants(pid: int) -> list:
 
 
 def live_view_pid(graph_pid: int) -> int:
+    """The node's Python process (not the script's shell that started it)."""
     for pid in descendants(graph_pid):
         try:
-            if b"ball_balance_live_view" in Path(f"/proc/{pid}/cmdline").read_bytes():
-                return pid
+            words = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
         except FileNotFoundError:
             continue
+        if "python" in Path(words[0].decode()).name and any(w.endswith(b"/ball_balance_live_view") for w in words):
+            return pid
     raise RuntimeError("no ball_balance_live_view process under the graph")
+
+
+def wait_sampling(popen: subprocess.Popen, timeout_s: float, sample) -> tuple:
+    """Wait for popen's exit while calling sample() twice a second (the graph's processes are
+    gone once it has exited); (exit code, sample()'s last value, when it was taken)."""
+    deadline, last = time.monotonic() + timeout_s, (None, time.monotonic())
+    while popen.poll() is None:
+        if time.monotonic() > deadline:
+            raise subprocess.TimeoutExpired(popen.args, timeout_s)
+        value = sample()
+        if value == value:     # not nan: the processes still there
+            last = (value, time.monotonic())
+        time.sleep(0.5)
+    return popen.returncode, last[0], last[1]
 
 
 def group_cpu_s(pid: int) -> float:
@@ -99,10 +115,11 @@ def run_condition(condition: str, args, out: Path) -> dict:
                 browser.wait_for("document.getElementById('connection').textContent === 'connected'", 120.0)
             started, node_cpu0 = time.monotonic(), process_cpu_s(node)
             browser_cpu0 = group_cpu_s(browser.process.pid) if browser else 0.0
-        row["exit"] = graph.wait(timeout=120 * args.duration)
+        row["exit"], node_cpu, sampled = wait_sampling(graph, 120 * args.duration,
+                                                      lambda: process_cpu_s(node) if node else float("nan"))
         wall_s = time.monotonic() - started
-        if node is not None:
-            row["node_cpu_pct"] = 100 * (process_cpu_s(node) - node_cpu0) / wall_s
+        if node is not None and node_cpu is not None:
+            row["node_cpu_pct"] = 100 * (node_cpu - node_cpu0) / (sampled - started)
         if browser is not None:
             row["browser_cpu_pct"] = 100 * (group_cpu_s(browser.process.pid) - browser_cpu0) / wall_s
             frames = browser.evaluate("parseInt(/(\\d+) sent/.exec(document.getElementById('image-info')"

@@ -69,7 +69,7 @@ class LiveViewServer:
         self.handle, self.on_pages, self.reply_timeout_s, self.log = handle, on_pages, reply_timeout_s, log
         self.port: Optional[int] = None
         self.pages: Set[_Page] = set()
-        self.latest_state = "{}"
+        self.latest_state: Optional[str] = None    # JSON, once the ROS side has pushed a state
         self._loop = asyncio.new_event_loop()
         self._runner: Optional[web.AppRunner] = None
         self._started = threading.Event()
@@ -151,7 +151,7 @@ class LiveViewServer:
         return web.FileResponse(STATIC_DIR / "index.html")
 
     async def _state(self, request: web.Request) -> web.Response:
-        return web.Response(text=self.latest_state, content_type="application/json")
+        return web.Response(text=self.latest_state or "{}", content_type="application/json")
 
     async def _websocket(self, request: web.Request) -> web.StreamResponse:
         origin = request.headers.get("Origin")
@@ -162,8 +162,9 @@ class LiveViewServer:
         page = _Page(ws)
         self.pages.add(page)
         self.on_pages(len(self.pages))
-        page.state = self.latest_state
-        page.wake.set()
+        if self.latest_state is not None:
+            page.state = self.latest_state
+            page.wake.set()
         sender = asyncio.ensure_future(page.send_forever())
         try:
             async for message in ws:

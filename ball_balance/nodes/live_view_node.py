@@ -74,6 +74,10 @@ SCHEMA = [
     Param("call_timeout_s", 3.0, "deadline of every service call made for the page", "s", 0.1, 60.0,
           read_only=True),
 ]
+# what the reader keeps between two updates: a 60 Hz ball state and reference at the 10 Hz update
+KEPT = 20
+BALL_QOS = QoSProfile(depth=KEPT, reliability=qos_profile_sensor_data.reliability,
+                      durability=qos_profile_sensor_data.durability)
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
 REFERENCE_PARAMS = ("reference_kind", "reference_centre_m", "reference_radius_m", "reference_period_s")
 POLL_PERIOD_S = 1.0         # the robot manager's state and the controller's parameters, while watched
@@ -204,9 +208,9 @@ class LiveViewNode(Node):
             return
         if wanted:
             self.watched = {
-                "ball": self.reader.create_subscription(BallState, "/ball_state", lambda m: None,
-                                                        qos_profile_sensor_data),
-                "reference": self.reader.create_subscription(PointStamped, "/ball_reference", lambda m: None, 10),
+                "ball": self.reader.create_subscription(BallState, "/ball_state", lambda m: None, BALL_QOS),
+                "reference": self.reader.create_subscription(PointStamped, "/ball_reference", lambda m: None,
+                                                             QoSProfile(depth=KEPT)),
                 "joints": self.reader.create_subscription(JointState, "/joint_states", lambda m: None,
                                                           QoSProfile(depth=1)),
                 "image": self.reader.create_subscription(Image, self.params["image_topic"], lambda m: None,
