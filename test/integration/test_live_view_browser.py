@@ -2,9 +2,9 @@
 protocol (test/cdp_client.py), on the simulated graph as scripts/sim_balance.sh starts it (the
 PID tracking a circle, so the ball keeps moving). The page loads from the node alone (nothing
 from elsewhere), shows camera frames and the ball moving (values read from the page's DOM),
-sets a gain through the controller's parameters, answers at once when the robot manager is
-absent, and, with a robot manager in the graph, its emergency stop button stops the arm as the
-joint states show.
+sets a gain through the controller's parameters and answers at once when the robot manager is
+absent. With the robot manager (a graph started for it), the page's buttons configure and
+activate the arm, and its emergency stop button stops it as the joint states show.
 
 Chromium comes from scripts/tools/install_test_browser.sh (scripts/test.sh runs it); without
 it the tests are skipped.
@@ -113,9 +113,10 @@ def test_a_gain_set_on_the_page_reaches_the_controller(live):
     assert response.values[0].double_value == pytest.approx(0.8)
 
 
-@pytest.mark.skipif(robot_manager_installed(), reason="the robot manager is in the graph")
 def test_without_a_robot_manager_the_emergency_stop_button_says_so_at_once(live):
     sim, graph, browser = live
+    if not browser.text("#rm-state").startswith("absent"):
+        pytest.skip("this graph has a robot manager")
     started = time.monotonic()
     browser.click("#btn-estop")
     text = reply(browser)
@@ -124,27 +125,94 @@ def test_without_a_robot_manager_the_emergency_stop_button_says_so_at_once(live)
     assert browser.text("#rm-state").startswith("absent")
 
 
+@pytest.fixture(scope="module")
+def managed(tmp_path_factory):
+    """The arm started for the robot manager (scripts/sim_arm.sh --managed: nothing that moves
+    the arm active), the PID, the robot manager and the live view; the ball's state from the
+    simulation's truth (no camera: the robot manager is told not to require one)."""
+    lease = DomainLease()
+    logs = tmp_path_factory.mktemp("live_view_managed")
+    launcher, graph, browser = Launcher(lease.domain_id, logs), Graph(lease.domain_id), None
+    try:
+        launcher.start([str(ROOT / "scripts" / "sim_arm.sh"), "--managed", "--sim-config",
+                        str(ROOT / "config" / "sim_truth_fed.yaml"), "--param", "ball_x=0.05",
+                        "--param", "ball_y=-0.03"], name="sim")
+        launcher.start([executable("ball_balance_controller"), "--ros-args", "--params-file",
+                        str(ROOT / "config" / "pid.yaml"), "-p", "use_sim_time:=true",
+                        "-p", "joint_states_timeout_s:=5.0"], name="controller")
+        launcher.start([executable("robot_manager"), "--ros-args", "-p", "camera_required:=false"],
+                       name="robot_manager")
+        view = launcher.start([executable("ball_balance_live_view"), "--ros-args", "-p", "port:=0"], name="live_view")
+        found = []
+
+        def started() -> bool:
+            assert view.running, view.output()
+            found[:] = re.findall(r"live view on (http://127\.0\.0\.1:\d+/)", view.output())
+            return bool(found)
+        graph.spin_until(started, START_TIMEOUT_S, "the live view's start-up line")
+        browser = Browser(logs / "chromium.log")
+        browser.open(found[0])
+        yield graph, browser
+    finally:
+        if browser is not None:
+            try:
+                browser.screenshot(logs / "page.png")
+            except Exception:  # noqa: BLE001 - best effort
+                pass
+            browser.close()
+        launcher.stop_all()
+        graph.close()
+        lease.release()
+
+
+def press(browser, button: str, label: str, expected_state: str) -> None:
+    """Press a lifecycle button until the robot manager takes it (it may still be starting)."""
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while True:
+        browser.evaluate("document.getElementById('status-line').textContent = '-'")
+        browser.click(button)
+        text = reply(browser)
+        if text.startswith(f"OK: {label}") or time.monotonic() > deadline:
+            break
+        time.sleep(2.0)
+    assert text.startswith(f"OK: {label}"), text
+    browser.wait_for(f"document.getElementById('rm-state').textContent === '{expected_state}'", PAGE_TIMEOUT_S,
+                     f"the robot manager {expected_state} on the page")
+
+
+def still(graph, what: str) -> None:
+    """The joint states say the arm is still: every joint under 1e-3 rad/s, positions held."""
+    states = graph.collect(JointState, "/joint_states", count=50, timeout=120.0)
+    speeds = [max(abs(v) for v in msg.velocity) for msg in states if msg.velocity]
+    assert speeds and max(speeds) < STILL_RAD_S, f"{what}: joint speeds {max(speeds or [0]):.5f} rad/s"
+    moved = max(abs(a - b) for a, b in zip(states[0].position, states[-1].position, strict=True))
+    assert moved < 1e-3, f"{what}: the arm moved {moved:.5f} rad"
+
+
 @pytest.mark.skipif(not robot_manager_installed(),
                     reason="needs the robot manager (issue 37 items 1-2, branch robot-manager): no `robot_manager` "
                            "executable is installed")
-def test_the_emergency_stop_button_stops_the_arm(live):
-    sim, graph, browser = live
-    browser.wait_for("document.getElementById('rm-state').textContent === 'active'", START_TIMEOUT_S,
-                     "the robot manager active on the page")
+def test_the_pages_buttons_bring_the_arm_up_and_its_emergency_stop_stops_it(managed):
+    graph, browser = managed
+    browser.wait_for("document.getElementById('rm-state').textContent === 'unconfigured'", START_TIMEOUT_S,
+                     "the robot manager unconfigured on the page")
+    press(browser, "#btn-configure", "configure", "inactive")
+    press(browser, "#btn-activate", "activate", "active")
     browser.wait_for("document.getElementById('estop-state').textContent === 'released'", PAGE_TIMEOUT_S,
                      "the emergency stop released")
+    browser.wait_for("document.getElementById('controller-state').textContent.startsWith('engaged')",
+                     START_TIMEOUT_S, "the controller engaged")
     browser.click("#btn-estop")
     text = reply(browser)
     assert text.startswith("OK: emergency stop"), text
-    # the joint states say the arm is still: every joint under 1e-3 rad/s, and the positions held
-    states = graph.collect(JointState, "/joint_states", count=50, timeout=120.0)
-    speeds = [max(abs(v) for v in msg.velocity) for msg in states if msg.velocity]
-    assert speeds and max(speeds) < STILL_RAD_S, speeds
-    moved = max(abs(a - b) for a, b in zip(states[0].position, states[-1].position))
-    assert moved < 1e-3, f"the arm moved {moved:.5f} rad after the emergency stop"
+    still(graph, "after the emergency stop")
     browser.wait_for("document.getElementById('estop-state').textContent === 'ACTIVE'", PAGE_TIMEOUT_S,
                      "the page showing the emergency stop active")
+    browser.wait_for("document.getElementById('events').textContent.indexOf('emergency') >= 0", PAGE_TIMEOUT_S,
+                     "the emergency stop's event on the page")
+    browser.evaluate("document.getElementById('status-line').textContent = '-'")
     browser.click("#btn-reset")
     assert reply(browser).startswith("OK: reset emergency stop"), browser.text("#status-line")
     browser.wait_for("document.getElementById('estop-state').textContent === 'released'", PAGE_TIMEOUT_S,
                      "the page showing the emergency stop released")
+    still(graph, "after the reset")
