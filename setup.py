@@ -15,6 +15,7 @@ EXECUTABLES = {
     "ball_balance_foxglove": "ball_balance.nodes.foxglove_node:main",
     "ball_balance_live_view": "ball_balance.nodes.live_view_node:main",
     "robot_state_publisher": "ball_balance.nodes.robot_state_publisher_node:main",
+    "robot_manager": "ball_balance.nodes.robot_manager_node:main",
     "ros2py": "ball_balance.cli.main:main",
     "camera_snapshot": "ball_balance.nodes.camera_snapshot_node:main",
 }

@@ -96,6 +96,8 @@ NODES = [
     ("robot_state_publisher", "robot_state_publisher",
      "ball_balance.nodes.robot_state_publisher_node:RobotStatePublisherNode",
      _module_schema("ball_balance.nodes.robot_state_publisher_node")),
+    ("robot_manager", "robot_manager", "ball_balance.nodes.robot_manager_node:RobotManagerNode",
+     _module_schema("ball_balance.nodes.robot_manager_node")),
     ("ros2_control_node", "controller_manager", "controller_manager_py.ros.node:ControllerManagerNode",
      _module_schema("controller_manager_py.ros.node")),
     ("camera_snapshot", "camera_snapshot", "ball_balance.nodes.camera_snapshot_node:CameraSnapshotNode",

@@ -9,6 +9,8 @@
 #   scripts/sim_arm.sh --sim-config config/sim_truth_fed.yaml   # no camera, /ball_state from truth
 #   scripts/sim_arm.sh --param camera_rate_hz=60 --param camera_width=320 --param camera_height=240
 #   scripts/sim_arm.sh --trajectory                 # MPC-style: the trajectory controller active
+#   scripts/sim_arm.sh --managed                    # for the robot manager: hardware inactive, only
+#                                                   # joint_state_broadcaster active (nothing moves)
 #   scripts/sim_arm.sh --check-params --param ball_force_deg=2   # only check the parameters: exit 0, or 2
 #
 # Topics: /joint_states, /tf, /tf_static, /robot_description, /camera/image_raw,
@@ -29,7 +31,8 @@ CONTROLLERS="$ROOT/config/ur_controllers.yaml"
 PARAMS=()
 TRAJECTORY=0
 CHECK_ONLY=0
-usage() { sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'; }
+MANAGED=0
+usage() { sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; }
 while (($#)); do
   case "$1" in
     --sim-config) SIM_CONFIG="$(realpath "$2")"; shift 2 ;;
@@ -38,6 +41,7 @@ while (($#)); do
     --seed) PARAMS+=(--param "seed=$2"); shift 2 ;;
     --param) PARAMS+=(--param "$2"); shift 2 ;;
     --trajectory) TRAJECTORY=1; shift ;;
+    --managed) MANAGED=1; shift ;;
     --check-params) CHECK_ONLY=1; shift ;;
     -h|--help) usage; exit 0 ;;
     *) echo "sim_arm.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
@@ -55,7 +59,15 @@ python -m ball_balance.robot --hardware mujoco --param "sim_config=$SIM_CONFIG" 
 python -m ball_balance.hardware.mujoco_system --check "$URDF" || { rm -rf "$WORK"; exit 2; }
 ((CHECK_ONLY)) && { rm -rf "$WORK"; exit 0; }
 
-if ((TRAJECTORY)); then
+HW_STATE=()
+if ((MANAGED)); then
+  # start-up for the robot manager (docs/robot_manager.md): the hardware configured (physics, camera
+  # and clock run; nothing is written to the servos, which hold home) and no controller that
+  # moves the arm active; the robot manager's activate switches them on together
+  ACTIVE="[joint_state_broadcaster]"
+  INACTIVE="[forward_position_controller, scaled_joint_trajectory_controller]"
+  HW_STATE=(-p "hardware_components_initial_state.inactive:=[ur5e_ball_balance]")
+elif ((TRAJECTORY)); then
   ACTIVE="[joint_state_broadcaster, scaled_joint_trajectory_controller]"
   INACTIVE="[forward_position_controller]"
 else
@@ -76,7 +88,7 @@ PIDS+=($!)
 # config/sim_manager.yaml: the simulated arm's scheduling (why: in that file)
 ros2_control_node --ros-args --params-file "$CONTROLLERS" --params-file "$ROOT/config/sim_manager.yaml" \
   -p "robot_description_file:=$URDF" ${MANAGER_RT[@]+"${MANAGER_RT[@]}"} \
-  -p "activate_controllers:=$ACTIVE" -p "inactive_controllers:=$INACTIVE" &
+  -p "activate_controllers:=$ACTIVE" -p "inactive_controllers:=$INACTIVE" ${HW_STATE[@]+"${HW_STATE[@]}"} &
 PIDS+=($!)
 echo "sim_arm.sh: running (robot_state_publisher ${PIDS[0]}, ros2_control_node ${PIDS[1]}); Ctrl-C stops" >&2
 # exit when either process ends (then stop the other)

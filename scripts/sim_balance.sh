@@ -3,7 +3,9 @@
 # (scripts/sim_arm.sh), ball_tracker on the simulated camera, the balance controller (PID, MPC or policy)
 # and the visualizer, each with its parameter file; a monitor prints progress once a second.
 # Ctrl-C stops every process. Usually started through scripts/sim_pid.sh or scripts/sim_mpc.sh.
-# The simulation waits, paused, until the nodes are up: the run starts with the ball at rest.
+# The simulation waits, paused, until the nodes are up: the run starts with the ball at rest; the
+# arm moves once the robot manager (docs/robot_manager.md) is configured and active, which the
+# script does and reports, with every robot manager event (emergency stops included).
 #
 #   scripts/sim_balance.sh --controller pid                    # balance at the centre
 #   scripts/sim_balance.sh --controller mpc --reference circle --radius 0.1 --period 10
@@ -32,7 +34,8 @@
 # The domains force_1deg..force_3deg and off_level_2deg do the same as the benchmark's episodes.
 #
 # Exit code: the monitor's (0: the ball stayed on the plate, 1: it dropped), 3 when a node of
-# the graph exited before the monitor (e.g. the controller manager died), 2 for bad arguments.
+# the graph exited before the monitor (e.g. the controller manager died) or the robot manager
+# could not be configured or activated (its reason is printed), 2 for bad arguments.
 # Topics: /ball_state, /plate_cmd, /ball_reference, /ball_balance_visualization (RViz, frame
 # plate_center), /forward_position_controller/commands (PID) or
 # /scaled_joint_trajectory_controller/joint_trajectory (MPC), /joint_states, /tf, /sim/ball_truth.
@@ -64,7 +67,7 @@ SIM_PARAMS=()
 TRACKER_PARAMS=()
 LIVE_VIEW=1
 LIVE_VIEW_PORT="${BALL_BALANCE_LIVE_VIEW_PORT:-8080}"
-usage() { sed -n '2,39p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,42p' "$0" | sed 's/^# \{0,1\}//'; }
 # the optional second number of --force and --plate-offset (a negative angle is a number, not an option)
 optional_number() { [[ -n "${1:-}" && "$1" != --* ]]; }
 needs() { (($1 >= 2)) || { echo "sim_balance.sh: $2 needs a value (see --help)" >&2; exit 2; }; }
@@ -100,11 +103,15 @@ while (($#)); do
     *) echo "sim_balance.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
-# the live view's gains: the PID's are set at run time; the MPC's are shown (read-only)
 case "$CONTROLLER" in
-  pid) EXE=ball_balance_controller; YAML="$ROOT/config/pid.yaml"; ARM_FLAGS=(); GAINS="[kp, ki, kd]" ;;
-  mpc) EXE=ball_balance_mpc; YAML="$ROOT/config/mpc.yaml"; ARM_FLAGS=(--trajectory); GAINS="[mpc_q_pos, mpc_q_vel, mpc_r_u]" ;;
-  policy) EXE=ball_balance_policy; YAML="$ROOT/config/policy.yaml"; ARM_FLAGS=(); GAINS="[kp, ki, kd]" ;;
+  # the controller the balance node commands, and the one that levels the plate at deactivate;
+  # the live view's gains (the PID's are set at run time, the MPC's are shown, read-only)
+  pid) EXE=ball_balance_controller; YAML="$ROOT/config/pid.yaml"; GAINS="[kp, ki, kd]"
+       ARM_CONTROLLERS=(forward_position_controller scaled_joint_trajectory_controller) ;;
+  mpc) EXE=ball_balance_mpc; YAML="$ROOT/config/mpc.yaml"; GAINS="[mpc_q_pos, mpc_q_vel, mpc_r_u]"
+       ARM_CONTROLLERS=(scaled_joint_trajectory_controller forward_position_controller) ;;
+  policy) EXE=ball_balance_policy; YAML="$ROOT/config/policy.yaml"; GAINS="[kp, ki, kd]"
+       ARM_CONTROLLERS=(forward_position_controller scaled_joint_trajectory_controller) ;;
   *) echo "sim_balance.sh: --controller must be pid, mpc or policy, got '$CONTROLLER'" >&2; exit 2 ;;
 esac
 float() { [[ "$1" == *.* || "$1" == *e* ]] && echo "$1" || echo "$1.0"; }
@@ -120,7 +127,7 @@ VIS_PARAMS=()
 SIM_CONFIG="$ROOT/config/sim.yaml"
 ((TRUTH_FED)) && SIM_CONFIG="$ROOT/config/sim_truth_fed.yaml"
 SIM_ARGS=(--sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y"
-          --param start_paused=true ${ARM_FLAGS[@]+"${ARM_FLAGS[@]}"} ${SIM_PARAMS[@]+"${SIM_PARAMS[@]}"})
+          --param start_paused=true --managed ${SIM_PARAMS[@]+"${SIM_PARAMS[@]}"})
 # a bad simulation parameter (--force 20, --sim-param ...): its one line, before anything starts
 "$ROOT/scripts/sim_arm.sh" --check-params "${SIM_ARGS[@]}" || exit 2
 LOGS="$(mktemp -d "${TMPDIR:-/tmp}/ball_balance_graph.XXXXXX")"
@@ -144,6 +151,13 @@ fi
 start controller "$EXE" --ros-args --params-file "$YAML" -p use_sim_time:=true -p joint_states_timeout_s:=5.0 \
   ${RT_OFF[@]+"${RT_OFF[@]}"} ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"}
 start visualizer ball_balance_visualizer --ros-args -p use_sim_time:=true ${VIS_PARAMS[@]+"${VIS_PARAMS[@]}"}
+# the arm moves once the robot manager is active: resume_when configures and activates it
+ROBOT_MANAGER=1
+CAMERA=true
+((TRUTH_FED)) && CAMERA=false
+# shellcheck disable=SC2046
+start robot_manager robot_manager --ros-args $(robot_manager_params "${ARM_CONTROLLERS[@]}" "$CAMERA")
+start events show_events
 if ((LIVE_VIEW)); then
   LIVE_IMAGE=/camera/image_raw
   [[ "$DEBUG_IMAGE" == true ]] && LIVE_IMAGE=/ball_tracker/debug_image

@@ -3,8 +3,9 @@
 # ros2_control_node (scripts/sim_arm.sh) + ball_tracker on the simulated camera, and
 # ball_balance_controller (ball_balance_controllers/BallBalanceController, the learned policy by
 # default, config/ur_controllers_policy.yaml) active in the manager instead of
-# forward_position_controller (both claim the six joints' position commands). No balance node:
-# /ball_state goes straight into the manager. A monitor prints progress once a second.
+# forward_position_controller (both claim the six joints' position commands), activated with the
+# hardware by the robot manager (docs/robot_manager.md). No balance node: /ball_state goes straight
+# into the manager. A monitor prints progress once a second; robot manager events are printed.
 #
 #   scripts/sim_policy_in_manager.sh
 #   scripts/sim_policy_in_manager.sh --ball 0.08 -0.05 --domain full_dr --seed 2 --duration 30
@@ -45,7 +46,7 @@ REFERENCE=""
 RADIUS=""
 PERIOD=""
 TRACKER_PARAMS=()
-usage() { sed -n '2,23p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,24p' "$0" | sed 's/^# \{0,1\}//'; }
 while (($#)); do
   case "$1" in
     --tilt-law) TILT_LAW="$2"; shift 2 ;;
@@ -105,7 +106,7 @@ trap stop_all INT TERM EXIT
 echo "sim_policy_in_manager.sh: ${TILT_LAW:-policy} tilt law in the controller manager, domain $DOMAIN seed $SEED," \
   "ball released at ($BALL_X, $BALL_Y) m; logs in $LOGS" >&2
 start sim "$ROOT/scripts/sim_arm.sh" --sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" \
-  --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y" --param start_paused=true
+  --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y" --param start_paused=true --managed
 if ((! TRUTH_FED)); then
   start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
     ${RT_OFF[@]+"${RT_OFF[@]}"} ${TRACKER_PARAMS[@]+"${TRACKER_PARAMS[@]}"}
@@ -121,18 +122,22 @@ if ! spawner "$CONTROLLER" -t ball_balance_controllers/BallBalanceController -p 
   grep -h "$CONTROLLER" "$LOGS/sim.log" | tail -n 5 >&2 || true
   exit 3
 fi
-# then take over the joints from forward_position_controller in one switch, once the monitor
-# listens (it counts from the engagement), and resume the simulation (paused until then) once
-# /ball_state has its publisher. The hand-over stays a process of the graph (a failed switch
-# ends the graph with its log lines, exit code 3).
-handover() {
+# the robot manager activates it with the hardware (forward_position_controller stays inactive:
+# sim_arm.sh --managed), once the monitor listens (it counts from the engagement) and the
+# simulation (paused until then) has resumed with /ball_state's publisher up. The bring-up stays
+# a process of the graph (a failed configure or activate ends the graph with its reason, exit code 3).
+ROBOT_MANAGER=1
+CAMERA=true
+((TRUTH_FED)) && CAMERA=false
+# shellcheck disable=SC2046
+start robot_manager robot_manager --ros-args \
+  $(robot_manager_params "$CONTROLLER" scaled_joint_trajectory_controller "$CAMERA")
+start events show_events
+bring_up_when_watched() {
   wait_for_endpoint /ball_reference Subscription || return 3
-  ros2py_bounded 60 control switch_controllers --spin-time 30 --activate "$CONTROLLER" \
-    --deactivate forward_position_controller --strict || return 3
-  echo "sim_policy_in_manager.sh: $CONTROLLER active (forward_position_controller inactive)" >&3
   resume_when /ball_state=Publisher
 }
-start handover handover
+start handover bring_up_when_watched
 
 MONITOR=(python -m ball_balance.benchmark.live --sim-time --duration "$DURATION"
          --title "${TILT_LAW:-policy} in the manager, $DOMAIN${REFERENCE:+, $REFERENCE}")

@@ -3,7 +3,7 @@
     ros2py topic list|echo|hz|bw|info|pub     ros2py node list|info     ros2py service list|call
     ros2py param get|set|dump|list|load|describe    ros2py bag record|play|info    ros2py run PKG EXE
     ros2py tf echo TARGET SOURCE           ros2py interface show TYPE
-    ros2py action list|info|send_goal
+    ros2py action list|info|send_goal      ros2py lifecycle nodes|get|list|set
     ros2py control list_controllers|list_hardware_components|list_hardware_interfaces|
                    switch_controllers|load_controller|set_controller_state|unload_controller
 
@@ -260,6 +260,26 @@ def _control_parsers(sub) -> None:
     p.add_argument("state", choices=["unconfigured", "inactive", "active"])
 
 
+def _lifecycle_parsers(sub) -> None:
+    lifecycle = sub.add_parser("lifecycle", help="managed (lifecycle) nodes").add_subparsers(dest="verb",
+                                                                                           required=True)
+    _spin_time(_verb(lifecycle, "nodes", "lifecycle:cmd_nodes", "output a list of nodes with lifecycle"),
+               LIST_SPIN_TIME_S)
+    p = _verb(lifecycle, "get", "lifecycle:cmd_get", "get lifecycle state for one or more nodes")
+    p.add_argument("node_name", nargs="?", help="name of the ROS node (default: every lifecycle node)")
+    _spin_time(p, WAIT_FOR_NODE_S)
+    p = _verb(lifecycle, "list", "lifecycle:cmd_list", "output a list of available transitions")
+    p.add_argument("node_name", help="name of the ROS node")
+    p.add_argument("-a", "--all", action="store_true", help="display all existing transitions")
+    _spin_time(p, WAIT_FOR_NODE_S)
+    p = _verb(lifecycle, "set", "lifecycle:cmd_set", "trigger lifecycle state transition")
+    p.add_argument("node_name", help="name of the ROS node")
+    p.add_argument("transition", help="the label or the id of the transition (e.g. configure)")
+    p.add_argument("--timeout", type=float, default=120.0,
+                   help="ros2py extension: wait this long for the answer, then ask get_state (default: %(default)s)")
+    _spin_time(p, WAIT_FOR_NODE_S)
+
+
 def _action_parsers(sub) -> None:
     action = sub.add_parser("action", help="list actions, send goals").add_subparsers(dest="verb", required=True)
     p = _verb(action, "list", "action:cmd_list", "output a list of action names")
@@ -288,6 +308,7 @@ def build_parser() -> argparse.ArgumentParser:
     _simple_parsers(sub)
     _control_parsers(sub)
     _action_parsers(sub)
+    _lifecycle_parsers(sub)
     return parser
 
 

@@ -39,7 +39,9 @@ A thin adapter around ball_balance.sim.SimWorld (the physics) and CameraThread (
   /sim/set_ball_force (ball_tracker_msgs/SetBallForce): a constant force on the ball's centre
   held from now on, as the plate tilt that rolls the ball the same way (`ball_force_deg`,
   `ball_force_dir_deg`, the parameters that set it at start); a bad request is refused with
-  the reason and changes nothing.
+  the reason and changes nothing;
+  /sim/inject_hardware_error (std_srvs/Trigger): the next read() returns ERROR, as a driver's
+  does when it loses the robot (the manager then deactivates its controllers and runs on_error).
   Requests are taken by the real-time loop at its next read().
 - the domain's disturbances, on simulated time from the start as in a benchmark episode: its
   pushes (`pushes`, every push_interval_s) and force steps (`force_2deg`: on at 5 s, turned
@@ -201,6 +203,10 @@ def _full_description(info: HardwareInfo, path: str) -> str:
         raise robot.RobotDescriptionError(f"robot_description_file: cannot read {path}: {error}") from None
 
 
+class _InjectedError(Exception):
+    """/sim/inject_hardware_error: read() fails once."""
+
+
 class MujocoSystem(SystemInterface):
     provides_clock = True
 
@@ -355,6 +361,9 @@ class MujocoSystem(SystemInterface):
                 self._requests.popleft()()
             except CommandError as error:   # validated by sim_ros already; never stop the loop
                 self.get_logger().warning(f"{self.get_name()}: simulation request refused: {error}")
+            except _InjectedError:
+                self.get_logger().error(f"{self.get_name()}: injected hardware error (/sim/inject_hardware_error)")
+                return return_type.ERROR
         answers = self.answers
         frame_due = world.time_s >= self._next_frame_s
         if self.paused:
@@ -485,6 +494,11 @@ class MujocoSystem(SystemInterface):
             self._target = world.joint_positions()
             self._copy_states()
         self._requests.append(reset)
+
+    def request_hardware_error(self) -> None:
+        def fail():
+            raise _InjectedError()
+        self._requests.append(fail)
 
     def request_pause(self, paused: bool) -> None:
         """Stop (true) or resume (false) physics and the simulated clock."""

@@ -92,6 +92,7 @@ class SimRosIo:
             node.create_service(SetBool, "/sim/set_pause", self._handle_pause),
             node.create_service(Trigger, "/sim/step_simulation", self._handle_step),
             node.create_service(SetBallForce, "/sim/set_ball_force", self._handle_ball_force),
+            node.create_service(Trigger, "/sim/inject_hardware_error", self._handle_hardware_error),
         ]
         self.timers = []   # lock-step's (follow_answers)
         self.subscriptions = [
@@ -211,6 +212,12 @@ class SimRosIo:
     def _handle_reset(self, request, response):
         self.controls.request_reset_ball()
         response.success, response.message = True, "ball reset to the plate centre"
+        return response
+
+    def _handle_hardware_error(self, request, response):
+        self.controls.request_hardware_error()
+        response.success = True
+        response.message = "the next read() fails, as a driver's does when it loses the robot"
         return response
 
     def _handle_reset_world(self, request, response):

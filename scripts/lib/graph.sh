@@ -79,12 +79,48 @@ wait_for_endpoint() {  # wait_for_endpoint TOPIC Publisher|Subscription [SECONDS
 resume_when() {
   local spec
   for spec in "$@"; do wait_for_endpoint "${spec%=*}" "${spec#*=}" || return 3; done
+  ((ROBOT_MANAGER)) && { wait_for_endpoint /robot_manager/events Publisher || return 3; }
   # a manager that dies between the topics and the call would leave it waiting forever
   if ! ros2py_bounded 60 service call --timeout 30 /sim/set_pause std_srvs/srv/SetBool "{data: false}"; then
     echo "$(basename "$0"): the simulation was not resumed: the call to /sim/set_pause failed or timed out" >&3
     return 3
   fi
   echo "$(basename "$0"): simulation resumed (the graph is up)" >&3
+  if ((ROBOT_MANAGER)); then bring_up || return 3; fi
+  exec sleep infinity
+}
+
+# The robot manager (docs/robot_manager.md) is how the arm starts moving: the simulated arm comes
+# up with nothing that moves it active (sim_arm.sh --managed), and `bring_up` configures and then
+# activates /robot_manager, printing each outcome (a failure: its reason, status 3).
+# Its deadlines grow with the machine's load (LOAD_FACTOR: the 1-minute load average per CPU, at
+# least 1): configure waits for camera frames and the plate pose, which a loaded machine delays.
+ROBOT_MANAGER=0
+LOAD_FACTOR="$(awk -v cpus="$(nproc)" '{f = $1 / cpus; printf "%d", (f > 1 ? f + 0.999 : 1)}' /proc/loadavg)"
+ROBOT_MANAGER_TIMEOUT_S="${ROBOT_MANAGER_TIMEOUT_S:-$((60 * LOAD_FACTOR))}"
+robot_manager_params() {  # robot_manager_params CONTROLLER LEVEL_CONTROLLER CAMERA(true|false): its -p arguments
+  echo "-p controllers:=[$1] -p level_controller:=$2 -p camera_required:=$3" \
+    "-p configure_timeout_s:=$((10 * LOAD_FACTOR)).0"
+}
+bring_up() {
+  local label out why
+  for label in configure activate; do
+    if ! out="$(ros2py_bounded "$((ROBOT_MANAGER_TIMEOUT_S + 40 * LOAD_FACTOR))" lifecycle set /robot_manager \
+        "$label" --timeout "$ROBOT_MANAGER_TIMEOUT_S" --spin-time "$((30 * LOAD_FACTOR))" 2>&1)"; then
+      why="$(grep -h "$label failed" "$LOGS/robot_manager.log" | tail -n 1 | sed 's/.*\]: //')"
+      echo "$(basename "$0"): robot_manager: ${why:-$label failed: ${out//$'\n'/ }}" >&3
+      return 3
+    fi
+    echo "$(basename "$0"): robot_manager: $label done" >&3
+  done
+  echo "$(basename "$0"): robot_manager active: the arm follows the controller (emergency stop:" \
+    "ros2py service call /robot_manager/emergency_stop std_srvs/srv/Trigger)" >&3
+}
+# every event of the robot manager (stops, transitions) on the script's stderr, as it happens
+show_events() {
+  ros2py topic echo /robot_manager/events diagnostic_msgs/msg/DiagnosticStatus --field message \
+    --qos-durability transient_local --qos-reliability reliable 2>/dev/null \
+    | grep --line-buffered -v '^---$' | sed -u "s/^'\(.*\)'$/\1/; s/^/$(basename "$0"): robot_manager event: /" >&3
   exec sleep infinity
 }
 

@@ -1,0 +1,90 @@
+"""`ros2py lifecycle nodes|get|list|set`, printing as ros2cli's `ros2 lifecycle` does.
+
+`set` waits for the transition's answer (configure can take as long as the node's own waits);
+when the answer is lost or late, it asks `get_state` before it reports a failure: a transition
+that completed is reported as successful.
+"""
+from __future__ import annotations
+
+from ball_balance.cli.errors import CliError
+from ball_balance.cli.session import Session, absolute_name
+from ball_balance.operation import lifecycle as lc
+
+GET_STATE_TYPE = "lifecycle_msgs/srv/GetState"
+
+
+def _lifecycle_nodes(session: Session):
+    session.discover(session.spin_time_s)
+    return sorted(name[: -len("/get_state")] for name, types in session.node.get_service_names_and_types()
+                  if name.endswith("/get_state") and GET_STATE_TYPE in types)
+
+
+def _get_state(session: Session, node: str, timeout_s: float):
+    from lifecycle_msgs.srv import GetState
+
+    return session.call(GetState, f"{node}/get_state", GetState.Request(), timeout_s).current_state
+
+
+def _transitions(session: Session, node: str, timeout_s: float, graph: bool = False):
+    from lifecycle_msgs.srv import GetAvailableTransitions
+
+    service = f"{node}/{'get_transition_graph' if graph else 'get_available_transitions'}"
+    return list(session.call(GetAvailableTransitions, service, GetAvailableTransitions.Request(),
+                             timeout_s).available_transitions)
+
+
+def cmd_nodes(args) -> int:
+    with Session(args.spin_time) as session:
+        for node in _lifecycle_nodes(session):
+            print(node)
+    return 0
+
+
+def cmd_get(args) -> int:
+    with Session(args.spin_time) as session:
+        nodes = [absolute_name(args.node_name)] if args.node_name else _lifecycle_nodes(session)
+        for node in nodes:
+            state = _get_state(session, node, args.spin_time)
+            print(f"{state.label} [{state.id}]" if args.node_name else f"{node}: {state.label} [{state.id}]")
+    return 0
+
+
+def _print_transitions(transitions) -> None:
+    for t in transitions:
+        print(f"- {t.transition.label} [{t.transition.id}]\n\tStart: {t.start_state.label}\n"
+              f"\tGoal: {t.goal_state.label}")
+
+
+def cmd_list(args) -> int:
+    with Session(args.spin_time) as session:
+        _print_transitions(_transitions(session, absolute_name(args.node_name), args.spin_time, args.all))
+    return 0
+
+
+def cmd_set(args) -> int:
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+
+    node = absolute_name(args.node_name)
+    with Session(args.spin_time) as session:
+        transitions = _transitions(session, node, args.spin_time)
+        wanted = [t for t in transitions
+                  if t.transition.label == args.transition or str(t.transition.id) == args.transition]
+        if not wanted:
+            print("Unknown transition requested, available ones are:")
+            for t in transitions:
+                print(f"- {t.transition.label} [{t.transition.id}]")
+            return 1
+        chosen = wanted[0]
+        start = chosen.start_state.id
+        goal = next((t.goal for t in lc.TRANSITIONS if t.id == chosen.transition.id), None)
+        request = ChangeState.Request(transition=Transition(id=chosen.transition.id, label=chosen.transition.label))
+        try:
+            ok = session.call(ChangeState, f"{node}/change_state", request, args.timeout).success
+        except CliError as error:   # lost or late: what state did it reach?
+            state = _get_state(session, node, args.spin_time).id
+            ok = state == goal and state != start
+            if not ok:
+                print(f"{error}; {node} is {lc.STATE_LABELS.get(state, state)}")
+    print("Transitioning successful" if ok else "Transitioning failed")
+    return 0 if ok else 1
