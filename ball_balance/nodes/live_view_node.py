@@ -162,6 +162,7 @@ class LiveViewNode(Node):
         self.watched: Optional[dict] = None
         self.wall = {"ball": -math.inf, "joints": -math.inf}
         self.pages = 0
+        self.refused_requests = 0
         self.requests: queue.SimpleQueue = queue.SimpleQueue()
         self.wake = self.create_guard_condition(self.on_wake)
         self.encoder = FrameEncoder(self.take_frame, self.decode_frame, self.on_jpeg, p["image_rate_hz"],
@@ -185,7 +186,13 @@ class LiveViewNode(Node):
 
     def on_request(self, request) -> concurrent.futures.Future:
         """A page's request (web thread): checked here, carried out on the executor's thread."""
-        command = commands.parse(request, self.allowed + REFERENCE_PARAMS)   # CommandError: refused at once
+        try:
+            command = commands.parse(request, self.allowed + REFERENCE_PARAMS)
+        except commands.CommandError as error:   # refused at once: counted, logged, the page told why
+            self.refused_requests += 1
+            self.get_logger().warning(f"refused a page's request ({self.refused_requests} so far): {error}",
+                                      throttle_duration_sec=5.0)
+            raise
         answer: concurrent.futures.Future = concurrent.futures.Future()
         self.requests.put((command, answer))
         self.wake.trigger()
@@ -345,6 +352,7 @@ class LiveViewNode(Node):
         snapshot["fresh"] = {k: now - t < FRESH_S for k, t in self.wall.items()}
         snapshot["gain_names"] = list(self.gain_names)
         snapshot["pending_calls"] = len(self.pending)
+        snapshot["refused_requests"] = self.refused_requests
         self.server.push_state(snapshot)
 
     # ---- the encoder thread ------------------------------------------------------------------

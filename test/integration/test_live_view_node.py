@@ -27,7 +27,7 @@ def start_live_view(launcher, graph):
         found[:] = re.findall(r"live view on (http://127\.0\.0\.1:\d+/)", node.output())
         return bool(found)
     graph.spin_until(started, START_TIMEOUT_S, "the live view's start-up line")
-    return found[0]
+    return found[0], node
 
 
 async def ask(url: str, requests: list, timeout: float = 30.0) -> list:
@@ -72,7 +72,7 @@ def test_lifecycle_and_emergency_stop_requests_reach_the_robot_manager(launcher,
     graph.node.create_service(ChangeState, "/robot_manager/change_state", change_state)
     graph.node.create_service(Trigger, "/robot_manager/emergency_stop", trigger("emergency_stop"))
     graph.node.create_service(Trigger, "/robot_manager/reset_emergency_stop", trigger("reset_emergency_stop"))
-    url = start_live_view(launcher, graph)
+    url, node = start_live_view(launcher, graph)
     # the node sees the services once discovery has run: ask until the first answer is not "absent"
     graph.spin_for(1.0)
     replies = []
@@ -88,11 +88,13 @@ def test_lifecycle_and_emergency_stop_requests_reach_the_robot_manager(launcher,
     assert replies[0]["message"] == "emergency stop: emergency_stop done"
     assert "unknown transition" in replies[2]["message"]
     assert calls[-3:] == [("change_state", 3, "activate"), ("emergency_stop",), ("reset_emergency_stop",)]
+    graph.spin_until(lambda: "refused a page's request (1 so far): unknown transition 'reboot'" in node.output(),
+                     30.0, "the refused request in the node's log")
 
 
 def test_a_robot_manager_that_does_not_answer_is_reported_at_the_deadline(launcher, graph):
     graph.node.create_service(Trigger, "/robot_manager/emergency_stop", lambda request, response: response)
-    url = start_live_view(launcher, graph)
+    url, _ = start_live_view(launcher, graph)
     graph.spin_for(1.0)
     for _ in range(30):   # until discovered; then never spun while the page waits: no answer
         reply = asyncio.run(ask(url, [{"op": "emergency_stop"}]))[0]
