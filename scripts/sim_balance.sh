@@ -153,10 +153,9 @@ start controller "$EXE" --ros-args --params-file "$YAML" -p use_sim_time:=true -
 start visualizer ball_balance_visualizer --ros-args -p use_sim_time:=true ${VIS_PARAMS[@]+"${VIS_PARAMS[@]}"}
 # the arm moves once the robot manager is active: resume_when configures and activates it
 ROBOT_MANAGER=1
-CAMERA=true
-((TRUTH_FED)) && CAMERA=false
+ROBOT_MANAGER_CONTROLLERS="${ARM_CONTROLLERS[0]}"
 # shellcheck disable=SC2046
-start robot_manager robot_manager --ros-args $(robot_manager_params "${ARM_CONTROLLERS[@]}" "$CAMERA")
+start robot_manager robot_manager --ros-args $(robot_manager_params "${ARM_CONTROLLERS[1]}")
 start events show_events
 if ((LIVE_VIEW)); then
   LIVE_IMAGE=/camera/image_raw

@@ -127,11 +127,9 @@ fi
 # simulation (paused until then) has resumed with /ball_state's publisher up. The bring-up stays
 # a process of the graph (a failed configure or activate ends the graph with its reason, exit code 3).
 ROBOT_MANAGER=1
-CAMERA=true
-((TRUTH_FED)) && CAMERA=false
+ROBOT_MANAGER_CONTROLLERS="$CONTROLLER"
 # shellcheck disable=SC2046
-start robot_manager robot_manager --ros-args \
-  $(robot_manager_params "$CONTROLLER" scaled_joint_trajectory_controller "$CAMERA")
+start robot_manager robot_manager --ros-args $(robot_manager_params scaled_joint_trajectory_controller)
 start events show_events
 bring_up_when_watched() {
   wait_for_endpoint /ball_reference Subscription || return 3

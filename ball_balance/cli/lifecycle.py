@@ -1,10 +1,13 @@
 """`ros2py lifecycle nodes|get|list|set`, printing as ros2cli's `ros2 lifecycle` does.
 
 `set` waits for the transition's answer (configure can take as long as the node's own waits);
-when the answer is lost or late, it asks `get_state` before it reports a failure: a transition
-that completed is reported as successful.
+when the answer is lost or late, it asks `get_state` (again while the node is in a transition
+state or still in the start state, for up to --timeout or --spin-time more, the longer) before it
+reports a failure: a transition that completed is reported as successful.
 """
 from __future__ import annotations
+
+import time
 
 from ball_balance.cli.errors import CliError
 from ball_balance.cli.session import Session, absolute_name
@@ -81,8 +84,13 @@ def cmd_set(args) -> int:
         request = ChangeState.Request(transition=Transition(id=chosen.transition.id, label=chosen.transition.label))
         try:
             ok = session.call(ChangeState, f"{node}/change_state", request, args.timeout).success
-        except CliError as error:   # lost or late: what state did it reach?
+        except CliError as error:   # lost or late: what state did it reach (once it is not in transition)?
+            # the request may still be on its way: the node gets --spin-time (or --timeout) more
             state = _get_state(session, node, args.spin_time).id
+            deadline = time.monotonic() + max(args.timeout, args.spin_time)
+            while (state not in lc.PRIMARY_STATES or state == start) and time.monotonic() < deadline:
+                session.spin_for(0.2)
+                state = _get_state(session, node, args.spin_time).id
             ok = state == goal and state != start
             if not ok:
                 print(f"{error}; {node} is {lc.STATE_LABELS.get(state, state)}")

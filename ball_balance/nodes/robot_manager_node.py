@@ -76,7 +76,8 @@ SCHEMA = (
     Param("level_max_speed_rad_s", 0.3, "fastest joint speed of the levelling motion", unit="rad/s",
           min=0.01, max=3.0),
     Param("camera_required", True, "configure needs camera frames, intrinsics and a plate pose (false: a graph "
-          "without a camera, e.g. the truth-fed simulation)", user_facing=True),
+          "without a camera, e.g. the truth-fed simulation, or one paused until activation); the camera-lost "
+          "watchdog runs whenever frames have arrived", user_facing=True),
     Param("image_topic", "/camera/image_raw", "camera frames (sensor data QoS)"),
     Param("camera_info_topic", "/camera/camera_info", "camera intrinsics (sensor data QoS)"),
     Param("ball_state_topic", "/ball_state", "the tracker's output"),
@@ -109,6 +110,7 @@ class RobotManagerNode(LifecycleNode):
         self.group = group = ReentrantCallbackGroup()
         self.state = lc.UNCONFIGURED
         self.busy = ""                 # the transition being prepared ('' when none)
+        self.busy_state = lc.UNKNOWN   # its transition state (get_state answers it meanwhile, as rcl does)
         self._prepared = None          # None: not prepared; '' success; text: the failure
         self.estop = False
         self.estop_reason = ""
@@ -116,8 +118,7 @@ class RobotManagerNode(LifecycleNode):
         self._stop_task = None
         self._last_stop_try = -math.inf
         self.cm = ManagerClient(self, p["controller_manager"], p["service_timeout_s"], group)
-        self.watchdog = Watchdog(WatchdogLimits(p["manager_timeout_s"], p["camera_lost_timeout_s"],
-                                                p["camera_required"]),
+        self.watchdog = Watchdog(WatchdogLimits(p["manager_timeout_s"], p["camera_lost_timeout_s"]),
                                  heartbeat_topic=f"{self.cm.manager}/statistics/values", camera_topic=p["image_topic"])
         self.controller_states = {}    # name -> label, from the manager's ~/activity
         self.last_info = None
@@ -178,7 +179,7 @@ class RobotManagerNode(LifecycleNode):
             return False, str(error)
         if self.busy:
             return False, f"{self.busy} is in progress"
-        self.busy = transition.label
+        self.busy, self.busy_state = transition.label, transition.via
         start = self.state
         try:
             self._publish_transition(transition, start, transition.via)
@@ -481,7 +482,8 @@ class RobotManagerNode(LifecycleNode):
         return response
 
     def on_get_state(self, request, response):
-        response.current_state = lc_msg.State(id=self.state, label=self.state_label)
+        state = self.busy_state if self.busy else self.state
+        response.current_state = lc_msg.State(id=state, label=lc.STATE_LABELS[state])
         return response
 
     def on_get_available_states(self, request, response):

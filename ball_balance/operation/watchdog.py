@@ -18,7 +18,6 @@ HARDWARE_ERROR, MANAGER_STALLED, CAMERA_LOST = "hardware_error", "manager_stalle
 class WatchdogLimits:
     manager_timeout_s: float = 2.0      # no heartbeat from the controller manager this long: stalled
     camera_timeout_s: float = 2.0       # no camera frame this long while the ball is on the plate: lost
-    camera_required: bool = True        # false: a graph without a camera (truth-fed simulation)
 
 
 @dataclass
@@ -51,7 +50,8 @@ class Watchdog:
             quiet_s = now_s - self.last_heartbeat_s
             return MANAGER_STALLED, (f"the controller manager stopped updating: nothing on {self.heartbeat_topic} "
                                      f"for {quiet_s:.1f} s (limit {limits.manager_timeout_s:g} s)")
-        if (limits.camera_required and self.ball_on_plate and self.last_frame_s is not None
+        # a graph without a camera (truth-fed simulation) never had a frame: nothing to lose
+        if (self.ball_on_plate and self.last_frame_s is not None
                 and now_s - self.last_frame_s > limits.camera_timeout_s):
             return CAMERA_LOST, (f"camera lost with the ball on the plate: no frame on {self.camera_topic} for "
                                  f"{now_s - self.last_frame_s:.1f} s (limit {limits.camera_timeout_s:g} s)")

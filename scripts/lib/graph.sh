@@ -79,28 +79,34 @@ wait_for_endpoint() {  # wait_for_endpoint TOPIC Publisher|Subscription [SECONDS
 resume_when() {
   local spec
   for spec in "$@"; do wait_for_endpoint "${spec%=*}" "${spec#*=}" || return 3; done
-  ((ROBOT_MANAGER)) && { wait_for_endpoint /robot_manager/events Publisher || return 3; }
+  if ((ROBOT_MANAGER)); then
+    wait_for_endpoint /robot_manager/events Publisher || return 3
+    bring_up || return 3
+  fi
   # a manager that dies between the topics and the call would leave it waiting forever
   if ! ros2py_bounded 60 service call --timeout 30 /sim/set_pause std_srvs/srv/SetBool "{data: false}"; then
     echo "$(basename "$0"): the simulation was not resumed: the call to /sim/set_pause failed or timed out" >&3
     return 3
   fi
   echo "$(basename "$0"): simulation resumed (the graph is up)" >&3
-  if ((ROBOT_MANAGER)); then bring_up || return 3; fi
   exec sleep infinity
 }
 
 # The robot manager (docs/robot_manager.md) is how the arm starts moving: the simulated arm comes
 # up with nothing that moves it active (sim_arm.sh --managed), and `bring_up` configures and then
-# activates /robot_manager, printing each outcome (a failure: its reason, status 3).
-# Its deadlines grow with the machine's load (LOAD_FACTOR: the 1-minute load average per CPU, at
-# least 1): configure waits for camera frames and the plate pose, which a loaded machine delays.
+# activates /robot_manager, printing each outcome (a failure: its reason, status 3). It runs
+# before the simulation resumes, so the controller takes over at simulated time 0 whatever the
+# machine's speed (lock-step: the same run on a slow machine as on a fast one); a paused
+# simulation renders no frames, so configure does not wait for the camera here
+# (camera_required:=false; its camera-lost watchdog runs once frames flow).
+# Deadlines grow with the machine's load (LOAD_FACTOR: the 1-minute load average per CPU, at
+# least 1).
 ROBOT_MANAGER=0
+ROBOT_MANAGER_CONTROLLERS=""   # the balancing controller(s) it activates, comma-separated
 LOAD_FACTOR="$(awk -v cpus="$(nproc)" '{f = $1 / cpus; printf "%d", (f > 1 ? f + 0.999 : 1)}' /proc/loadavg)"
 ROBOT_MANAGER_TIMEOUT_S="${ROBOT_MANAGER_TIMEOUT_S:-$((60 * LOAD_FACTOR))}"
-robot_manager_params() {  # robot_manager_params CONTROLLER LEVEL_CONTROLLER CAMERA(true|false): its -p arguments
-  echo "-p controllers:=[$1] -p level_controller:=$2 -p camera_required:=$3" \
-    "-p configure_timeout_s:=$((10 * LOAD_FACTOR)).0"
+robot_manager_params() {  # robot_manager_params LEVEL_CONTROLLER: its -p arguments
+  echo "-p controllers:=[$ROBOT_MANAGER_CONTROLLERS] -p level_controller:=$1 -p camera_required:=false"
 }
 bring_up() {
   local label out why
@@ -113,7 +119,7 @@ bring_up() {
     fi
     echo "$(basename "$0"): robot_manager: $label done" >&3
   done
-  echo "$(basename "$0"): robot_manager active: the arm follows the controller (emergency stop:" \
+  echo "$(basename "$0"): robot_manager active: $ROBOT_MANAGER_CONTROLLERS active with the hardware (emergency stop:" \
     "ros2py service call /robot_manager/emergency_stop std_srvs/srv/Trigger)" >&3
 }
 # every event of the robot manager (stops, transitions) on the script's stderr, as it happens

@@ -54,6 +54,8 @@ class Rig:
         # process works through it
         self.clock = []
         node.create_subscription(Clock, "/clock", lambda m: self.clock.append(m.clock.sec + m.clock.nanosec * 1e-9), 1)
+        self.latest = []   # the newest /joint_states (depth 1), for "now"-conditions
+        node.create_subscription(JointState, "/joint_states", self._keep_latest, 1)
         self.sim = self.launcher.start([str(ROOT / "scripts" / "sim_arm.sh"), "--managed", "--sim-config",
                                         str(ROOT / "config" / "sim_truth_fed.yaml"), "--param", "ball_x=0.05",
                                         "--param", "ball_y=-0.03"], name="sim")
@@ -65,6 +67,9 @@ class Rig:
         self.camera_check = self.launcher.start(
             [executable("robot_manager"), "--ros-args", "-r", "__node:=camera_check", "-p", "level_controller:=''",
              "-p", "configure_timeout_s:=2.0"], name="camera_check")
+
+    def _keep_latest(self, msg):
+        self.latest[:] = [msg]
 
     def close(self):
         self.launcher.stop_all()
@@ -130,8 +135,9 @@ class Rig:
 
     def wait_until_moving(self):
         """Until the balance controller tilts the plate (the ball was released off centre)."""
-        self.graph.spin_until(lambda: self.states and speed(self.states[-1]) > 0.01 or
-                              np.abs(positions(self.states[-1]) - HOME).max() > 2e-3, 60, "the arm moving")
+        self.graph.spin_until(lambda: self.latest and (speed(self.latest[-1]) > 0.01 or
+                                                       np.abs(positions(self.latest[-1]) - HOME).max() > 2e-3),
+                              60, "the arm moving")
 
 
 def stamp(msg) -> float:
@@ -191,7 +197,7 @@ def test_activate_balances_and_deactivate_levels_the_plate(rig):
     assert rig.controllers()["forward_position_controller"] == "active"
     rig.wait_until_moving()
     # once the first catch of the ball is over (the plate tilted, moving slowly)
-    rig.graph.spin_until(lambda: speed(rig.states[-1]) < 0.05 and np.abs(positions(rig.states[-1]) - HOME).max() > 1e-3,
+    rig.graph.spin_until(lambda: speed(rig.latest[-1]) < 0.05 and np.abs(positions(rig.latest[-1]) - HOME).max() > 1e-3,
                          60, "the plate tilted and calm")
     t0 = rig.now()
     assert rig.transition("deactivate"), rig.manager.output()[-2000:]
@@ -237,6 +243,26 @@ def test_the_emergency_stop_holds_the_arm_until_reset_and_reset_moves_nothing(ri
     t_reset = rig.now()
     for message in rig.samples_between(t_reset, t_reset + 1.0):
         assert speed(message) < STILL_RAD_S and np.abs(positions(message) - held).max() < 1e-4
+    assert rig.state() == "inactive"
+
+
+def test_ros2py_lifecycle_drives_it_by_hand_and_survives_a_late_answer(rig):
+    assert not (rig.latch and rig.latch[-1])
+
+    def ros2py(*args):
+        result = rig.launcher.run([executable("ros2py"), "lifecycle", *args, "--spin-time", "30"], timeout=180)
+        return result.returncode, result.stdout
+
+    assert ros2py("get", "/robot_manager") == (0, "inactive [2]\n")
+    code, out = ros2py("list", "/robot_manager")
+    assert code == 0 and "- activate [3]\n\tStart: inactive\n\tGoal: activating\n" in out, out
+    code, out = ros2py("set", "/robot_manager", "fly")
+    assert code == 1 and out.startswith("Unknown transition requested, available ones are:\n- cleanup [2]"), out
+    assert ros2py("set", "/robot_manager", "activate") == (0, "Transitioning successful\n")
+    # an answer later than --timeout (deactivate levels the plate for at least a second): get_state
+    # says whether the transition went through
+    code, out = ros2py("set", "/robot_manager", "deactivate", "--timeout", "0.5")
+    assert (code, out.splitlines()[-1]) == (0, "Transitioning successful"), out
     assert rig.state() == "inactive"
 
 
