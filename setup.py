@@ -13,6 +13,7 @@ EXECUTABLES = {
     "ball_balance_policy": "ball_balance.nodes.policy_node:main",
     "ball_balance_visualizer": "ball_balance.nodes.visualizer_node:main",
     "ball_balance_foxglove": "ball_balance.nodes.foxglove_node:main",
+    "ball_balance_live_view": "ball_balance.nodes.live_view_node:main",
     "robot_state_publisher": "ball_balance.nodes.robot_state_publisher_node:main",
     "robot_manager": "ball_balance.nodes.robot_manager_node:main",
     "ros2py": "ball_balance.cli.main:main",
@@ -34,6 +35,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(include=["ball_balance", "ball_balance.*"]),
+    package_data={"ball_balance.live_view": ["static/*"]},  # the live view's page: served from the package
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

@@ -91,6 +91,8 @@ NODES = [
      _module_schema("ball_balance.nodes.visualizer_node")),
     ("ball_balance_foxglove", "ball_balance_foxglove", "ball_balance.nodes.foxglove_node:FoxgloveNode",
      _module_schema("ball_balance.nodes.foxglove_node")),
+    ("ball_balance_live_view", "ball_balance_live_view", "ball_balance.nodes.live_view_node:LiveViewNode",
+     _module_schema("ball_balance.nodes.live_view_node")),
     ("robot_state_publisher", "robot_state_publisher",
      "ball_balance.nodes.robot_state_publisher_node:RobotStatePublisherNode",
      _module_schema("ball_balance.nodes.robot_state_publisher_node")),

@@ -11,18 +11,24 @@
 #   scripts/run_demo.sh                      # MPC, 30 s of simulated time
 #   scripts/run_demo.sh --controller pid     # the PID instead
 #   scripts/run_demo.sh --duration 60 --out /tmp/demo
+#   scripts/run_demo.sh --live-view-port 8081        # the live view elsewhere (--no-live-view: none)
+# While it runs, the live view shows it in a browser: the script prints its address
+# (http://127.0.0.1:8080/ by default; docs/live_view.md).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 CONTROLLER=mpc
 DURATION=30
 OUT="$ROOT/artifacts/demo"
-usage() { sed -n '2,15p' "$0" | sed 's/^# \{0,1\}//'; }
+LIVE_VIEW=(--live-view-port "${BALL_BALANCE_LIVE_VIEW_PORT:-8080}")
+usage() { sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'; }
 while (($#)); do
   case "$1" in
     --controller) CONTROLLER="$2"; shift 2 ;;
     --duration) DURATION="$2"; shift 2 ;;
     --out) OUT="$2"; shift 2 ;;
+    --live-view-port) LIVE_VIEW=(--live-view-port "$2"); shift 2 ;;
+    --no-live-view) LIVE_VIEW=(--no-live-view); shift ;;
     -h|--help) usage; exit 0 ;;
     *) echo "run_demo.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
@@ -41,7 +47,7 @@ mkdir -p "$OUT"
 set +e
 "$ROOT/scripts/sim_balance.sh" --controller "$CONTROLLER" --ball 0.08 -0.05 \
   --reference circle --radius 0.10 --period 10 --start-delay 6 \
-  --duration "$DURATION" --out "$OUT" --video-s 12 --debug-image
+  --duration "$DURATION" --out "$OUT" --video-s 12 --debug-image "${LIVE_VIEW[@]}"
 CODE=$?
 set -e
 

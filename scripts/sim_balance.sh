@@ -18,6 +18,12 @@
 #   scripts/sim_balance.sh --sim-param camera_rate_hz=60        # any simulation parameter (config/sim.yaml)
 #   scripts/sim_balance.sh --force 2 90       # a constant force on the ball, as a plate 2 deg off level, towards +y
 #   scripts/sim_balance.sh --plate-offset 2 0 # the plate mounted 2 deg off level about its x axis (rolls to -y)
+#   scripts/sim_balance.sh --live-view-port 8081   # the live view's port (default 8080; 0: a free one)
+#   scripts/sim_balance.sh --no-live-view          # without the live view in the browser
+#
+# The live view (docs/live_view.md) serves the run on http://127.0.0.1:8080/; the script prints
+# the address once it listens. A live view that cannot start (port taken) is reported and the
+# graph runs on without it.
 #
 # --force DEG [DIR_DEG]: F = m g sin(DEG) on the ball's centre towards DIR_DEG (plate axes, from +x
 # towards +y; default 0), from the start; change it while running (docs/simulation.md):
@@ -59,7 +65,9 @@ DEBUG_IMAGE=false
 CTRL_PARAMS=()
 SIM_PARAMS=()
 TRACKER_PARAMS=()
-usage() { sed -n '2,36p' "$0" | sed 's/^# \{0,1\}//'; }
+LIVE_VIEW=1
+LIVE_VIEW_PORT="${BALL_BALANCE_LIVE_VIEW_PORT:-8080}"
+usage() { sed -n '2,42p' "$0" | sed 's/^# \{0,1\}//'; }
 # the optional second number of --force and --plate-offset (a negative angle is a number, not an option)
 optional_number() { [[ -n "${1:-}" && "$1" != --* ]]; }
 needs() { (($1 >= 2)) || { echo "sim_balance.sh: $2 needs a value (see --help)" >&2; exit 2; }; }
@@ -81,6 +89,8 @@ while (($#)); do
     --param) CTRL_PARAMS+=(-p "$2"); shift 2 ;;
     --tracker-param) needs $# "$1"; TRACKER_PARAMS+=(-p "$2"); shift 2 ;;
     --sim-param) SIM_PARAMS+=(--param "$2"); shift 2 ;;
+    --live-view-port) needs $# "$1"; LIVE_VIEW_PORT="$2"; shift 2 ;;
+    --no-live-view) LIVE_VIEW=0; shift ;;
     --force)
       needs $# "$1"; SIM_PARAMS+=(--param "ball_force_deg=$2"); shift 2
       if optional_number "${1:-}"; then SIM_PARAMS+=(--param "ball_force_dir_deg=$1"); shift; fi ;;
@@ -94,12 +104,13 @@ while (($#)); do
   esac
 done
 case "$CONTROLLER" in
-  # the controller the balance node commands, and the one that levels the plate at deactivate
-  pid) EXE=ball_balance_controller; YAML="$ROOT/config/pid.yaml"
+  # the controller the balance node commands, and the one that levels the plate at deactivate;
+  # the live view's gains (the PID's are set at run time, the MPC's are shown, read-only)
+  pid) EXE=ball_balance_controller; YAML="$ROOT/config/pid.yaml"; GAINS="[kp, ki, kd]"
        ARM_CONTROLLERS=(forward_position_controller scaled_joint_trajectory_controller) ;;
-  mpc) EXE=ball_balance_mpc; YAML="$ROOT/config/mpc.yaml"
+  mpc) EXE=ball_balance_mpc; YAML="$ROOT/config/mpc.yaml"; GAINS="[mpc_q_pos, mpc_q_vel, mpc_r_u]"
        ARM_CONTROLLERS=(scaled_joint_trajectory_controller forward_position_controller) ;;
-  policy) EXE=ball_balance_policy; YAML="$ROOT/config/policy.yaml"
+  policy) EXE=ball_balance_policy; YAML="$ROOT/config/policy.yaml"; GAINS="[kp, ki, kd]"
        ARM_CONTROLLERS=(forward_position_controller scaled_joint_trajectory_controller) ;;
   *) echo "sim_balance.sh: --controller must be pid, mpc or policy, got '$CONTROLLER'" >&2; exit 2 ;;
 esac
@@ -146,6 +157,11 @@ ROBOT_MANAGER_CONTROLLERS="${ARM_CONTROLLERS[0]}"
 # shellcheck disable=SC2046
 start robot_manager robot_manager --ros-args $(robot_manager_params "${ARM_CONTROLLERS[1]}")
 start events show_events
+if ((LIVE_VIEW)); then
+  LIVE_IMAGE=/camera/image_raw
+  [[ "$DEBUG_IMAGE" == true ]] && LIVE_IMAGE=/ball_tracker/debug_image
+  start_live_view "$LIVE_VIEW_PORT" -p "controller_node:=$EXE" -p "gain_names:=$GAINS" -p "image_topic:=$LIVE_IMAGE"
+fi
 # the simulation starts paused: it runs once the tracker (or the truth feed), the controller and
 # the monitor are up
 start resume resume_when /ball_state=Publisher /plate_cmd=Publisher /sim/ball_truth=Subscription

@@ -13,6 +13,10 @@
 #   scripts/sim_policy_in_manager.sh --reference circle --radius 0.1 --period 10 --duration 20
 #   scripts/sim_policy_in_manager.sh --truth-fed           # no camera/tracker: /ball_state from truth
 #   scripts/sim_policy_in_manager.sh --tracker-param disturbance_time_constant_s:=1.0   # any tracker parameter
+#   scripts/sim_policy_in_manager.sh --live-view-port 8081  # the live view's port (8080; --no-live-view: none)
+#
+# The live view (docs/live_view.md) shows the run on http://127.0.0.1:8080/ (the address is
+# printed); the controller runs in the manager, so the page shows no controller node and gains.
 #
 # Exit code: the monitor's (0: the ball stayed on the plate, 1: it dropped), 3 when a process of
 # the graph (or the controller's spawning) failed first, 2 for bad arguments.
@@ -36,11 +40,13 @@ SEED=0
 DURATION=0
 OUT=""
 TRUTH_FED=0
+LIVE_VIEW=1
+LIVE_VIEW_PORT="${BALL_BALANCE_LIVE_VIEW_PORT:-8080}"
 REFERENCE=""
 RADIUS=""
 PERIOD=""
 TRACKER_PARAMS=()
-usage() { sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,24p' "$0" | sed 's/^# \{0,1\}//'; }
 while (($#)); do
   case "$1" in
     --tilt-law) TILT_LAW="$2"; shift 2 ;;
@@ -55,6 +61,8 @@ while (($#)); do
     --out) OUT="$2"; shift 2 ;;
     --truth-fed) TRUTH_FED=1; shift ;;
     --tracker-param) TRACKER_PARAMS+=(-p "$2"); shift 2 ;;
+    --live-view-port) LIVE_VIEW_PORT="$2"; shift 2 ;;
+    --no-live-view) LIVE_VIEW=0; shift ;;
     -h|--help) usage; exit 0 ;;
     *) echo "sim_policy_in_manager.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
@@ -102,6 +110,9 @@ start sim "$ROOT/scripts/sim_arm.sh" --sim-config "$SIM_CONFIG" --domain "$DOMAI
 if ((! TRUTH_FED)); then
   start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
     ${RT_OFF[@]+"${RT_OFF[@]}"} ${TRACKER_PARAMS[@]+"${TRACKER_PARAMS[@]}"}
+fi
+if ((LIVE_VIEW)); then
+  start_live_view "$LIVE_VIEW_PORT"
 fi
 # load and configure (the model is checked here: a misfit fails with one line)
 if ! spawner "$CONTROLLER" -t ball_balance_controllers/BallBalanceController -p "$PARAMS_FILE" --inactive \

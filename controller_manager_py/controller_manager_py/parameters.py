@@ -14,6 +14,7 @@ node's `unknown_parameters` parameter is `error`. A name a parameter had before 
 """
 from __future__ import annotations
 
+import array
 import difflib
 import math
 from dataclasses import dataclass, field
@@ -81,7 +82,8 @@ def _coerce(param: Param, value: Any) -> Any:
             if isinstance(value, str):
                 return value
         elif isinstance(default, (list, tuple)):
-            if isinstance(value, (list, tuple)):
+            # rclpy hands a double/integer array set at run time (set_parameters) as array.array
+            if isinstance(value, (list, tuple, array.array)):
                 if default and isinstance(default[0], float):
                     return tuple(float(v) for v in value)
                 return tuple(value)

@@ -71,3 +71,13 @@ def test_a_node_given_a_former_name_names_the_new_one():
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
+
+
+def test_an_array_set_at_run_time_is_accepted_as_a_list():
+    # rclpy hands a double array set through set_parameters as array.array('d')
+    import array
+
+    from controller_manager_py.parameters import Param
+
+    centre = Param("centre_m", [0.0, 0.0], "a point")
+    assert centre.validate(array.array("d", [0.02, -0.01])) == (0.02, -0.01)

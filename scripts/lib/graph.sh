@@ -11,6 +11,39 @@ start() {  # start NAME CMD...: in the background, output to $LOGS/NAME.log
   echo "$(basename "$0"): started $name (pid $!)" >&2
 }
 
+# `start NAME optional CMD...`: a node the graph can do without (the live view). When it exits
+# (its port taken, say), one line says so and the graph goes on: the process left in its place
+# idles, so that run_monitor does not take it for a dead core node.
+optional() {
+  local status=0
+  "$@" || status=$?
+  ((STOPPING)) || echo "$(basename "$0"): $(basename "$1") exited (status $status); the graph goes on without it" >&3
+  exec sleep infinity
+}
+
+# announce_url LOG WHAT: print the first http:// address LOG names, once it does (up to 120 s),
+# so the user learns where the live view listens (its port may be chosen at start-up).
+announce_url() {
+  local log="$1" what="$2" i url
+  for ((i = 0; i < 1200; i++)); do
+    url="$(grep -o -m1 'http://[^ ]*' "$log" 2>/dev/null || true)"
+    if [[ -n "$url" ]]; then
+      echo "$(basename "$0"): $what: $url" >&3
+      return 0
+    fi
+    sleep 0.1
+  done
+  return 1
+}
+
+# start_live_view PORT ARGS...: the live view in the browser (docs/live_view.md) as an optional
+# node with `--ros-args -p port:=PORT ARGS...`; its address is printed once it listens.
+start_live_view() {
+  local port="$1"; shift
+  start live_view optional ball_balance_live_view --ros-args -p "port:=$port" "$@"
+  announce_url "$LOGS/live_view.log" "live view (open it in a browser)" &
+}
+
 # fd 3: the script's own stderr, for lines from helper processes (`start` sends their output
 # to their log)
 exec 3>&2

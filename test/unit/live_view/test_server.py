@@ -1,0 +1,97 @@
+"""The live view's web server without ROS: the page and its files, the state and frames pushed
+to a WebSocket, requests answered (or refused, or timed out) without holding the server."""
+import asyncio
+import concurrent.futures
+import json
+
+import aiohttp
+import pytest
+
+from ball_balance.live_view.commands import CommandError
+from ball_balance.live_view.server import LiveViewServer
+
+
+@pytest.fixture
+def server():
+    answers = {}
+
+    def handle(request):
+        if request.get("op") == "bad":
+            raise CommandError("unknown op 'bad'")
+        future = concurrent.futures.Future()
+        answers[request["op"]] = future
+        if request["op"] == "ok":
+            future.set_result((True, "done"))
+        return future     # "never": nobody answers
+
+    pages = []
+    srv = LiveViewServer("127.0.0.1", 0, handle, pages.append, reply_timeout_s=0.5)
+    srv.start()
+    srv.pages_seen = pages
+    yield srv
+    srv.stop()
+
+
+def run(coroutine):
+    return asyncio.run(asyncio.wait_for(coroutine, 20.0))
+
+
+def test_the_page_and_its_files_are_served_from_the_package(server):
+    async def get():
+        async with aiohttp.ClientSession() as session:
+            pages = {}
+            for path in ("/", "/static/app.js", "/static/style.css"):
+                async with session.get(server.url.rstrip("/") + path) as response:
+                    pages[path] = (response.status, await response.text())
+            return pages
+    pages = run(get())
+    assert all(status == 200 for status, _ in pages.values())
+    assert '<script src="/static/app.js">' in pages["/"][1]
+    for _, text in pages.values():    # nothing from elsewhere
+        assert "http://" not in text and "https://" not in text
+
+
+def test_a_page_gets_state_and_frames_and_answers_to_its_requests(server):
+    async def session_run():
+        async with aiohttp.ClientSession() as session:
+            async with session.ws_connect(server.url + "ws") as ws:
+                server.push_state({"ball": {"x": 0.01}})
+                server.push_frame(b"\xff\xd8jpeg")
+                got = {}
+                while "state" not in got or "frame" not in got:
+                    message = await ws.receive()
+                    if message.type == aiohttp.WSMsgType.BINARY:
+                        got["frame"] = message.data
+                    elif json.loads(message.data).get("ball"):
+                        got["state"] = json.loads(message.data)
+                replies = []
+                for i, op in enumerate(("ok", "bad", "never")):
+                    await ws.send_str(json.dumps({"id": i, "op": op}))
+                await ws.send_str("{not json")
+                while len(replies) < 4:
+                    message = json.loads((await ws.receive()).data)
+                    if message["type"] == "reply":
+                        replies.append(message)
+                return got, sorted(replies, key=lambda r: (r["id"] is None, r["id"] or 0))
+    got, replies = run(session_run())
+    assert got["frame"] == b"\xff\xd8jpeg" and got["state"]["type"] == "state"
+    assert replies[0] == {"type": "reply", "id": 0, "ok": True, "message": "done"}
+    assert replies[1]["ok"] is False and "unknown op" in replies[1]["message"]
+    assert replies[2]["ok"] is False and "no answer within 0.5 s" in replies[2]["message"]
+    assert replies[3]["ok"] is False and replies[3]["id"] is None
+    assert server.pages_seen[0] == 1 and server.pages_seen[-1] in (0, 1)
+
+
+def test_a_websocket_from_another_origin_is_refused(server):
+    async def connect():
+        async with aiohttp.ClientSession() as session:
+            with pytest.raises(aiohttp.WSServerHandshakeError) as error:
+                await session.ws_connect(server.url + "ws", headers={"Origin": "http://evil.example"})
+            return error.value.status
+    assert run(connect()) == 403
+
+
+def test_a_busy_port_is_one_clear_error(server):
+    other = LiveViewServer("127.0.0.1", server.port, lambda request: None)
+    with pytest.raises(OSError):
+        other.start()
