@@ -205,7 +205,9 @@ def test_activate_balances_and_deactivate_levels_the_plate(rig):
     assert rig.state() == "inactive"
     states = rig.controllers()
     assert states["forward_position_controller"] == states["scaled_joint_trajectory_controller"] == "inactive"
-    during = rig.samples_between(t0, t1)
+    # the balancing goes on until the switch to the levelling controller, tens of milliseconds
+    # of simulated time after t0 (fewer on a slower machine): judge the path after that
+    during = rig.samples_between(t0 + 0.25, t1)
     fastest = max(during, key=speed)
     timeline = " ".join(f"{stamp(m) - t0:.2f}:{speed(m):.2f}" for m in during[::25])
     assert speed(fastest) < 0.3 * 1.5, (f"the levelling was not smooth: {speed(fastest):.2f} rad/s at "
