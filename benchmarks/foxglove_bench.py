@@ -21,7 +21,6 @@ core busy.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import re
@@ -32,41 +31,34 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "test"))
+from graph_bench import (  # noqa: E402
+    METRIC_HEADER,
+    arguments,
+    cell,
+    condition_run,
+    footer,
+    metric_cells,
+    monitor_metrics,
+    print_table,
+    process_cpu_s,
+    wait_for_line,
+)
+
 import foxglove_ws_client  # noqa: E402
 from ball_balance.nodes.foxglove_node import DEFAULT_TOPICS  # noqa: E402
-from harness import DomainLease, executable, ros_env, stop_groups  # noqa: E402
+from harness import executable, stop_groups  # noqa: E402
 
 CONDITIONS = ("none", "idle", "watched")
-BUSY = [sys.executable, "-c", "while True: pass"]
 ADVERTISED = "advertised /camera/image_raw"
 
 
-def process_cpu_s(pid: int) -> float:
-    """User + system CPU time of one process (all its threads), s."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except FileNotFoundError:
-        return float("nan")
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def wait_for_line(path: Path, text: str, popen: subprocess.Popen, timeout_s: float) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and popen.poll() is None:
-        if path.exists() and text in path.read_text(errors="replace"):
-            return True
-        time.sleep(0.2)
-    return False
 
 
 def run_condition(condition: str, args, out: Path) -> dict:
-    folder = out / condition
-    folder.mkdir(parents=True, exist_ok=True)
-    lease = DomainLease()
-    env = ros_env(lease.domain_id)
-    busy = [subprocess.Popen(BUSY) for _ in range(args.busy)]
-    popens, row = [], {"condition": condition}
-    try:
+    row = {"condition": condition}
+    with condition_run(out, condition, args.busy) as (folder, env, popens):
         if condition != "none":
             node_log = folder / "foxglove.log"
             with open(node_log, "wb") as log:
@@ -102,42 +94,12 @@ def run_condition(condition: str, args, out: Path) -> dict:
             client_out.close()
             received = json.loads((folder / "client.json").read_text())["received"]
             row["received"], row["client_s"] = received, wall_s
-        metrics = folder / "metrics.txt"
-        if metrics.exists():
-            row.update({k: float(v) for k, v in (line.split(": ") for line in metrics.read_text().splitlines())})
-    finally:
-        stop_groups(popens)
-        for process in busy:
-            process.kill()
-            process.wait()
-        lease.release()
+        row.update(monitor_metrics(folder))
     return row
 
 
-def cell(row: dict, key: str, scale: float = 1.0, fmt: str = "{:.1f}") -> str:
-    value = row.get(key)
-    return "-" if value is None else fmt.format(value * scale)
-
-
-def print_table(header, rows) -> None:
-    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
-    print(" | ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)))
-    print("-+-".join("-" * w for w in widths))
-    for r in rows:
-        print(" | ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)))
-
-
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--conditions", default=",".join(CONDITIONS), help=f"comma-separated: {', '.join(CONDITIONS)}")
-    parser.add_argument("--controller", default="pid", choices=["pid", "mpc", "policy"])
-    parser.add_argument("--duration", type=float, default=30.0, help="simulated seconds per run")
-    parser.add_argument("--busy", type=int, default=0, help="extra processes each keeping a core busy")
-    parser.add_argument("--out", default=str(ROOT / "artifacts" / "foxglove_bench"))
-    args = parser.parse_args(argv)
-    names = [n for n in args.conditions.split(",") if n]
-    if set(names) - set(CONDITIONS):
-        parser.error(f"unknown condition(s) {sorted(set(names) - set(CONDITIONS))}: expected {list(CONDITIONS)}")
+    parser, args, names = arguments(__doc__, CONDITIONS, "foxglove_bench", busy=0, argv=argv)
     if "watched" in names:
         missing = foxglove_ws_client.missing_tools()
         if missing:
@@ -150,11 +112,8 @@ def main(argv=None) -> int:
         rows.append(run_condition(name, args, out))
         print(f"  {name}: exit {rows[-1]['exit']}", flush=True)
     print()
-    print_table(["condition", "exit", "RTF", "drop", "RMSE>5s mm", "cam->cmd p95 ms (stamps)", "cam->cmd p95 ms (wall)",
-                 "node CPU %", "client CPU %"],
-                [[r["condition"], str(r["exit"]), cell(r, "real_time_factor", fmt="{:.2f}"),
-                  cell(r, "drop", fmt="{:.0f}"), cell(r, "rmse_steady_m", 1e3), cell(r, "latency_p95_s", 1e3),
-                  cell(r, "latency_wall_p95_s", 1e3, "{:.0f}"), cell(r, "node_cpu_pct"), cell(r, "client_cpu_pct")]
+    print_table(["condition", "exit", *METRIC_HEADER, "node CPU %", "client CPU %"],
+                [[r["condition"], str(r["exit"]), *metric_cells(r), cell(r, "node_cpu_pct"), cell(r, "client_cpu_pct")]
                  for r in rows])
     watched = [r for r in rows if "received" in r]
     if watched:
@@ -162,9 +121,7 @@ def main(argv=None) -> int:
         print(f"\nwhat the client received in {row['client_s']:.0f} s:\n")
         print_table(["topic", "messages", "per s"],
                     [[t, str(n), f"{n / row['client_s']:.1f}"] for t, n in row["received"].items()])
-    print(f"\n{args.controller}, {args.duration:g} s of simulated time per run, {args.busy} busy process(es), "
-          f"{os.cpu_count()} CPUs; load average {load_before:.1f} before, {os.getloadavg()[0]:.1f} after; "
-          f"files in {out}")
+    print("\n" + footer(args, load_before, out))
     return 0
 
 

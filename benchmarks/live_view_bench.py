@@ -20,7 +20,6 @@ core); the browser's is the sum over its processes. Camera-to-command is the mon
 """
 from __future__ import annotations
 
-import argparse
 import os
 import re
 import subprocess
@@ -30,11 +29,19 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "test"))
-sys.path.insert(0, str(ROOT / "benchmarks"))
 from cdp_client import Browser  # noqa: E402
-from foxglove_bench import BUSY, cell, print_table, process_cpu_s, wait_for_line  # noqa: E402
-
-from harness import DomainLease, ros_env, stop_groups  # noqa: E402
+from graph_bench import (  # noqa: E402
+    METRIC_HEADER,
+    arguments,
+    cell,
+    condition_run,
+    footer,
+    metric_cells,
+    monitor_metrics,
+    print_table,
+    process_cpu_s,
+    wait_for_line,
+)
 
 CONDITIONS = ("none", "idle", "open")
 ANNOUNCED = "live view (open it in a browser): "
@@ -89,67 +96,47 @@ def group_cpu_s(pid: int) -> float:
 
 
 def run_condition(condition: str, args, out: Path) -> dict:
-    folder = out / condition
-    folder.mkdir(parents=True, exist_ok=True)
-    lease = DomainLease()
-    env = ros_env(lease.domain_id)
-    busy = [subprocess.Popen(BUSY) for _ in range(args.busy)]
-    popens, row, browser = [], {"condition": condition}, None
-    try:
-        view = ["--no-live-view"] if condition == "none" else ["--live-view-port", "0"]
-        graph_log = folder / "graph.log"
-        with open(graph_log, "wb") as log:
-            graph = subprocess.Popen([str(ROOT / "scripts" / "sim_balance.sh"), "--controller", args.controller,
-                                      "--duration", str(args.duration), "--out", str(folder), *view],
-                                     env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-        popens.append(graph)
-        started, node_cpu0, node = time.monotonic(), 0.0, None
-        if condition != "none":
-            if not wait_for_line(graph_log, ANNOUNCED, graph, 300):
-                raise RuntimeError(f"{condition}: the live view did not start (see {graph_log})")
-            url = re.search(re.escape(ANNOUNCED) + r"(\S+)", graph_log.read_text()).group(1)
-            node = live_view_pid(graph.pid)
-            if condition == "open":
-                browser = Browser(folder / "chromium.log")
-                browser.open(url)
-                browser.wait_for("document.getElementById('connection').textContent === 'connected'", 120.0)
-            started, node_cpu0 = time.monotonic(), process_cpu_s(node)
-            browser_cpu0 = group_cpu_s(browser.process.pid) if browser else 0.0
-        row["exit"], node_cpu, sampled = wait_sampling(graph, 120 * args.duration,
-                                                      lambda: process_cpu_s(node) if node else float("nan"))
-        wall_s = time.monotonic() - started
-        if node is not None and node_cpu is not None:
-            row["node_cpu_pct"] = 100 * (node_cpu - node_cpu0) / (sampled - started)
-        if browser is not None:
-            row["browser_cpu_pct"] = 100 * (group_cpu_s(browser.process.pid) - browser_cpu0) / wall_s
-            frames = browser.evaluate("parseInt(/(\\d+) sent/.exec(document.getElementById('image-info')"
-                                      ".textContent)[1])")
-            row["frames_per_s"] = (frames or 0) / wall_s
-        metrics = folder / "metrics.txt"
-        if metrics.exists():
-            row.update({k: float(v) for k, v in (line.split(": ") for line in metrics.read_text().splitlines())})
-    finally:
-        if browser is not None:
-            browser.close()
-        stop_groups(popens)
-        for process in busy:
-            process.kill()
-            process.wait()
-        lease.release()
+    row, browser = {"condition": condition}, None
+    with condition_run(out, condition, args.busy) as (folder, env, popens):
+        try:
+            view = ["--no-live-view"] if condition == "none" else ["--live-view-port", "0"]
+            graph_log = folder / "graph.log"
+            with open(graph_log, "wb") as log:
+                graph = subprocess.Popen([str(ROOT / "scripts" / "sim_balance.sh"), "--controller", args.controller,
+                                          "--duration", str(args.duration), "--out", str(folder), *view],
+                                         env=env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+            popens.append(graph)
+            started, node_cpu0, node = time.monotonic(), 0.0, None
+            if condition != "none":
+                if not wait_for_line(graph_log, ANNOUNCED, graph, 300):
+                    raise RuntimeError(f"{condition}: the live view did not start (see {graph_log})")
+                url = re.search(re.escape(ANNOUNCED) + r"(\S+)", graph_log.read_text()).group(1)
+                node = live_view_pid(graph.pid)
+                if condition == "open":
+                    browser = Browser(folder / "chromium.log")
+                    browser.open(url)
+                    browser.wait_for("document.getElementById('connection').textContent === 'connected'", 120.0)
+                started, node_cpu0 = time.monotonic(), process_cpu_s(node)
+                browser_cpu0 = group_cpu_s(browser.process.pid) if browser else 0.0
+            row["exit"], node_cpu, sampled = wait_sampling(graph, 120 * args.duration,
+                                                          lambda: process_cpu_s(node) if node else float("nan"))
+            wall_s = time.monotonic() - started
+            if node is not None and node_cpu is not None:
+                row["node_cpu_pct"] = 100 * (node_cpu - node_cpu0) / (sampled - started)
+            if browser is not None:
+                row["browser_cpu_pct"] = 100 * (group_cpu_s(browser.process.pid) - browser_cpu0) / wall_s
+                frames = browser.evaluate("parseInt(/(\\d+) sent/.exec(document.getElementById('image-info')"
+                                          ".textContent)[1])")
+                row["frames_per_s"] = (frames or 0) / wall_s
+            row.update(monitor_metrics(folder))
+        finally:
+            if browser is not None:
+                browser.close()
     return row
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--conditions", default=",".join(CONDITIONS), help=f"comma-separated: {', '.join(CONDITIONS)}")
-    parser.add_argument("--controller", default="pid", choices=["pid", "mpc", "policy"])
-    parser.add_argument("--duration", type=float, default=30.0, help="simulated seconds per run")
-    parser.add_argument("--busy", type=int, default=1, help="extra processes each keeping a core busy")
-    parser.add_argument("--out", default=str(ROOT / "artifacts" / "live_view_bench"))
-    args = parser.parse_args(argv)
-    names = [n for n in args.conditions.split(",") if n]
-    if set(names) - set(CONDITIONS):
-        parser.error(f"unknown condition(s) {sorted(set(names) - set(CONDITIONS))}: expected {list(CONDITIONS)}")
+    _, args, names = arguments(__doc__, CONDITIONS, "live_view_bench", busy=1, argv=argv)
     out = Path(args.out)
     load_before = os.getloadavg()[0]
     rows = []
@@ -157,16 +144,11 @@ def main(argv=None) -> int:
         rows.append(run_condition(name, args, out))
         print(f"  {name}: exit {rows[-1]['exit']}", flush=True)
     print()
-    print_table(["condition", "exit", "RTF", "drop", "RMSE>5s mm", "cam->cmd p95 ms (stamps)", "cam->cmd p95 ms (wall)",
-                 "node CPU %", "browser CPU %", "frames/s"],
-                [[r["condition"], str(r["exit"]), cell(r, "real_time_factor", fmt="{:.2f}"),
-                  cell(r, "drop", fmt="{:.0f}"), cell(r, "rmse_steady_m", 1e3), cell(r, "latency_p95_s", 1e3),
-                  cell(r, "latency_wall_p95_s", 1e3, "{:.0f}"), cell(r, "node_cpu_pct"), cell(r, "browser_cpu_pct"),
-                  cell(r, "frames_per_s")]
+    print_table(["condition", "exit", *METRIC_HEADER, "node CPU %", "browser CPU %", "frames/s"],
+                [[r["condition"], str(r["exit"]), *metric_cells(r), cell(r, "node_cpu_pct"),
+                  cell(r, "browser_cpu_pct"), cell(r, "frames_per_s")]
                  for r in rows])
-    print(f"\n{args.controller}, {args.duration:g} s of simulated time per run, {args.busy} busy process(es), "
-          f"{os.cpu_count()} CPUs; load average {load_before:.1f} before, {os.getloadavg()[0]:.1f} after; "
-          f"files in {out}")
+    print("\n" + footer(args, load_before, out))
     return 0
 
 
