@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -181,6 +182,18 @@ class Graph:
     def spin_until(self, condition: Callable[[], bool], timeout: float, what: str = "condition") -> None:
         if not self.wait_until(condition, timeout):
             raise TimeoutError(f"timed out after {timeout:.0f} s waiting for {what}")
+
+    def wait_for_output(self, process: Process, pattern: str, timeout: float, what: str) -> str:
+        """The first group of regex `pattern`'s first match in `process`'s output, spinning until it
+        is there; the process dying first fails with its output."""
+        found = []
+
+        def printed() -> bool:
+            assert process.running, process.output()[-3000:]
+            found[:] = re.findall(pattern, process.output())
+            return bool(found)
+        self.spin_until(printed, timeout, what)
+        return found[0]
 
     def spin_for(self, seconds: float) -> None:
         self.wait_until(lambda: False, seconds)

@@ -9,7 +9,6 @@ activate the arm, and its emergency stop button stops it as the joint states sho
 Chromium comes from scripts/tools/install_test_browser.sh (scripts/test.sh runs it); without
 it the tests are skipped.
 """
-import re
 import time
 
 import pytest
@@ -57,23 +56,13 @@ def live(tmp_path_factory):
     try:
         sim = launcher.start([str(ROOT / "scripts" / "sim_balance.sh"), "--controller", "pid", "--reference", "circle",
                               "--radius", "0.06", "--period", "6", "--live-view-port", "0"], name="sim_balance")
-        found = []
-
-        def announced() -> bool:
-            assert sim.running, sim.output()[-3000:]
-            found[:] = re.findall(r"live view \(open it in a browser\): (http://127\.0\.0\.1:\d+/)", sim.output())
-            return bool(found)
-        graph.spin_until(announced, START_TIMEOUT_S, "the live view's address from sim_balance.sh")
+        url = graph.wait_for_output(sim, r"live view \(open it in a browser\): (http://127\.0\.0\.1:\d+/)",
+                                    START_TIMEOUT_S, "the live view's address from sim_balance.sh")
         browser = Browser(logs / "chromium.log")
-        browser.open(found[0])
+        browser.open(url)
         yield sim, graph, browser
     finally:
-        if browser is not None:
-            try:
-                browser.screenshot(logs / "page.png")   # what the page showed last, for a failure
-            except Exception:  # noqa: BLE001 - best effort
-                pass
-            browser.close()
+        close_page(browser, logs)
         launcher.stop_all()
         graph.close()
         lease.release()
@@ -148,26 +137,26 @@ def managed(tmp_path_factory):
         launcher.start([executable("robot_manager"), "--ros-args", "-p", "camera_required:=false"],
                        name="robot_manager")
         view = launcher.start([executable("ball_balance_live_view"), "--ros-args", "-p", "port:=0"], name="live_view")
-        found = []
-
-        def started() -> bool:
-            assert view.running, view.output()
-            found[:] = re.findall(r"live view on (http://127\.0\.0\.1:\d+/)", view.output())
-            return bool(found)
-        graph.spin_until(started, START_TIMEOUT_S, "the live view's start-up line")
+        url = graph.wait_for_output(view, r"live view on (http://127\.0\.0\.1:\d+/)", START_TIMEOUT_S,
+                                    "the live view's start-up line")
         browser = Browser(logs / "chromium.log")
-        browser.open(found[0])
+        browser.open(url)
         yield graph, browser
     finally:
-        if browser is not None:
-            try:
-                browser.screenshot(logs / "page.png")
-            except Exception:  # noqa: BLE001 - best effort
-                pass
-            browser.close()
+        close_page(browser, logs)
         launcher.stop_all()
         graph.close()
         lease.release()
+
+
+def close_page(browser, logs) -> None:
+    if browser is None:
+        return
+    try:
+        browser.screenshot(logs / "page.png")   # what the page showed last, for a failure
+    except Exception:  # noqa: BLE001 - best effort
+        pass
+    browser.close()
 
 
 def press(browser, button: str, label: str, expected_state: str) -> None:

@@ -4,7 +4,6 @@ reported at the deadline while the server keeps serving. The robot manager here 
 own node (its services answer only while the test spins it)."""
 import asyncio
 import json
-import re
 
 import aiohttp
 import pytest
@@ -20,14 +19,8 @@ START_TIMEOUT_S = 60.0
 def start_live_view(launcher, graph):
     node = launcher.start([executable("ball_balance_live_view"), "--ros-args", "-p", "port:=0",
                            "-p", "call_timeout_s:=1.0"], name="live_view")
-    found = []
-
-    def started() -> bool:
-        assert node.running, node.output()
-        found[:] = re.findall(r"live view on (http://127\.0\.0\.1:\d+/)", node.output())
-        return bool(found)
-    graph.spin_until(started, START_TIMEOUT_S, "the live view's start-up line")
-    return found[0], node
+    return graph.wait_for_output(node, r"live view on (http://127\.0\.0\.1:\d+/)", START_TIMEOUT_S,
+                                 "the live view's start-up line"), node
 
 
 async def ask(url: str, requests: list, timeout: float = 30.0) -> list:
