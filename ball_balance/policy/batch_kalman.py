@@ -9,13 +9,15 @@ tilt's known acceleration, process noise raised by the running innovation consis
 measurement noise estimated from the detections' scatter (median of the normalised triple
 residuals, DetectionNoiseEstimator), the gate, coasting and track restarts (the gain estimate
 survives them). filterpy's update (Joseph form) is reproduced step for step; a test checks the
-batch against BallKalman on the same detections.
+batch against BallKalman on the same detections. It has no disturbance state
+(`disturbance_time_constant_s`): the training plant has no constant force, and the policy runs
+on top of the PID, which cancels the tracker's estimate of one.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ball_balance.vision.kalman import CHI2_1_MEDIAN, MANEUVER_MAX_NIS, KalmanConfig
+from ball_balance.vision.kalman import CHI2_1_MEDIAN, MODEL_AGREED_NIS, KalmanConfig
 
 DIM = 5
 
@@ -170,7 +172,7 @@ class BatchBallKalman:
                 widen, nis = seen & (distance > self.maneuver_sigma), self.nis
                 if self.cfg.maneuver_confirm_frames > 1:
                     widen, nis = self._confirmed_pushes(seen, widen, y, distance)
-                self.hold_until = np.where(widen & (nis <= MANEUVER_MAX_NIS), t + self.cfg.maneuver_hold_s,
+                self.hold_until = np.where(widen & (nis <= MODEL_AGREED_NIS), t + self.cfg.maneuver_hold_s,
                                            self.hold_until)
                 if widen.any() and self._widen(widen):
                     inv, widened_distance = self._innovation(y)

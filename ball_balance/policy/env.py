@@ -134,11 +134,12 @@ class Nominal:
 
 def tracker_config():
     """The tracker's parameters as the benchmark and the node run them (config/ball_tracker.yaml
-    over the schema's defaults)."""
+    over the schema's defaults), without the disturbance state: the training plant has no
+    constant force, and its filter (BatchBallKalman) no such state."""
     from ball_balance.benchmark.episode import tracker_values
     from ball_balance.vision.config import TrackerConfig
 
-    return TrackerConfig.from_values(tracker_values())
+    return TrackerConfig.from_values({**tracker_values(), "disturbance_time_constant_s": 0.0})
 
 
 def reference_table(kind: str, n_ticks: int) -> np.ndarray:

@@ -105,12 +105,12 @@ TRACKER_SCHEMA = (
     Param("cmd_accel_noise_m_s2", 0.05,
           "white-noise acceleration (1 sigma) of the process model while a commanded tilt is known "
           "(accel_noise_m_s2 without one)", "m/s^2", 1e-4, 1000.0),
-    Param("disturbance_time_constant_s", 0.0,
-          "> 0: the filter also estimates a constant acceleration of the ball besides the commanded tilt's "
-          "(a plate off level, a force on the ball), a random walk over about this time constant between "
-          "changes that a test on the innovations finds (docs/tracker.md), and publishes it as a "
-          "plate-level offset on /ball_level_offset, which the controllers cancel (offset-free control); "
-          "0 = off", "s", 0.0, 60.0),
+    Param("disturbance_time_constant_s", 20.0,
+          "the filter also estimates a constant acceleration of the ball besides the commanded tilt's "
+          "(a plate off level, a force on the ball): a random walk over about this time constant between "
+          "changes that a test on the innovations finds (docs/tracker.md), published as a plate-level "
+          "offset on /ball_level_offset, which the controllers cancel (offset-free control); 0 = off", "s",
+          0.0, 60.0),
     Param("estimate_input_gain", True,
           "estimate online the ratio of the ball's acceleration to the commanded tilt's -k g sin(u)"),
     Param("input_gain_bounds", (0.4, 2.5), "[min, max] of that ratio", "", check=_range_pair),

@@ -39,7 +39,7 @@ benchmark 111 mm/s short of a 0.15 m/s push one frame after it, 36 two frames af
 later, slowed the controllers' recovery. So `fast`, a plain constant-velocity filter with
 `accel_noise_m_s2` and the same measurement noise, runs alongside, and for `maneuver_hold_s`
 after such a detection its velocity is the one reported, unless the model had disagreed with
-the detections before it (MANEUVER_MAX_NIS: a long delay or a wrong gain, not a push). The
+the detections before it (MODEL_AGREED_NIS: a long delay or a wrong gain, not a push). The
 position stays the model's; during the hold it predicts with at least
 `maneuver_accel_noise_m_s2` of process noise, so that position follows the pushed ball within
 frames (with only the small noise it lagged the returning ball by 3-5 mm for most of the hold).
@@ -80,18 +80,24 @@ from ball_balance.rotations import matrix_to_rotvec
 from ball_balance.vision.config import TRACKER_SCHEMA
 
 CHI2_1_MEDIAN = 0.45493642311957283   # median of a chi-square variable with one degree of freedom
-# a detection beyond maneuver_sigma starts the maneuver hold only while the running innovation
-# consistency (1 when the model is right) is at most this: a model that has disagreed for a
-# while (a long delay, a wrong gain) is not seeing a push, and the constant-velocity filter's
-# velocity cost 1 mm in extreme_dr when it took over there too
-MANEUVER_MAX_NIS = 1.0
+# the running innovation consistency (1 when the model is right) at most this: the model agreed
+# with the detections. Only then is a detection beyond maneuver_sigma a push, or a bias of the
+# innovations a change of d: a model that has disagreed for a while (a delay or a gain still
+# being learned) is seeing its own error; the constant-velocity filter's velocity cost 1 mm in
+# extreme_dr when it took over there too, and d taken for such an error shook the ball
+MODEL_AGREED_NIS = 1.0
+# the running consistency starts at 1 with a track; after this many of its time constants its
+# start weighs 5 % and it describes the detections
+CONSISTENCY_SETTLE_TIME_CONSTANTS = 3.0
 _TRACKER_DEFAULTS = {p.name: p.default for p in TRACKER_SCHEMA}   # KalmanConfig's defaults
-DISTURBANCE_STD_M_S2 = 0.3   # d's 1-sigma at the first track: a plate up to about 3 degrees off level
+DISTURBANCE_STD_M_S2 = 0.3   # 1-sigma of a change of d: a force up to about 3 degrees of tilt
 # A change of d (a force that starts, turns or ends) shows as innovations that keep one sign:
 # their whitened sum over DISTURBANCE_CHANGE_WINDOW_S, squared and over its frames, is
 # chi-square with 2 degrees of freedom while the model holds; beyond DISTURBANCE_CHANGE_CHI2
 # (a 0.1 % false alarm per test) d has changed by an unknown amount (1-sigma
-# DISTURBANCE_STD_M_S2) about half a window ago, and the filter's covariance says so
+# DISTURBANCE_STD_M_S2) about half a window ago, and the filter's covariance says so. d starts
+# at 0, known: a plate off level from the start is found as such a change, once the gain is
+# learned, instead of being learned together with a gain that is still wrong
 DISTURBANCE_CHANGE_WINDOW_S = 0.3
 DISTURBANCE_CHANGE_CHI2 = 13.815510557964274
 
@@ -337,8 +343,10 @@ class BallKalman:
         if self.disturbance_state:
             self.d_index = self.dim
             self.dim += 2
-        self._disturbance = (np.zeros(2), DISTURBANCE_STD_M_S2 ** 2)   # kept over dropped tracks
-        self._innovations: Deque[Tuple[float, np.ndarray]] = deque()   # (stamp, whitened), the last window
+        self._disturbance = (np.zeros(2), 0.0)   # kept over dropped tracks
+        # (stamp, whitened innovation, running consistency before it), the last window
+        self._innovations: Deque[Tuple[float, np.ndarray, float]] = deque()
+        self._track_start_s = 0.0
         self._window_start_s: Optional[float] = None
         self.disturbance_changes = 0  # changes of d found (total)
         self.model_mismatch_time_constant_s = cfg.model_mismatch_time_constant_s
@@ -427,6 +435,7 @@ class BallKalman:
         kf.x = np.array(x)
         kf.P = np.diag(P)
         self.initialised, self.coasted, self.t_last = True, 0, t
+        self._track_start_s = t
 
     def _predict(self, dt: float, accel: Optional[Tuple[float, float]], holding: bool = False) -> None:
         kf = self.kf
@@ -555,7 +564,7 @@ class BallKalman:
             distance = self.mahalanobis(z)
             if self.maneuver_sigma > 0.0 and dt_step > 0.0 and self._push_seen(z, distance):
                 nis = self._excess[2] if self._confirming() else self.nis
-                if nis <= MANEUVER_MAX_NIS:   # a model that agreed until the push began
+                if nis <= MODEL_AGREED_NIS:   # a model that agreed until the push began
                     self._hold_until = t + self.maneuver_hold_s
                 self._widen_last_prediction()
                 distance = self.mahalanobis(z)
@@ -586,7 +595,9 @@ class BallKalman:
         window): d by it, the velocity by it times T, the position by it times T^2/2, all
         correlated, so the innovations that follow move d, and not the velocity, by what the
         change was. Without a known acceleration d is not in the model, and during a push's
-        hold the innovations are the push's: the window starts again."""
+        hold the innovations are the push's: the window starts again. The test assumes the
+        model agreed with the detections before the window (MODEL_AGREED_NIS), measured over
+        CONSISTENCY_SETTLE_TIME_CONSTANTS of the track; otherwise a bias is the model's error."""
         window = self._innovations
         if not known or pushed:
             window.clear()
@@ -595,15 +606,19 @@ class BallKalman:
         kf = self.kf
         innovation = np.asarray(z, dtype=np.float64) - kf.H @ kf.x
         S = kf.H @ kf.P @ kf.H.T + kf.R
-        window.append((t, np.linalg.solve(np.linalg.cholesky(S), innovation)))
+        window.append((t, np.linalg.solve(np.linalg.cholesky(S), innovation), self.nis))
         while t - window[0][0] > DISTURBANCE_CHANGE_WINDOW_S:
             window.popleft()
         if self._window_start_s is None:
             self._window_start_s = t
         if t - self._window_start_s < DISTURBANCE_CHANGE_WINDOW_S:
             return
-        total = np.sum([whitened for _, whitened in window], axis=0)
+        total = np.sum([whitened for _, whitened, _ in window], axis=0)
         if float(total @ total) / len(window) <= DISTURBANCE_CHANGE_CHI2:
+            return
+        window_start_s, _, nis_before = window[0]
+        settle_s = CONSISTENCY_SETTLE_TIME_CONSTANTS * self.model_mismatch_time_constant_s
+        if nis_before > MODEL_AGREED_NIS or window_start_s - self._track_start_s < settle_s:
             return
         span_s = t - window[0][0]
         T = span_s / 2.0

@@ -9,7 +9,7 @@ from ball_balance.vision.kalman import BallKalman, KalmanConfig
 
 
 def test_batch_kalman_with_the_tilt_lever_is_the_trackers_filter():
-    tracker_cfg = TrackerConfig.from_values({})
+    tracker_cfg = TrackerConfig.from_values({"disturbance_time_constant_s": 0.0})   # as the training plant's
     cfg = KalmanConfig.from_tracker(tracker_cfg)
     b, dt, k_g, c = 4, 1 / 30, 5.886, tracker_cfg.tilt_lever_m
     batch = BatchBallKalman(b, cfg)
@@ -25,7 +25,7 @@ def test_batch_kalman_with_the_tilt_lever_is_the_trackers_filter():
         if n == 100:
             v[1] += 0.15                                    # a push
         # detections a little better than the configured 1 mm: the running consistency stays well
-        # below MANEUVER_MAX_NIS before the push, so the push surely takes the hold under test
+        # below MODEL_AGREED_NIS before the push, so the push surely takes the hold under test
         z = x + lever + rng.normal(0, 0.0007, (b, 2))
         det = rng.random(b) >= 0.1
         pos, vel, valid = batch.step(t, z, det, accel, lever)
