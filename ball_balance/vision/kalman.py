@@ -102,6 +102,20 @@ DISTURBANCE_CHANGE_WINDOW_S = 0.3
 DISTURBANCE_CHANGE_CHI2 = 13.815510557964274
 
 
+def _add_white_acceleration(M: np.ndarray, q: float, dt: float) -> None:
+    """M[:4, :4] += q [[dt^4/4 I, dt^3/2 I], [dt^3/2 I, dt^2 I]]: a white-noise acceleration of
+    density q over dt, on the states [x, y, vx, vy] (written out: it runs twice a frame)."""
+    pp, pv, vv = q * (dt ** 4 / 4), q * (dt ** 3 / 2), q * dt ** 2
+    M[0, 0] += pp
+    M[1, 1] += pp
+    M[0, 2] += pv
+    M[2, 0] += pv
+    M[1, 3] += pv
+    M[3, 1] += pv
+    M[2, 2] += vv
+    M[3, 3] += vv
+
+
 @dataclass(frozen=True)
 class TrackEstimate:
     x: float
@@ -343,6 +357,7 @@ class BallKalman:
         if self.disturbance_state:
             self.d_index = self.dim
             self.dim += 2
+            self._disturbance_rows = np.array([[0, 2, self.d_index], [1, 3, self.d_index + 1]])
         self._disturbance = (np.zeros(2), 0.0)   # kept over dropped tracks
         # (stamp, whitened innovation, running consistency before it), the last window
         self._innovations: Deque[Tuple[float, np.ndarray, float]] = deque()
@@ -445,7 +460,7 @@ class BallKalman:
         F = np.eye(self.dim)
         F[0:2, 2:4] = dt * I2
         Q = np.zeros((self.dim, self.dim))
-        Q[:4, :4] = q * np.block([[dt ** 4 / 4 * I2, dt ** 3 / 2 * I2], [dt ** 3 / 2 * I2, dt ** 2 * I2]])
+        _add_white_acceleration(Q, q, dt)
         a = None if accel is None else np.asarray(accel, dtype=np.float64)
         if self.disturbance_state and a is not None:
             # x' = ... + d dt^2/2, v' = ... + d dt, d' = d + w; without a known acceleration the
@@ -456,8 +471,8 @@ class BallKalman:
             jerk = self.q_d * np.array([[dt ** 5 / 20, dt ** 4 / 8, dt ** 3 / 6],
                                         [dt ** 4 / 8, dt ** 3 / 3, dt ** 2 / 2],
                                         [dt ** 3 / 6, dt ** 2 / 2, dt]])
-            for axis in ((0, 2, i), (1, 3, i + 1)):
-                Q[np.ix_(axis, axis)] += jerk
+            rows = self._disturbance_rows                # (x, vx, d_x) and (y, vy, d_y)
+            Q[rows[:, :, None], rows[:, None, :]] += jerk
         if self.gain_state:
             if a is not None:                        # x' = ... + s a dt^2/2, v' = ... + s a dt
                 F[0:2, 4] = a * dt ** 2 / 2
@@ -482,8 +497,7 @@ class BallKalman:
         extra = self.sigma_a ** 2 - q
         if extra <= 0.0 or dt <= 0.0:
             return
-        I2 = np.eye(2)
-        self.kf.P[:4, :4] += extra * np.block([[dt ** 4 / 4 * I2, dt ** 3 / 2 * I2], [dt ** 3 / 2 * I2, dt ** 2 * I2]])
+        _add_white_acceleration(self.kf.P, extra, dt)
         self.maneuver_count += 1
 
     def process_noise(self, known_accel: bool, holding: bool = False) -> float:
