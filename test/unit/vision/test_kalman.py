@@ -180,7 +180,7 @@ def test_input_gain_is_estimated_and_bounded_and_kept_over_a_dropped_track():
     bounded = filter_with(meas_noise_m=0.003, cmd_accel_noise_m_s2=0.05, estimate_input_gain=True,
                           input_gain_bounds=(0.5, 1.2))
     _run_with_gain(bounded, 1.6, rng)
-    assert bounded.input_gain == pytest.approx(1.2, abs=0.01)   # at its bound, d takes the rest
+    assert bounded.input_gain == pytest.approx(1.2)
 
 
 def test_smaller_process_noise_while_the_acceleration_is_known():
