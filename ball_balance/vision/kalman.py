@@ -627,12 +627,12 @@ class BallKalman:
             self._window_start_s = t
         if t - self._window_start_s < DISTURBANCE_CHANGE_WINDOW_S:
             return
-        total = np.sum([whitened for _, whitened, _ in window], axis=0)
-        if float(total @ total) / len(window) <= DISTURBANCE_CHANGE_CHI2:
-            return
         window_start_s, _, nis_before = window[0]
         settle_s = CONSISTENCY_SETTLE_TIME_CONSTANTS * self.model_mismatch_time_constant_s
         if nis_before > MODEL_AGREED_NIS or window_start_s - self._track_start_s < settle_s:
+            return                    # the model did not agree: a bias is its own error
+        total = np.sum([whitened for _, whitened, _ in window], axis=0)
+        if float(total @ total) / len(window) <= DISTURBANCE_CHANGE_CHI2:
             return
         span_s = t - window[0][0]
         T = span_s / 2.0
