@@ -52,10 +52,6 @@ CONDITIONS = ("none", "idle", "watched")
 ADVERTISED = "advertised /camera/image_raw"
 
 
-
-
-
-
 def run_condition(condition: str, args, out: Path) -> dict:
     row = {"condition": condition}
     with condition_run(out, condition, args.busy) as (folder, env, popens):
