@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ball_balance.vision.kalman import CHI2_1_MEDIAN, MODEL_AGREED_NIS, KalmanConfig
+from ball_balance.vision.kalman import CHI2_1_MEDIAN, MODEL_AGREED_NIS, KalmanConfig, add_white_acceleration
 
 DIM = 5
 
@@ -240,12 +240,9 @@ class BatchBallKalman:
         if not mask.any():
             return False
         i = np.flatnonzero(mask)
-        h, extra = h[i], extra[i]
-        for axis in range(2):
-            self.p[i, axis, axis] += extra * h ** 4 / 4
-            self.p[i, axis, axis + 2] += extra * h ** 3 / 2
-            self.p[i, axis + 2, axis] += extra * h ** 3 / 2
-            self.p[i, axis + 2, axis + 2] += extra * h ** 2
+        p = self.p[i]
+        add_white_acceleration(p, extra[i], h[i])
+        self.p[i] = p
         return True
 
     def _predict(self, mask, dt, accel, holding) -> None:
@@ -270,10 +267,7 @@ class BatchBallKalman:
             f[:, 0:2, 4] = a * (h ** 2 / 2)[:, None]
             f[:, 2:4, 4] = a * h[:, None]
         qm = np.zeros((len(i), DIM, DIM))
-        for axis in range(2):
-            qm[:, axis, axis] = q * h ** 4 / 4
-            qm[:, axis, axis + 2] = qm[:, axis + 2, axis] = q * h ** 3 / 2
-            qm[:, axis + 2, axis + 2] = q * h ** 2
+        add_white_acceleration(qm, q, h)
         if self.gain_state:
             qm[:, 4, 4] = self.cfg.input_gain_rate_per_s ** 2 * h
         self.x[i] = np.einsum("bij,bj->bi", f, self.x[i])

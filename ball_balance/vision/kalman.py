@@ -102,18 +102,19 @@ DISTURBANCE_CHANGE_WINDOW_S = 0.3
 DISTURBANCE_CHANGE_CHI2 = 13.815510557964274
 
 
-def _add_white_acceleration(M: np.ndarray, q: float, dt: float) -> None:
-    """M[:4, :4] += q [[dt^4/4 I, dt^3/2 I], [dt^3/2 I, dt^2 I]]: a white-noise acceleration of
-    density q over dt, on the states [x, y, vx, vy] (written out: it runs twice a frame)."""
+def add_white_acceleration(M: np.ndarray, q, dt) -> None:
+    """M[..., :4, :4] += q [[dt^4/4 I, dt^3/2 I], [dt^3/2 I, dt^2 I]]: a white-noise acceleration
+    of density q over dt, on the states [x, y, vx, vy]. q and dt are scalars, or one value per
+    matrix of a batch M (b, n, n) (the training plant's filter)."""
     pp, pv, vv = q * (dt ** 4 / 4), q * (dt ** 3 / 2), q * dt ** 2
-    M[0, 0] += pp
-    M[1, 1] += pp
-    M[0, 2] += pv
-    M[2, 0] += pv
-    M[1, 3] += pv
-    M[3, 1] += pv
-    M[2, 2] += vv
-    M[3, 3] += vv
+    M[..., 0, 0] += pp
+    M[..., 1, 1] += pp
+    M[..., 0, 2] += pv
+    M[..., 2, 0] += pv
+    M[..., 1, 3] += pv
+    M[..., 3, 1] += pv
+    M[..., 2, 2] += vv
+    M[..., 3, 3] += vv
 
 
 @dataclass(frozen=True)
@@ -460,7 +461,7 @@ class BallKalman:
         F = np.eye(self.dim)
         F[0:2, 2:4] = dt * I2
         Q = np.zeros((self.dim, self.dim))
-        _add_white_acceleration(Q, q, dt)
+        add_white_acceleration(Q, q, dt)
         a = None if accel is None else np.asarray(accel, dtype=np.float64)
         if self.disturbance_state and a is not None:
             # x' = ... + d dt^2/2, v' = ... + d dt, d' = d + w; without a known acceleration the
@@ -497,7 +498,7 @@ class BallKalman:
         extra = self.sigma_a ** 2 - q
         if extra <= 0.0 or dt <= 0.0:
             return
-        _add_white_acceleration(self.kf.P, extra, dt)
+        add_white_acceleration(self.kf.P, extra, dt)
         self.maneuver_count += 1
 
     def process_noise(self, known_accel: bool, holding: bool = False) -> float:
