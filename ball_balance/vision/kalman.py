@@ -66,6 +66,7 @@ estimates describe the camera and the plant, not the track: they survive a dropp
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from collections import deque
@@ -100,6 +101,12 @@ DISTURBANCE_STD_M_S2 = 0.3   # 1-sigma of a change of d: a force up to about 3 d
 # learned, instead of being learned together with a gain that is still wrong
 DISTURBANCE_CHANGE_WINDOW_S = 0.3
 DISTURBANCE_CHANGE_CHI2 = 13.815510557964274
+
+
+def _log_likelihood(kf: KalmanFilter, z: np.ndarray) -> float:
+    y = z - kf.H @ kf.x
+    S = kf.H @ kf.P @ kf.H.T + kf.R
+    return -0.5 * (float(y @ np.linalg.solve(S, y)) + math.log(np.linalg.det(S)))
 
 
 def add_white_acceleration(M: np.ndarray, q, dt) -> None:
@@ -365,6 +372,10 @@ class BallKalman:
         self._track_start_s = 0.0
         self._window_start_s: Optional[float] = None
         self.disturbance_changes = 0  # changes of d found (total)
+        # during a push's hold: (the filter as if it were a change of d, not a push, with the
+        # log-likelihood ratio of the detections since under the two)
+        self._force: Optional[Tuple[KalmanFilter, float]] = None
+        self._transition = np.eye(self.dim)   # F's product since the last update
         self.model_mismatch_time_constant_s = cfg.model_mismatch_time_constant_s
         self.nis = 1.0                # running mean of the normalised innovation squared (per axis)
         self.maneuver_sigma = cfg.maneuver_sigma
@@ -435,6 +446,7 @@ class BallKalman:
         self.coasted = 0
         self.t_last = None
         self._excess = (0, np.zeros(2), 1.0)
+        self._force = None
         self._innovations.clear()
         self._window_start_s = None
 
@@ -451,13 +463,17 @@ class BallKalman:
         kf.x = np.array(x)
         kf.P = np.diag(P)
         self.initialised, self.coasted, self.t_last = True, 0, t
+        self._transition = np.eye(self.dim)
         self._track_start_s = t
 
-    def _predict(self, dt: float, accel: Optional[Tuple[float, float]], holding: bool = False) -> None:
-        kf = self.kf
-        I2 = np.eye(2)
+    def _predict(self, dt: float, accel: Optional[Tuple[float, float]], holding: bool = False,
+                 kf: Optional[KalmanFilter] = None) -> None:
         q = self.process_noise(accel is not None, holding)
-        self._last_prediction = (dt, q)
+        main = kf is None
+        if main:
+            kf = self.kf
+            self._last_prediction = (dt, q)
+        I2 = np.eye(2)
         F = np.eye(self.dim)
         F[0:2, 2:4] = dt * I2
         Q = np.zeros((self.dim, self.dim))
@@ -482,7 +498,11 @@ class BallKalman:
             kf.F, kf.Q = F, Q
             kf.predict()
             kf.P[4, 4] = min(kf.P[4, 4], self._gain_var_max)
+            if main:
+                self._transition = F @ self._transition
             return
+        if main:
+            self._transition = F @ self._transition
         kf.F, kf.Q = F, Q
         if a is None:
             kf.predict()
@@ -569,6 +589,11 @@ class BallKalman:
             elif dt > 0.0:            # a repeated or out-of-order stamp only updates
                 self._predict(dt, accel, holding=t <= self._hold_until)
                 self.t_last = t
+                if self._force is not None:
+                    if t > self._hold_until:
+                        self._end_force_hypothesis()
+                    else:
+                        self._predict(dt, accel, kf=self._force[0])
         if not self.initialised:
             if z is None:
                 return self._estimate(fresh=False, valid=False)
@@ -581,6 +606,10 @@ class BallKalman:
                 nis = self._excess[2] if self._confirming() else self.nis
                 if nis <= MODEL_AGREED_NIS:   # a model that agreed until the push began
                     self._hold_until = t + self.maneuver_hold_s
+                    if self.disturbance_state and accel is not None:
+                        force = copy.deepcopy(self.kf)
+                        self._open_disturbance(DISTURBANCE_CHANGE_WINDOW_S / 2.0, force)
+                        self._force = (force, 0.0)
                 self._widen_last_prediction()
                 distance = self.mahalanobis(z)
             if self.model_mismatch_time_constant_s > 0.0:   # a gated detection counts too, at the gate
@@ -589,7 +618,12 @@ class BallKalman:
             if distance <= self.gate_sigma:
                 if self.disturbance_state:
                     self._find_disturbance_change(t, z, known=accel is not None, pushed=t <= self._hold_until)
+                if self._force is not None:
+                    self._weigh_force(z)
                 self.kf.update(np.asarray(z, dtype=np.float64))
+                if self._innovations and self._innovations[-1][6] is None:
+                    self._innovations[-1][6] = self.kf.K.copy()
+                self._transition = np.eye(self.dim)
                 if self.gain_state:
                     self.kf.x[4] = min(max(self.kf.x[4], self.gain_bounds[0]), self.gain_bounds[1])
                 self.coasted = 0
@@ -621,29 +655,98 @@ class BallKalman:
         kf = self.kf
         innovation = np.asarray(z, dtype=np.float64) - kf.H @ kf.x
         S = kf.H @ kf.P @ kf.H.T + kf.R
-        window.append((t, np.linalg.solve(np.linalg.cholesky(S), innovation), self.nis))
+        window.append([t, np.linalg.solve(np.linalg.cholesky(S), innovation), self.nis, innovation, S,
+                       self._transition, None])
         while t - window[0][0] > DISTURBANCE_CHANGE_WINDOW_S:
             window.popleft()
         if self._window_start_s is None:
             self._window_start_s = t
         if t - self._window_start_s < DISTURBANCE_CHANGE_WINDOW_S:
             return
-        window_start_s, _, nis_before = window[0]
+        window_start_s, _, nis_before = window[0][:3]
         settle_s = CONSISTENCY_SETTLE_TIME_CONSTANTS * self.model_mismatch_time_constant_s
         if nis_before > MODEL_AGREED_NIS or window_start_s - self._track_start_s < settle_s:
             return                    # the model did not agree: a bias is its own error
-        total = np.sum([whitened for _, whitened, _ in window], axis=0)
+        total = np.sum([entry[1] for entry in window], axis=0)
         if float(total @ total) / len(window) <= DISTURBANCE_CHANGE_CHI2:
             return
-        span_s = t - window[0][0]
-        T = span_s / 2.0
+        jump = self._estimate_change(list(window))
+        if jump is not None:
+            kf.x = kf.x + jump
+        self._open_disturbance((t - window[0][0]) / 2.0, kf)
+        self.disturbance_changes += 1
+        window.clear()
+        self._window_start_s = None
+
+    def _estimate_change(self, window) -> Optional[np.ndarray]:
+        """The state correction for the change of d the window's innovations show (all but the
+        current frame's), at the current frame's prediction, or None. For a change nu of d at
+        frame i, the innovations that follow are gamma_j = G_j nu + noise, with the signature
+        G_j = H (B_j - A_j): B_j is how the change moves the true state (F B per prediction),
+        A_j how much of it the filter took up (A + K G per update, F A per prediction). nu is
+        the estimate under the change's prior N(0, DISTURBANCE_STD_M_S2^2 I) given these, and
+        i the frame of the largest evidence (generalised likelihood ratio, Willsky and Jones).
+        The correction is (B - A) nu; the covariance is opened as for a change of unknown size
+        (_open_disturbance), so the frames that follow still move d."""
+        n = self.dim
+        M = np.zeros((n, 2))
+        M[self.d_index, 0] = M[self.d_index + 1, 1] = 1.0
+        H = self.kf.H
+        prior_information = np.eye(2) / DISTURBANCE_STD_M_S2 ** 2
+        frames = window[:-1]
+        best = None
+        for i in range(len(frames)):
+            B = frames[i][5] @ M             # the change happened in the prediction into frame i
+            A = np.zeros((n, 2))
+            information = prior_information.copy()
+            score = np.zeros(2)
+            for j in range(i, len(frames)):
+                _, _, _, gamma, S, _, K = frames[j]
+                G = H @ (B - A)
+                S_inv_G = np.linalg.solve(S, G)
+                score += S_inv_G.T @ gamma
+                information += G.T @ S_inv_G
+                A = A + K @ G
+                transition = window[j + 1][5]
+                B, A = transition @ B, transition @ A
+            covariance = np.linalg.inv(information)
+            # log evidence of a change at frame i against none (up to a constant)
+            evidence = float(score @ covariance @ score) \
+                - math.log(np.linalg.det(information) * DISTURBANCE_STD_M_S2 ** 4)
+            if best is None or evidence > best[0]:
+                best = (evidence, (B - A) @ (covariance @ score))
+        return None if best is None else best[1]
+
+    def _open_disturbance(self, T: float, kf: KalmanFilter) -> None:
         J = np.array([T * T / 2.0, T, 1.0])
         for axis in (0, 1):
             rows = [axis, 2 + axis, self.d_index + axis]
             kf.P[np.ix_(rows, rows)] += DISTURBANCE_STD_M_S2 ** 2 * np.outer(J, J)
-        self.disturbance_changes += 1
-        window.clear()
-        self._window_start_s = None
+
+    def _weigh_force(self, z: Tuple[float, float]) -> None:
+        """Update the force hypothesis with detection z and add the log-likelihood ratio of z
+        under it against the push's."""
+        force, log_ratio = self._force
+        z = np.asarray(z, dtype=np.float64)
+        log_ratio += _log_likelihood(force, z) - _log_likelihood(self.kf, z)
+        force.update(z)
+        if self.gain_state:
+            force.x[4] = min(max(force.x[4], self.gain_bounds[0]), self.gain_bounds[1])
+        self._force = (force, log_ratio)
+
+    def _end_force_hypothesis(self) -> None:
+        """At the end of a push's hold: take the force hypothesis' state when it explained the
+        detections better (twice the log-likelihood ratio beyond DISTURBANCE_CHANGE_CHI2) and
+        its d differs from the push's by more than the same bound in its own covariance (a
+        change of d, not a better fit of a model error). Otherwise the push stands."""
+        force, log_ratio = self._force
+        self._force = None
+        i = self.d_index
+        change = force.x[i:i + 2] - self.kf.x[i:i + 2]
+        distance = float(change @ np.linalg.solve(force.P[i:i + 2, i:i + 2], change))
+        if 2.0 * log_ratio > DISTURBANCE_CHANGE_CHI2 and distance > DISTURBANCE_CHANGE_CHI2:
+            self.kf.x, self.kf.P = force.x, force.P
+            self.disturbance_changes += 1
 
     def _push_seen(self, z: Tuple[float, float], distance: float) -> bool:
         """Whether this detection shows a push: beyond maneuver_sigma (maneuver_confirm_frames 1,
