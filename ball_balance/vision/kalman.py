@@ -50,7 +50,10 @@ N - 1 whose innovations point the same way and lie beyond `maneuver_confirm_sigm
 beyond `gate_sigma`): a push keeps pushing the detections the same way, noise scatters them.
 Only while the measurement noise is at least `maneuver_confirm_noise_m`: with less, a push
 moves the ball beyond the noise within a frame and one detection tells, so waiting for a
-second only brakes it a frame later.
+second only brakes it a frame later. With the disturbance state a large change of d looks
+like a push in its first frames: during the hold a second filter runs, in which the detection
+was a change of d and no push, and it replaces the first at the hold's end if the detections
+favour it (BallKalman._end_force_hypothesis).
 
 Delay: the plate reaches a command some time after the tracker receives it (the arm's latency
 and servo lag, 0.03-0.2 s in the benchmark's latency domains); the known acceleration and the
@@ -639,13 +642,14 @@ class BallKalman:
 
     def _find_disturbance_change(self, t: float, z: Tuple[float, float], known: bool, pushed: bool) -> None:
         """Before the update with detection z: test the innovations of the last
-        DISTURBANCE_CHANGE_WINDOW_S for a change of d and, on one, widen the covariance by
-        that of a change of 1-sigma DISTURBANCE_STD_M_S2 that happened T ago (half the
-        window): d by it, the velocity by it times T, the position by it times T^2/2, all
-        correlated, so the innovations that follow move d, and not the velocity, by what the
-        change was. Without a known acceleration d is not in the model, and during a push's
-        hold the innovations are the push's: the window starts again. The test assumes the
-        model agreed with the detections before the window (MODEL_AGREED_NIS), measured over
+        DISTURBANCE_CHANGE_WINDOW_S for a change of d and, on one, correct the state by the
+        change the window shows (_estimate_change) and widen the covariance by that of a change
+        of 1-sigma DISTURBANCE_STD_M_S2 that happened T ago (half the window): d by it, the
+        velocity by it times T, the position by it times T^2/2, all correlated, so the
+        innovations that follow still move d, and not the velocity, by what the change was.
+        Without a known acceleration d is not in the model, and during a push's hold the
+        innovations are the push's: the window starts again. The test assumes the model agreed
+        with the detections before the window (MODEL_AGREED_NIS), measured over
         CONSISTENCY_SETTLE_TIME_CONSTANTS of the track; otherwise a bias is the model's error."""
         window = self._innovations
         if not known or pushed:

@@ -436,6 +436,35 @@ def test_a_quiet_disturbance_state_finds_a_step_within_a_second_and_no_change_on
     assert clean.disturbance_changes == 0 and np.all(np.abs(d[-30:]) < 0.01)
 
 
+def test_a_step_of_the_disturbance_is_estimated_from_the_window_that_found_it():
+    # the change's size comes from the innovations of the window that found it (its signature
+    # in the filter), so d is near the step within half a second, not after seconds of averaging
+    kf = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=20.0, estimate_input_gain=False))
+    step = np.array([0.2, -0.1])
+    t, d = _ball_under_a_loop(kf, lambda t: step if t >= 2.0 else np.zeros(2), 4.0)
+    assert kf.disturbance_changes == 1
+    np.testing.assert_allclose(d[(t >= 2.5) & (t < 3.0)].mean(axis=0), step, atol=0.03)
+
+
+def test_a_force_first_taken_for_a_push_is_found_by_the_end_of_the_hold():
+    # a large step moves the ball beyond maneuver_sigma before the change test's window is full:
+    # it is taken for a push, and the filter run beside it as a change of d wins at the hold's end
+    cfg = dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=20.0, estimate_input_gain=False)
+    kf = BallKalman(cfg)
+    step = np.array([0.6, 0.3])
+    t, d = _ball_under_a_loop(kf, lambda t: step if t >= 2.0 else np.zeros(2), 4.0)
+    assert kf.maneuver_count >= 1 and kf.disturbance_changes >= 1
+    after_hold = t >= 2.4 + cfg.maneuver_hold_s   # detected within a few frames of the step
+    np.testing.assert_allclose(d[after_hold].mean(axis=0), step, atol=0.03)
+
+
+def test_a_push_is_not_taken_for_a_change_of_the_disturbance():
+    kf = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=20.0, estimate_input_gain=False))
+    t, d = _ball_under_a_loop(kf, lambda t: np.zeros(2), 8.0, push_at_s=4.0)
+    assert kf.maneuver_count >= 1 and kf.disturbance_changes == 0
+    assert np.all(np.abs(d) < 0.01)
+
+
 def test_a_plate_off_level_from_the_start_is_found_as_a_change():
     # d starts at 0, known; the offset shows as a change once the track's consistency is known
     kf = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=20.0, estimate_input_gain=False))
