@@ -101,6 +101,183 @@ def level_offset_summary(tilt_x_deg: float, tilt_y_deg: float) -> str:
             f"(x {tilt_x_deg:+.2f}, y {tilt_y_deg:+.2f} deg)")
 
 
+class BatchPlantEstimator:
+    """The plant estimate of a batch of plates, each with its own window, fitted all at once:
+    per plate the regularised sliding-window least-squares fit of x'' = -k_g u + d (k_g shared
+    by both axes) to the tracked positions and the double integral of the plate tilt reached,
+    blended in with the time constant tau_s and bounded, and the window restarts (a gap longer
+    than max_gap_s, two positions in a row far off the last fit's prediction, a fit far above
+    the running residual). Solved through the normal equations. The training plant steps one
+    plate per episode (ball_balance/policy/env.py).
+
+    The plates share one clock. Their samples sit in a ring of `capacity` slots (a call with a
+    new position for any plate takes one slot; plates without one get an empty slot there); a
+    slot still in a plate's window is never overwritten: the ring grows instead."""
+
+    def __init__(self, batch: int, cfg: EstimatorConfig, k_g_nominal: float, capacity: int):
+        self.b, self.cfg, self.k_nom, self.cap = batch, cfg, k_g_nominal, capacity
+        self.k_g = np.full(batch, k_g_nominal)
+        self.offset = np.zeros((batch, 2))             # d [m/s^2]
+        self.offset_given = np.zeros(batch, bool)      # d from take_level_offset: the fit keeps it
+        self.t = np.full((batch, capacity), -np.inf)   # sample stamps (ring, -inf: empty)
+        self.rows = np.zeros((batch, capacity, 6))     # p_x, p_y, P_x, P_y, V_x, V_y
+        self.count = 0                                 # samples written (ring index = count % cap)
+        self.t_start = np.full(batch, -np.inf)         # samples before this are out of the window
+        self.last_t = np.full(batch, -np.inf)
+        self.residual = np.full(batch, np.nan)         # running RMS residual of accepted fits
+        self.fit0 = np.zeros((batch, 7))               # (t, row) of the last fit's first sample
+        self.theta = np.full((batch, 7), np.nan)       # the last fit's parameters (nan: none)
+        self.jumps = np.zeros(batch, int)              # positions in a row far off the last fit
+        self.fits = np.zeros(batch, int)
+        self.skipped = np.zeros(batch, int)            # fits skipped as far above the running residual
+        self.restarts = np.zeros(batch, int)           # windows restarted after a disturbance (push)
+
+    def reset(self) -> None:
+        """Forget every plate's window (not the estimate: the plant has not changed)."""
+        self.t.fill(-np.inf)
+        self.t_start.fill(-np.inf)
+        self.last_t.fill(-np.inf)
+        self.theta.fill(np.nan)
+        self.jumps.fill(0)
+
+    def take_level_offset(self, level_rad) -> None:
+        """The disturbance from the tracker's filter, as its plate-level offset (b, 2) [rad]:
+        d = k_g sin(level), which the controllers cancel with the tilt `level` whatever k_g is
+        (the tracker's filter sees the detections themselves). A plate's window then keeps d
+        as given and estimates k_g alone. Plates with a non-finite level are left alone."""
+        if not self.cfg.adapt_offset:
+            return
+        level = np.asarray(level_rad, dtype=float).reshape(self.b, 2)
+        ok = np.isfinite(level).all(1)
+        self.offset[ok] = np.clip(self.k_g[ok, None] * np.sin(level[ok]),
+                                  -self.cfg.offset_max_m_s2, self.cfg.offset_max_m_s2)
+        self.offset_given |= ok
+
+    def _in_window(self, now) -> np.ndarray:
+        filled = np.isfinite(self.t)
+        age = np.where(filled, now[:, None] - np.where(filled, self.t, 0.0), np.inf)
+        return filled & (self.t >= self.t_start[:, None]) & (age <= self.cfg.window_s + 1e-9)
+
+    def _grow(self) -> None:
+        """Twice the slots, the samples kept in the order they were written."""
+        order = (self.count + np.arange(self.cap)) % self.cap
+        self.t = np.concatenate([self.t[:, order], np.full((self.b, self.cap), -np.inf)], 1)
+        self.rows = np.concatenate([self.rows[:, order], np.zeros((self.b, self.cap, 6))], 1)
+        self.count, self.cap = self.cap, 2 * self.cap
+
+    def add_state(self, stamp, pos, big_p, big_v, new) -> None:
+        """Per plate with `new` set: a ball position (b, 2) captured at stamp (b,), with the
+        double and single integrals (b, 2) of the tilt reached up to then (from any origin that
+        stays the same while the window lasts). A stamp not after the plate's last one, or a
+        non-finite value, is ignored."""
+        cfg = self.cfg
+        if not cfg.enabled:
+            return
+        sample = np.concatenate([pos, big_p, big_v], 1)   # (b, 6): a row of the ring
+        new = new & (stamp > self.last_t) & np.isfinite(stamp) & np.isfinite(sample).all(1)
+        if not new.any():
+            return
+        gap = new & (stamp - self.last_t > cfg.max_gap_s)
+        self.t_start = np.where(gap, stamp, self.t_start)
+        self.theta[gap] = np.nan
+        # the new position against the last fit's prediction (a push: restart after it)
+        has_residual = np.isfinite(self.residual)
+        fitted = new & np.isfinite(self.theta[:, 0]) & has_residual
+        tau = (stamp - self.fit0[:, 0])[:, None]
+        th = self.theta
+        limit = np.maximum(cfg.jump_sigma * np.where(has_residual, self.residual, 0.0), cfg.jump_min_m)
+        pi = big_p - self.fit0[:, 3:5] - self.fit0[:, 5:7] * tau   # per axis (b, 2)
+        predicted = th[:, [0, 3]] + th[:, [1, 4]] * tau + 0.5 * th[:, [2, 5]] * tau ** 2 - th[:, 6:7] * pi
+        off = fitted & (np.abs(pos - predicted) > limit[:, None]).any(1)
+        self.jumps = np.where(new, np.where(off, self.jumps + 1, 0), self.jumps)
+        restart = new & (self.jumps >= 2)
+        self.t_start = np.where(restart, self.last_t, self.t_start)   # keep the last sample
+        self.theta[restart] = np.nan
+        self.jumps[restart] = 0
+        self.restarts += restart
+        # write the sample (plates without a new one get an empty slot) into a slot out of every
+        # plate's window as of the call's newest stamp (the plates share one clock)
+        slot_t = self.t[:, self.count % self.cap]
+        if np.any(slot_t >= np.maximum(self.t_start, stamp[new].max() - cfg.window_s - 1e-6)):
+            self._grow()
+        i = self.count % self.cap
+        self.count += 1
+        self.t[:, i] = np.where(new, stamp, -np.inf)
+        self.rows[:, i] = np.where(new[:, None], sample, 0.0)
+        self.last_t = np.where(new, stamp, self.last_t)
+        now = np.where(new, stamp, -np.inf)
+        mask = self._in_window(now) & new[:, None]
+        m = mask.sum(1)
+        t_masked = np.where(mask, self.t, np.inf)
+        first = np.argmin(t_masked, 1)
+        t0 = self.t[np.arange(self.b), first]
+        due = new & (m >= 10) & (stamp - t0 >= 0.5 * cfg.window_s)
+        if due.any():
+            self._fit(np.flatnonzero(due), mask, first, t0, m)
+
+    def _fit(self, idx, mask, first, t0, m) -> None:
+        cfg = self.cfg
+        w = 1.0 / cfg.position_noise_m
+        mk = mask[idx].astype(float)                   # (n, C): 1 in the window, 0 else
+        rows, row0 = self.rows[idx], self.rows[idx, first[idx]]
+        tau = np.where(mask[idx], self.t[idx] - t0[idx, None], 0.0)
+        n, c = mk.shape
+        # unknowns: [p0x, v0x, dx, p0y, v0y, dy, k_g] (no term in u itself: for a sinusoidal
+        # tilt, as on a circle, u and its double integral are collinear and k_g would be lost)
+        a = np.zeros((n, 2, c, 7))
+        bvec = np.zeros((n, 2, c))
+        for axis in range(2):
+            pi = rows[:, :, 2 + axis] - row0[:, None, 2 + axis] - row0[:, None, 4 + axis] * tau   # from t0
+            a[:, axis, :, 3 * axis] = w
+            a[:, axis, :, 3 * axis + 1] = w * tau
+            a[:, axis, :, 3 * axis + 2] = w * 0.5 * tau ** 2
+            a[:, axis, :, 6] = -w * pi
+            bvec[:, axis] = w * rows[:, :, axis]
+        a *= mk[:, None, :, None]
+        bvec *= mk[:, None, :]
+        a, bvec = a.reshape(n, 2 * c, 7), bvec.reshape(n, 2 * c)
+        # priors: the current estimate, loose enough that an informative window moves it
+        k_sigma = cfg.gain_prior_ratio * self.k_nom if cfg.adapt_gain else 1e-9
+        d_sigma = cfg.offset_prior_m_s2 if cfg.adapt_offset else 1e-9
+        ata = np.einsum("nri,nrj->nij", a, a)
+        atb = np.einsum("nri,nr->ni", a, bvec)
+        ata[:, 6, 6] += 1.0 / k_sigma ** 2
+        atb[:, 6] += self.k_g[idx] / k_sigma ** 2
+        for axis in range(2):
+            ata[:, 3 * axis + 2, 3 * axis + 2] += 1.0 / d_sigma ** 2
+            atb[:, 3 * axis + 2] += self.offset[idx, axis] / d_sigma ** 2
+        theta = np.linalg.solve(ata, atb[..., None])[..., 0]
+        err = np.einsum("nri,ni->nr", a, theta) - bvec
+        residual = np.sqrt(np.sum(err ** 2, 1) / (2 * m[idx])) * cfg.position_noise_m
+        run = self.residual[idx]
+        has_run = np.isfinite(run)
+        outlier = has_run & (residual > cfg.outlier_ratio * np.maximum(np.where(has_run, run, 0.0), 2e-4))
+        # an outlier fit (a push, a hand): skipped, the window restarts after its older half
+        sk = idx[outlier]
+        if len(sk):
+            t_sorted = np.sort(np.where(mask[sk], self.t[sk], np.inf), 1)
+            self.t_start[sk] = t_sorted[np.arange(len(sk)), m[sk] // 2]
+            self.skipped[sk] += 1
+        ok, theta, residual = idx[~outlier], theta[~outlier], residual[~outlier]
+        run = self.residual[ok]
+        self.residual[ok] = np.where(np.isfinite(run), 0.9 * run + 0.1 * residual, residual)
+        self.fit0[ok] = np.concatenate([t0[ok, None], self.rows[ok, first[ok]]], 1)
+        self.theta[ok] = theta
+        self.fits[ok] += 1
+        # the time between the window's last two samples
+        t_sorted = np.sort(np.where(mask[ok], self.t[ok], -np.inf), 1)
+        dt = t_sorted[:, -1] - t_sorted[:, -2]
+        alpha = np.minimum(1.0, dt / cfg.tau_s)
+        if cfg.adapt_gain:
+            k_new = self.k_g[ok] + alpha * (theta[:, 6] - self.k_g[ok])
+            self.k_g[ok] = np.clip(k_new, cfg.gain_min_ratio * self.k_nom, cfg.gain_max_ratio * self.k_nom)
+        if cfg.adapt_offset:
+            d_new = self.offset[ok] + alpha[:, None] * (theta[:, [2, 5]] - self.offset[ok])
+            blend = ~self.offset_given[ok, None]
+            self.offset[ok] = np.where(blend, np.clip(d_new, -cfg.offset_max_m_s2, cfg.offset_max_m_s2),
+                                       self.offset[ok])
+
+
 class PlantEstimator:
     """Sliding-window least-squares estimate of k_g and d (both axes) from ball positions and
     the plate tilt history. Feed `add_tilt` every tick and `add_state` with each new ball state."""

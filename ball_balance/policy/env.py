@@ -8,10 +8,10 @@ rates the closed-loop benchmark uses (ball_balance/benchmark/episode.py):
     (batch_kalman.py: its config, the commanded tilt as known acceleration with its gain
     estimated, adaptive process and measurement noise) -> visible vision_delay_s later ->
     control tick 60 Hz (the PID node's rate; config/policy.yaml): online plant estimate (k g
-    and a constant disturbance, the pipeline's control/estimation.py, batched) -> latency
-    prediction over the state's age with that estimate -> the PID as the pid node runs it
-    (control/pid.py's own law over the batch; schema defaults, the estimate in its
-    feed-forward, disturbance tilt and feedback scale)
+    and a constant disturbance: the pipeline's own, control/estimation.py's BatchPlantEstimator,
+    a plate per episode) -> latency prediction over the state's age with that estimate -> the
+    PID as the pid node runs it (control/pid.py's own law over the batch; schema defaults, the
+    estimate in its feed-forward, disturbance tilt and feedback scale)
     + policy correction -> shaping (tilt-rate limit per tick, total tilt limit) ->
     camera-to-command latency -> servo lag ->
     plate tilt -> x'' = -k g sin(tilt + bias)
@@ -30,7 +30,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from ball_balance.control import config as control_config
-from ball_balance.control.estimation import EstimatorConfig
+from ball_balance.control.estimation import BatchPlantEstimator
 from ball_balance.control.pid import Pid
 from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
 from ball_balance.policy.batch_kalman import BatchBallKalman
@@ -153,133 +153,6 @@ def reference_table(kind: str, n_ticks: int) -> np.ndarray:
         s = ref.sample(n * CONTROL_DT_S)
         out[n] = (s.p, s.v, s.a)
     return out
-
-
-class BatchPlantEstimator:
-    """ball_balance.control.estimation.PlantEstimator over a batch of plates: the same
-    regularised sliding-window least-squares fit of x'' = -k_g u + d (k_g shared by both axes)
-    to the tracked positions and the double integral of the plate tilt reached, blended in
-    with the time constant tau_s and bounded; the same window restarts (a gap, two positions
-    in a row far off the last fit, a fit far above the running residual). Solved through the
-    normal equations, all plates at once."""
-
-    def __init__(self, batch: int, cfg: EstimatorConfig, k_g_nominal: float, capacity: int):
-        self.b, self.cfg, self.k_nom, self.cap = batch, cfg, k_g_nominal, capacity
-        self.k_g = np.full(batch, k_g_nominal)
-        self.offset = np.zeros((batch, 2))
-        self.t = np.full((batch, capacity), -np.inf)   # sample stamps (ring, -inf: empty)
-        self.rows = np.zeros((batch, capacity, 6))     # p_x, p_y, P_x, P_y, V_x, V_y
-        self.count = 0                                 # samples written (ring index = count % cap)
-        self.t_start = np.full(batch, -np.inf)         # samples before this are out of the window
-        self.last_t = np.full(batch, -np.inf)
-        self.residual = np.full(batch, np.nan)         # running RMS residual of accepted fits
-        self.fit0 = np.zeros((batch, 7))               # (t, row) of the last fit's first sample
-        self.theta = np.full((batch, 7), np.nan)       # the last fit's parameters (nan: none)
-        self.jumps = np.zeros(batch, int)
-
-    def _in_window(self, now) -> np.ndarray:
-        filled = np.isfinite(self.t)
-        age = np.where(filled, now[:, None] - np.where(filled, self.t, 0.0), np.inf)
-        return filled & (self.t >= self.t_start[:, None]) & (age <= self.cfg.window_s + 1e-9)
-
-    def add_state(self, stamp, pos, big_p, big_v, new) -> None:
-        """Per plate with `new` set: a ball position (b, 2) captured at stamp (b,), with the
-        double and single integrals (b, 2) of the tilt reached up to then (from any origin)."""
-        cfg = self.cfg
-        if not (cfg.adapt_gain or cfg.adapt_offset):
-            return
-        new = new & (stamp > self.last_t)
-        if not new.any():
-            return
-        gap = new & (stamp - self.last_t > cfg.max_gap_s)
-        self.t_start = np.where(gap, stamp, self.t_start)
-        self.theta[gap] = np.nan
-        # the new position against the last fit's prediction (a push: restart after it)
-        fitted = new & np.isfinite(self.theta[:, 0]) & np.isfinite(self.residual)
-        tau = stamp - self.fit0[:, 0]
-        off = np.zeros(self.b, bool)
-        for axis in range(2):
-            pi = big_p[:, axis] - self.fit0[:, 3 + axis] - self.fit0[:, 5 + axis] * tau
-            th = self.theta
-            predicted = th[:, 3 * axis] + th[:, 3 * axis + 1] * tau + 0.5 * th[:, 3 * axis + 2] * tau ** 2 \
-                - th[:, 6] * pi
-            limit = np.maximum(cfg.jump_sigma * np.nan_to_num(self.residual), cfg.jump_min_m)
-            off |= np.abs(pos[:, axis] - predicted) > limit
-        off &= fitted
-        self.jumps = np.where(new, np.where(off, self.jumps + 1, 0), self.jumps)
-        restart = new & (self.jumps >= 2)
-        self.t_start = np.where(restart, self.last_t, self.t_start)   # keep the last sample
-        self.theta[restart] = np.nan
-        self.jumps[restart] = 0
-        # write the sample (plates without a new one get an empty slot)
-        i = self.count % self.cap
-        self.count += 1
-        self.t[:, i] = np.where(new, stamp, -np.inf)
-        self.rows[:, i] = np.concatenate([pos, big_p, big_v], 1)
-        self.last_t = np.where(new, stamp, self.last_t)
-        now = np.where(new, stamp, -np.inf)
-        mask = self._in_window(now) & new[:, None]
-        m = mask.sum(1)
-        t_masked = np.where(mask, self.t, np.inf)
-        first = np.argmin(t_masked, 1)
-        t0 = self.t[np.arange(self.b), first]
-        due = new & (m >= 10) & (stamp - t0 >= 0.5 * cfg.window_s)
-        if due.any():
-            self._fit(np.flatnonzero(due), mask, first, t0, m, stamp)
-
-    def _fit(self, idx, mask, first, t0, m, stamp) -> None:
-        cfg = self.cfg
-        w = 1.0 / cfg.position_noise_m
-        mk = mask[idx].astype(float)                   # (n, C): 1 in the window, 0 else
-        rows, row0 = self.rows[idx], self.rows[idx, first[idx]]
-        tau = np.where(mask[idx], self.t[idx] - t0[idx, None], 0.0)
-        n, c = mk.shape
-        a = np.zeros((n, 2, c, 7))
-        bvec = np.zeros((n, 2, c))
-        for axis in range(2):
-            pi = rows[:, :, 2 + axis] - row0[:, None, 2 + axis] - row0[:, None, 4 + axis] * tau
-            a[:, axis, :, 3 * axis] = w
-            a[:, axis, :, 3 * axis + 1] = w * tau
-            a[:, axis, :, 3 * axis + 2] = w * 0.5 * tau ** 2
-            a[:, axis, :, 6] = -w * pi
-            bvec[:, axis] = w * rows[:, :, axis]
-        a *= mk[:, None, :, None]
-        bvec *= mk[:, None, :]
-        a, bvec = a.reshape(n, 2 * c, 7), bvec.reshape(n, 2 * c)
-        k_sigma = cfg.gain_prior_ratio * self.k_nom if cfg.adapt_gain else 1e-9
-        d_sigma = cfg.offset_prior_m_s2 if cfg.adapt_offset else 1e-9
-        ata = np.einsum("nri,nrj->nij", a, a)
-        atb = np.einsum("nri,nr->ni", a, bvec)
-        ata[:, 6, 6] += 1.0 / k_sigma ** 2
-        atb[:, 6] += self.k_g[idx] / k_sigma ** 2
-        for axis in range(2):
-            ata[:, 3 * axis + 2, 3 * axis + 2] += 1.0 / d_sigma ** 2
-            atb[:, 3 * axis + 2] += self.offset[idx, axis] / d_sigma ** 2
-        theta = np.linalg.solve(ata, atb[..., None])[..., 0]
-        err = np.einsum("nri,ni->nr", a, theta) - bvec
-        residual = np.sqrt(np.sum(err ** 2, 1) / (2 * m[idx])) * cfg.position_noise_m
-        run = self.residual[idx]
-        outlier = np.isfinite(run) & (residual > cfg.outlier_ratio * np.maximum(np.nan_to_num(run), 2e-4))
-        # an outlier fit (a push, a hand): skipped, the window restarts after its older half
-        sk = idx[outlier]
-        if len(sk):
-            t_sorted = np.sort(np.where(mask[sk], self.t[sk], np.inf), 1)
-            self.t_start[sk] = t_sorted[np.arange(len(sk)), m[sk] // 2]
-        ok, theta, residual = idx[~outlier], theta[~outlier], residual[~outlier]
-        run = self.residual[ok]
-        self.residual[ok] = np.where(np.isfinite(run), 0.9 * run + 0.1 * residual, residual)
-        self.fit0[ok] = np.concatenate([t0[ok, None], self.rows[ok, first[ok]]], 1)
-        self.theta[ok] = theta
-        # the time between the window's last two samples: here always the last two frames' gap
-        t_sorted = np.sort(np.where(mask[ok], self.t[ok], -np.inf), 1)
-        dt = t_sorted[:, -1] - t_sorted[:, -2]
-        alpha = np.minimum(1.0, dt / cfg.tau_s)
-        if cfg.adapt_gain:
-            k_new = self.k_g[ok] + alpha * (theta[:, 6] - self.k_g[ok])
-            self.k_g[ok] = np.clip(k_new, cfg.gain_min_ratio * self.k_nom, cfg.gain_max_ratio * self.k_nom)
-        if cfg.adapt_offset:
-            d_new = self.offset[ok] + alpha[:, None] * (theta[:, [2, 5]] - self.offset[ok])
-            self.offset[ok] = np.clip(d_new, -cfg.offset_max_m_s2, cfg.offset_max_m_s2)
 
 
 class PlateBatch:

@@ -6,10 +6,9 @@ import pytest
 
 from ball_balance.benchmark.episode import controller_values
 from ball_balance.control import config as control_config
-from ball_balance.control.estimation import PlantEstimator
+from ball_balance.control.estimation import BatchPlantEstimator, PlantEstimator
 from ball_balance.policy.env import (
     CONTROL_DT_S,
-    BatchPlantEstimator,
     DomainRanges,
     PlateBatch,
 )
