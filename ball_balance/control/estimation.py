@@ -24,6 +24,10 @@ and two in a row far off (`jump_sigma` times the recent residual, at least `jump
 restart the window after the disturbance; a fit whose residual is far above the recent ones
 is skipped the same way.
 
+The fit is written once, over arrays: `BatchPlantEstimator` fits a batch of plates at once (the
+training plant steps one plate per episode, ball_balance/policy/env.py), and `PlantEstimator`,
+which the pipeline runs, is its batch of one with the plate tilt history it integrates.
+
 The controllers use the estimate through `k_g` and `accel_offset_m_s2`: the PID scales its
 feedback by k_g_nominal / k_g and adds the tilt d / k_g that cancels the disturbance; the MPC
 plans in nominal-equivalent tilt v = (k_g u - d) / k_g_nominal with its limits rescaled; the
@@ -32,9 +36,8 @@ latency prediction integrates x'' = -k_g u + d.
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass
-from typing import Deque, Optional, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -101,6 +104,13 @@ def level_offset_summary(tilt_x_deg: float, tilt_y_deg: float) -> str:
             f"(x {tilt_x_deg:+.2f}, y {tilt_y_deg:+.2f} deg)")
 
 
+
+# The runtime's ring of samples holds a window at camera rates up to this: twice the simulated
+# camera's 60 Hz (config/sim.yaml; the closed-loop benchmark's runs at 30 Hz), room for a
+# faster camera without growing. A faster stream grows the ring rather than lose a sample.
+RUNTIME_RATE_BOUND_HZ = 120.0
+
+
 class BatchPlantEstimator:
     """The plant estimate of a batch of plates, each with its own window, fitted all at once:
     per plate the regularised sliding-window least-squares fit of x'' = -k_g u + d (k_g shared
@@ -108,7 +118,7 @@ class BatchPlantEstimator:
     blended in with the time constant tau_s and bounded, and the window restarts (a gap longer
     than max_gap_s, two positions in a row far off the last fit's prediction, a fit far above
     the running residual). Solved through the normal equations. The training plant steps one
-    plate per episode (ball_balance/policy/env.py).
+    plate per episode (ball_balance/policy/env.py); `PlantEstimator` is the batch of one.
 
     The plates share one clock. Their samples sit in a ring of `capacity` slots (a call with a
     new position for any plate takes one slot; plates without one get an empty slot there); a
@@ -279,40 +289,59 @@ class BatchPlantEstimator:
 
 
 class PlantEstimator:
-    """Sliding-window least-squares estimate of k_g and d (both axes) from ball positions and
-    the plate tilt history. Feed `add_tilt` every tick and `add_state` with each new ball state."""
+    """The plant estimate of one plate (both axes): `BatchPlantEstimator`'s batch of one, with
+    the plate tilt history it integrates. Feed `add_tilt` every tick and `add_state` with each
+    new ball state; read `k_g` and `offset`."""
 
     def __init__(self, cfg: EstimatorConfig, k_g_nominal: float):
         self.cfg = cfg
         self.k_g_nominal = k_g_nominal
-        self.k_g = k_g_nominal
-        self.offset = np.zeros(2)               # d [m/s^2]
         self.tilts = TiltHistory(max_len=512)   # plate tilt reached (measured), per tick
-        # samples: (t, p_x, p_y, P_x, P_y, V_x, V_y) with P, V the double and single integrals
-        # of the tilt from the window's origin
-        self._samples: Deque[np.ndarray] = deque()
-        self._residual_m: Optional[float] = None   # running RMS residual of accepted fits
-        self._last_fit = None        # (first sample of the fit's window, fitted parameters)
-        self._jumps = 0              # consecutive new positions far off the last fit's prediction
-        self.fits = 0
-        self.skipped = 0
-        self.restarts = 0            # windows restarted after a disturbance (push)
-        self._offset_given = False   # d comes from take_level_offset
+        self.batch = BatchPlantEstimator(1, cfg, k_g_nominal,
+                                         int(math.ceil(cfg.window_s * RUNTIME_RATE_BOUND_HZ)) + 8)
+        # the double and single integrals of the tilt at the last sample, from the window's origin
+        self._big_p, self._big_v = np.zeros(2), np.zeros(2)
+
+    @property
+    def k_g(self) -> float:
+        return float(self.batch.k_g[0])
+
+    @k_g.setter
+    def k_g(self, value: float) -> None:
+        self.batch.k_g[0] = value
+
+    @property
+    def offset(self) -> np.ndarray:
+        """d [m/s^2] per axis (a copy: the estimate as of now)."""
+        return self.batch.offset[0].copy()
+
+    @offset.setter
+    def offset(self, value) -> None:
+        self.batch.offset[0] = value
+
+    @property
+    def fits(self) -> int:
+        return int(self.batch.fits[0])
+
+    @property
+    def skipped(self) -> int:
+        return int(self.batch.skipped[0])
+
+    @property
+    def restarts(self) -> int:
+        """Windows restarted after a disturbance (push)."""
+        return int(self.batch.restarts[0])
 
     def reset(self) -> None:
         """Forget the window (not the estimate: the plant has not changed)."""
-        self._samples.clear()
+        self.batch.reset()
         self.tilts.clear()
 
     def take_level_offset(self, level_rad: Sequence[float]) -> None:
-        """The disturbance from the tracker's filter, as its plate-level offset per axis [rad]:
-        d = k_g sin(level), which the controllers cancel with the tilt `level` whatever k_g is
-        (the tracker's filter sees the detections themselves). The window's fit then keeps d
-        as given and estimates k_g alone."""
-        if self.cfg.adapt_offset and all(math.isfinite(v) for v in level_rad):
-            self.offset = np.clip(self.k_g * np.sin(np.asarray(level_rad, dtype=float)),
-                                  -self.cfg.offset_max_m_s2, self.cfg.offset_max_m_s2)
-            self._offset_given = True
+        """The disturbance from the tracker's filter, as its plate-level offset per axis [rad]
+        (`BatchPlantEstimator.take_level_offset`): the window's fit then keeps d as given and
+        estimates k_g alone."""
+        self.batch.take_level_offset(np.array([[float(level_rad[0]), float(level_rad[1])]]))
 
     def add_tilt(self, t_s: float, tilt: Sequence[float]) -> None:
         self.tilts.record(t_s, float(tilt[0]), float(tilt[1]))
@@ -320,95 +349,12 @@ class PlantEstimator:
     def add_state(self, stamp_s: float, pos_m: Sequence[float]) -> None:
         """A new ball position [m] captured at stamp_s (controller clock)."""
         cfg = self.cfg
-        if not cfg.enabled or not all(math.isfinite(v) for v in (stamp_s, pos_m[0], pos_m[1])):
+        stamp, pos = float(stamp_s), np.array([pos_m[0], pos_m[1]], dtype=float)
+        last = self.batch.last_t[0]
+        if not cfg.enabled or not (math.isfinite(stamp) and np.isfinite(pos).all()) or not stamp > last:
             return
-        if self._samples:
-            last = self._samples[-1]
-            if stamp_s <= last[0]:
-                return
-            if stamp_s - last[0] > cfg.max_gap_s:
-                self._samples.clear()
-        if self._samples:
-            last = self._samples[-1]
-            # integrate the tilt (as acceleration +u) from the last sample: P'' = u
-            big_p, big_v = predict(last[3:5], last[5:7], last[0], stamp_s, self.tilts, -1.0)
-        else:
-            big_p, big_v = np.zeros(2), np.zeros(2)
-        sample = np.array([stamp_s, pos_m[0], pos_m[1], *big_p, *big_v])
-        if self._off_the_fit(sample):
-            self._jumps += 1
-            if self._jumps >= 2:   # the ball was pushed: start the window again after it
-                self.restarts += 1
-                keep = self._samples[-1]
-                self._samples.clear()
-                self._samples.append(keep)
-                self._last_fit = None
-                self._jumps = 0
-        else:
-            self._jumps = 0
-        self._samples.append(sample)
-        while self._samples and stamp_s - self._samples[0][0] > cfg.window_s:
-            self._samples.popleft()
-        if len(self._samples) >= 10 and stamp_s - self._samples[0][0] >= 0.5 * cfg.window_s:
-            self._fit()
-
-    def _off_the_fit(self, sample: np.ndarray) -> bool:
-        """The new position is far from what the last fit predicts for it."""
-        if self._last_fit is None or self._residual_m is None:
-            return False
-        row0, theta = self._last_fit
-        tau = sample[0] - row0[0]
-        for axis in range(2):
-            pi = sample[3 + axis] - row0[3 + axis] - row0[5 + axis] * tau
-            predicted = theta[3 * axis] + theta[3 * axis + 1] * tau + 0.5 * theta[3 * axis + 2] * tau ** 2 \
-                - theta[6] * pi
-            if abs(sample[1 + axis] - predicted) > max(self.cfg.jump_sigma * self._residual_m, self.cfg.jump_min_m):
-                return True
-        return False
-
-    def _fit(self) -> None:
-        cfg = self.cfg
-        s = np.array(self._samples)
-        t0 = s[0, 0]
-        tau = s[:, 0] - t0
-        m = len(s)
-        # unknowns: [p0x, v0x, dx, p0y, v0y, dy, k_g] (no term in u itself: for a sinusoidal
-        # tilt, as on a circle, u and its double integral are collinear and k_g would be lost)
-        a = np.zeros((2 * m + 3, 7))
-        b = np.zeros(2 * m + 3)
-        w = 1.0 / cfg.position_noise_m
-        for axis in range(2):
-            rows = slice(axis * m, (axis + 1) * m)
-            pi = s[:, 3 + axis] - s[0, 3 + axis] - s[0, 5 + axis] * tau   # double integral from t0
-            a[rows, 3 * axis] = w
-            a[rows, 3 * axis + 1] = w * tau
-            a[rows, 3 * axis + 2] = w * 0.5 * tau ** 2
-            a[rows, 6] = -w * pi
-            b[rows] = w * s[:, 1 + axis]
-        # priors: the current estimate, loose enough that an informative window moves it
-        k_sigma = cfg.gain_prior_ratio * self.k_g_nominal if cfg.adapt_gain else 1e-9
-        d_sigma = cfg.offset_prior_m_s2 if cfg.adapt_offset else 1e-9
-        a[2 * m, 6], b[2 * m] = 1.0 / k_sigma, self.k_g / k_sigma
-        for axis in range(2):
-            a[2 * m + 1 + axis, 3 * axis + 2] = 1.0 / d_sigma
-            b[2 * m + 1 + axis] = self.offset[axis] / d_sigma
-        theta, *_ = np.linalg.lstsq(a, b, rcond=None)
-        residual = float(np.sqrt(np.mean((a[:2 * m] @ theta - b[:2 * m]) ** 2))) * cfg.position_noise_m
-        if self._residual_m is not None and residual > cfg.outlier_ratio * max(self._residual_m, 2e-4):
-            # not the model (a push, a hand): skip, and restart the window after the disturbance
-            self.skipped += 1
-            for _ in range(m // 2):
-                self._samples.popleft()
-            return
-        self._residual_m = residual if self._residual_m is None else 0.9 * self._residual_m + 0.1 * residual
-        self._last_fit = (s[0].copy(), theta)
-        self.fits += 1
-        dt = s[-1, 0] - s[-2, 0]
-        alpha = min(1.0, dt / cfg.tau_s)
-        if cfg.adapt_gain:
-            k_new = self.k_g + alpha * (theta[6] - self.k_g)
-            self.k_g = float(np.clip(k_new, cfg.gain_min_ratio * self.k_g_nominal,
-                                     cfg.gain_max_ratio * self.k_g_nominal))
-        if cfg.adapt_offset and not self._offset_given:
-            d_new = self.offset + alpha * (theta[[2, 5]] - self.offset)
-            self.offset = np.clip(d_new, -cfg.offset_max_m_s2, cfg.offset_max_m_s2)
+        if stamp - last > cfg.max_gap_s:   # a new window (the batch's gap): integrate from here
+            self._big_p, self._big_v = np.zeros(2), np.zeros(2)
+        else:   # integrate the tilt (as acceleration +u) from the last sample: P'' = u
+            self._big_p, self._big_v = predict(self._big_p, self._big_v, last, stamp, self.tilts, -1.0)
+        self.batch.add_state(np.array([stamp]), pos[None], self._big_p[None], self._big_v[None], np.ones(1, bool))

@@ -6,7 +6,6 @@ import pytest
 
 from ball_balance.benchmark.episode import controller_values
 from ball_balance.control import config as control_config
-from ball_balance.control.estimation import BatchPlantEstimator, PlantEstimator
 from ball_balance.policy.env import (
     CONTROL_DT_S,
     DomainRanges,
@@ -41,41 +40,6 @@ def test_the_plant_steps_at_the_pid_nodes_rate_and_the_benchmarks_camera_rate():
     spec, nominal = EpisodeSpec(), Nominal.from_config()
     assert (nominal.camera_rate_hz, nominal.vision_delay_s, nominal.fast_noise_floor_m) == \
         (spec.camera_rate_hz, spec.vision_delay_s, spec.fast_noise_floor_m)
-
-
-def test_batch_plant_estimator_is_the_plant_estimator():
-    """The batched estimate follows control/estimation.py on the same positions and tilts,
-    a push (window restart) included."""
-    cfg = control_config.estimator_config(controller_values("policy", "stationary"))
-    b, k_nominal, dt = 3, 5.886, 0.02
-    k_true = np.array([4.0, 7.0, 9.0])
-    d_true = np.array([[0.05, -0.02], [0.0, 0.1], [-0.1, 0.0]])
-    batch = BatchPlantEstimator(b, cfg, k_nominal, int(np.ceil(cfg.window_s * 30)) + 8)
-    single = [PlantEstimator(cfg, k_nominal) for _ in range(b)]
-    rng = np.random.default_rng(0)
-    x, v = np.zeros((b, 2)), np.full((b, 2), 0.05)
-    big_p, big_v = np.zeros((b, 2)), np.zeros((b, 2))
-    next_frame = 0.0
-    for n in range(900):
-        t = n * dt
-        u = 0.03 * np.stack([np.sin(2 * np.pi * t / 3 + np.arange(b)), np.cos(2 * np.pi * t / 2.3) + 0 * k_true], 1)
-        for i in range(b):
-            single[i].add_tilt(t, u[i])
-        if t >= next_frame - 1e-9:
-            next_frame += 1 / 30
-            z = x + rng.normal(0, 0.001, (b, 2))
-            for i in range(b):
-                single[i].add_state(t, z[i])
-            batch.add_state(np.full(b, t), z, big_p.copy(), big_v.copy(), np.ones(b, bool))
-        if n == 500:
-            v[1] += (0.15, 0.0)    # a push on plate 1
-        a = -k_true[:, None] * u + d_true
-        x, v = x + v * dt + 0.5 * a * dt * dt, v + a * dt
-        big_p, big_v = big_p + big_v * dt + 0.5 * u * dt * dt, big_v + u * dt
-    assert single[1].restarts + single[1].skipped > 0
-    np.testing.assert_allclose(batch.k_g, [e.k_g for e in single], rtol=2e-3)
-    np.testing.assert_allclose(batch.offset, [e.offset for e in single], atol=2e-3)
-    np.testing.assert_allclose(batch.k_g, k_true, rtol=0.05)
 
 
 def test_plant_prediction_is_the_pipelines():
