@@ -107,6 +107,7 @@ DISTURBANCE_CHANGE_CHI2 = 13.815510557964274
 
 
 def _log_likelihood(kf: KalmanFilter, z: np.ndarray) -> float:
+    """log N(z; H x, H P H^T + R) of the filter's prediction, up to a constant."""
     y = z - kf.H @ kf.x
     S = kf.H @ kf.P @ kf.H.T + kf.R
     return -0.5 * (float(y @ np.linalg.solve(S, y)) + math.log(np.linalg.det(S)))
@@ -722,6 +723,8 @@ class BallKalman:
         return None if best is None else best[1]
 
     def _open_disturbance(self, T: float, kf: KalmanFilter) -> None:
+        """Widen kf's covariance by that of a change of d of 1-sigma DISTURBANCE_STD_M_S2 that
+        happened T ago, with the velocity and position it has moved since."""
         J = np.array([T * T / 2.0, T, 1.0])
         for axis in (0, 1):
             rows = [axis, 2 + axis, self.d_index + axis]
