@@ -104,7 +104,6 @@ def level_offset_summary(tilt_x_deg: float, tilt_y_deg: float) -> str:
             f"(x {tilt_x_deg:+.2f}, y {tilt_y_deg:+.2f} deg)")
 
 
-
 # The runtime's ring of samples starts with room for a window at this camera rate (the
 # closed-loop benchmark's) and doubles when a faster camera fills it (the simulated one runs at
 # 60 Hz, config/sim.yaml): the fit's work grows with the ring's size, not with the samples in it.

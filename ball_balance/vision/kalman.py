@@ -128,6 +128,18 @@ def add_white_acceleration(M: np.ndarray, q, dt) -> None:
     M[..., 3, 3] += vv
 
 
+@dataclass
+class _ChangeFrame:
+    """A detection in the change test's window: what the test and the change's estimate need."""
+    t: float                     # stamp [s]
+    whitened: np.ndarray         # the innovation whitened by its covariance
+    nis: float                   # the running consistency before it
+    innovation: np.ndarray       # z - H x of the prediction [m]
+    S: np.ndarray                # its covariance
+    transition: np.ndarray       # the product of the F's since the previous update
+    K: Optional[np.ndarray] = None   # the update's gain, once made
+
+
 @dataclass(frozen=True)
 class TrackEstimate:
     x: float
@@ -372,7 +384,7 @@ class BallKalman:
             self._disturbance_rows = np.array([[0, 2, self.d_index], [1, 3, self.d_index + 1]])
         self._disturbance = (np.zeros(2), 0.0)   # kept over dropped tracks
         # (stamp, whitened innovation, running consistency before it), the last window
-        self._innovations: Deque[Tuple[float, np.ndarray, float]] = deque()
+        self._innovations: Deque[_ChangeFrame] = deque()
         self._track_start_s = 0.0
         self._window_start_s: Optional[float] = None
         self.disturbance_changes = 0  # changes of d found (total)
@@ -499,16 +511,13 @@ class BallKalman:
                 F[0:2, 4] = a * dt ** 2 / 2
                 F[2:4, 4] = a * dt
             Q[4, 4] = self.gain_rate ** 2 * dt
-            kf.F, kf.Q = F, Q
-            kf.predict()
-            kf.P[4, 4] = min(kf.P[4, 4], self._gain_var_max)
-            if main:
-                self._transition = F @ self._transition
-            return
-        if main:
+        if main and self.disturbance_state:
             self._transition = F @ self._transition
         kf.F, kf.Q = F, Q
-        if a is None:
+        if self.gain_state:
+            kf.predict()
+            kf.P[4, 4] = min(kf.P[4, 4], self._gain_var_max)
+        elif a is None:
             kf.predict()
         else:
             kf.B = np.zeros((self.dim, 2))
@@ -625,9 +634,10 @@ class BallKalman:
                 if self._force is not None:
                     self._weigh_force(z)
                 self.kf.update(np.asarray(z, dtype=np.float64))
-                if self._innovations and self._innovations[-1][6] is None:
-                    self._innovations[-1][6] = self.kf.K.copy()
-                self._transition = np.eye(self.dim)
+                if self.disturbance_state:
+                    if self._innovations and self._innovations[-1].K is None:
+                        self._innovations[-1].K = self.kf.K.copy()
+                    self._transition = np.eye(self.dim)
                 if self.gain_state:
                     self.kf.x[4] = min(max(self.kf.x[4], self.gain_bounds[0]), self.gain_bounds[1])
                 self.coasted = 0
@@ -660,25 +670,25 @@ class BallKalman:
         kf = self.kf
         innovation = np.asarray(z, dtype=np.float64) - kf.H @ kf.x
         S = kf.H @ kf.P @ kf.H.T + kf.R
-        window.append([t, np.linalg.solve(np.linalg.cholesky(S), innovation), self.nis, innovation, S,
-                       self._transition, None])
-        while t - window[0][0] > DISTURBANCE_CHANGE_WINDOW_S:
+        window.append(_ChangeFrame(t, np.linalg.solve(np.linalg.cholesky(S), innovation), self.nis, innovation, S,
+                                   self._transition))
+        while t - window[0].t > DISTURBANCE_CHANGE_WINDOW_S:
             window.popleft()
         if self._window_start_s is None:
             self._window_start_s = t
         if t - self._window_start_s < DISTURBANCE_CHANGE_WINDOW_S:
             return
-        window_start_s, _, nis_before = window[0][:3]
+        window_start_s, nis_before = window[0].t, window[0].nis
         settle_s = CONSISTENCY_SETTLE_TIME_CONSTANTS * self.model_mismatch_time_constant_s
         if nis_before > MODEL_AGREED_NIS or window_start_s - self._track_start_s < settle_s:
             return                    # the model did not agree: a bias is its own error
-        total = np.sum([entry[1] for entry in window], axis=0)
+        total = np.sum([frame.whitened for frame in window], axis=0)
         if float(total @ total) / len(window) <= DISTURBANCE_CHANGE_CHI2:
             return
         jump = self._estimate_change(list(window))
         if jump is not None:
             kf.x = kf.x + jump
-        self._open_disturbance((t - window[0][0]) / 2.0, kf)
+        self._open_disturbance((t - window_start_s) / 2.0, kf)
         self.disturbance_changes += 1
         window.clear()
         self._window_start_s = None
@@ -701,18 +711,17 @@ class BallKalman:
         frames = window[:-1]
         best = None
         for i in range(len(frames)):
-            B = frames[i][5] @ M             # the change happened in the prediction into frame i
+            B = frames[i].transition @ M     # the change happened in the prediction into frame i
             A = np.zeros((n, 2))
             information = prior_information.copy()
             score = np.zeros(2)
             for j in range(i, len(frames)):
-                _, _, _, gamma, S, _, K = frames[j]
                 G = H @ (B - A)
-                S_inv_G = np.linalg.solve(S, G)
-                score += S_inv_G.T @ gamma
+                S_inv_G = np.linalg.solve(frames[j].S, G)
+                score += S_inv_G.T @ frames[j].innovation
                 information += G.T @ S_inv_G
-                A = A + K @ G
-                transition = window[j + 1][5]
+                A = A + frames[j].K @ G
+                transition = window[j + 1].transition
                 B, A = transition @ B, transition @ A
             covariance = np.linalg.inv(information)
             # log evidence of a change at frame i against none (up to a constant)
@@ -726,9 +735,8 @@ class BallKalman:
         """Widen kf's covariance by that of a change of d of 1-sigma DISTURBANCE_STD_M_S2 that
         happened T ago, with the velocity and position it has moved since."""
         J = np.array([T * T / 2.0, T, 1.0])
-        for axis in (0, 1):
-            rows = [axis, 2 + axis, self.d_index + axis]
-            kf.P[np.ix_(rows, rows)] += DISTURBANCE_STD_M_S2 ** 2 * np.outer(J, J)
+        rows = self._disturbance_rows                    # (x, vx, d_x) and (y, vy, d_y)
+        kf.P[rows[:, :, None], rows[:, None, :]] += DISTURBANCE_STD_M_S2 ** 2 * np.outer(J, J)
 
     def _weigh_force(self, z: Tuple[float, float]) -> None:
         """Update the force hypothesis with detection z and add the log-likelihood ratio of z
