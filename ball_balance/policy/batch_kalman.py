@@ -9,17 +9,36 @@ tilt's known acceleration, process noise raised by the running innovation consis
 measurement noise estimated from the detections' scatter (median of the normalised triple
 residuals, DetectionNoiseEstimator), the gate, coasting and track restarts (the gain estimate
 survives them). filterpy's update (Joseph form) is reproduced step for step; a test checks the
-batch against BallKalman on the same detections. It has no disturbance state
-(`disturbance_time_constant_s`): the training plant has no constant force, and the policy runs
-on top of the PID, which cancels the tracker's estimate of one.
+batch against BallKalman on the same detections.
+
+With `disturbance_time_constant_s` > 0 the state also holds d = (d_x, d_y), the acceleration
+the known one does not explain, with BallKalman's change test over DISTURBANCE_CHANGE_WINDOW_S
+and its estimate of a change (vision/kalman.py estimate_change and open_disturbance, the same
+functions). The second filter BallKalman runs during a push's hold, in case the push was a
+force that started or turned, is left out: the training plant's plate bias is constant from
+the start of an episode, and a push there is always a push.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ball_balance.vision.kalman import CHI2_1_MEDIAN, MODEL_AGREED_NIS, KalmanConfig, add_white_acceleration
+from ball_balance.vision.kalman import (
+    CHI2_1_MEDIAN,
+    CONSISTENCY_SETTLE_TIME_CONSTANTS,
+    DISTURBANCE_CHANGE_CHI2,
+    DISTURBANCE_CHANGE_WINDOW_S,
+    MODEL_AGREED_NIS,
+    ChangeFrame,
+    KalmanConfig,
+    add_white_acceleration,
+    disturbance_jerk,
+    disturbance_rows,
+    estimate_change,
+    open_disturbance,
+)
 
-DIM = 5
+GAIN = 4          # the state's index of s
+D_INDEX = 5       # ... and of d_x, d_y with the disturbance state
 
 
 class BatchBallKalman:
@@ -56,8 +75,19 @@ class BatchBallKalman:
         r0 = np.full(batch, cfg.meas_noise_m) if fixed_meas_noise_m is None or self.adaptive \
             else np.maximum(cfg.meas_noise_m, fixed_meas_noise_m)
         self.r = r0 ** 2
-        self.x = np.zeros((batch, DIM))
-        self.p = np.zeros((batch, DIM, DIM))
+        # d (BallKalman's disturbance state): a random walk of jerk density q_d, its value kept
+        # over dropped tracks; the change test's window per ball (_ChangeWindow)
+        self.disturbance_state = cfg.disturbance_time_constant_s > 0.0
+        self.dim = D_INDEX + 2 if self.disturbance_state else D_INDEX
+        self.q_d = (cfg.cmd_accel_noise_m_s2 / cfg.disturbance_time_constant_s) ** 2 if self.disturbance_state else 0.0
+        self.saved_d = np.zeros((batch, 2))
+        self.saved_d_var = np.zeros(batch)
+        self.transition = np.broadcast_to(np.eye(self.dim), (batch, self.dim, self.dim)).copy()
+        self.track_start = np.zeros(batch)
+        self.window = _ChangeWindow(batch, self.dim, int(np.ceil(DISTURBANCE_CHANGE_WINDOW_S * 60)) + 2)
+        self.disturbance_changes = np.zeros(batch, int)
+        self.x = np.zeros((batch, self.dim))
+        self.p = np.zeros((batch, self.dim, self.dim))
         self.saved_gain = np.ones(batch)
         self.saved_gain_var = np.full(batch, cfg.input_gain_std ** 2 if self.gain_state else 0.0)
         self.init = np.zeros(batch, bool)
@@ -81,10 +111,26 @@ class BatchBallKalman:
         """s per ball (the saved estimate between tracks)."""
         return np.where(self.init, self.x[:, 4], self.saved_gain) if self.gain_state else np.ones(self.b)
 
+    @property
+    def disturbance_m_s2(self) -> np.ndarray:
+        """d per ball (b, 2) [m/s^2] (the saved estimate between tracks; 0 without the state)."""
+        if not self.disturbance_state:
+            return np.zeros((self.b, 2))
+        return np.where(self.init[:, None], self.x[:, D_INDEX:D_INDEX + 2], self.saved_d)
+
+    def level_offset_rad(self, k_g: float) -> np.ndarray:
+        """d as a plate-level offset per ball and axis (b, 2) [rad] (BallKalman.level_offset_rad)."""
+        scale = (self.gain * k_g)[:, None]
+        return np.arcsin(np.clip(self.disturbance_m_s2 / scale, -1.0, 1.0))
+
     def _reset(self, mask) -> None:
         if self.gain_state:
             self.saved_gain = np.where(mask & self.init, self.x[:, 4], self.saved_gain)
             self.saved_gain_var = np.where(mask & self.init, self.p[:, 4, 4], self.saved_gain_var)
+        if self.disturbance_state:
+            self.saved_d = np.where((mask & self.init)[:, None], self.x[:, D_INDEX:D_INDEX + 2], self.saved_d)
+            self.saved_d_var = np.where(mask & self.init, self.p[:, D_INDEX, D_INDEX], self.saved_d_var)
+            self.window.clear(mask)
         self.init &= ~mask
         self.coasted[mask] = 0
         self.excess_count[mask] = 0
@@ -160,6 +206,11 @@ class BatchBallKalman:
             self.p[i, 0, 0] = self.p[i, 1, 1] = self.r[i]
             self.p[i, 2, 2] = self.p[i, 3, 3] = self.cfg.init_vel_std_m_s ** 2
             self.p[i, 4, 4] = self.saved_gain_var[i]
+            if self.disturbance_state:
+                self.x[i, D_INDEX:D_INDEX + 2] = self.saved_d[i]
+                self.p[i, D_INDEX, D_INDEX] = self.p[i, D_INDEX + 1, D_INDEX + 1] = self.saved_d_var[i]
+                self.transition[i] = np.eye(self.dim)
+                self.track_start[i] = t
             self.init[i], self.coasted[i], self.t_last[i] = True, 0, t
         run = det & self.init & ~start
         valid = start.copy()
@@ -183,11 +234,15 @@ class BatchBallKalman:
                 self.nis = np.where(run, self.nis + alpha * (np.minimum(distance, gate) ** 2 / 2.0 - self.nis),
                                     self.nis)
             ok = run & (distance <= gate)
+            if self.disturbance_state and ok.any():
+                appended = self._find_disturbance_change(t, ok, y, accel is not None)
+                y = z - self.x[:, :2]         # a change found corrected the state
+                inv, _ = self._innovation(y)
             if ok.any():
                 i = np.flatnonzero(ok)
                 k = np.einsum("bij,bjk->bik", p[i, :, :2], inv[i])            # P H^T S^-1
                 x_new = self.x[i] + np.einsum("bij,bj->bi", k, y[i])
-                ikh = np.broadcast_to(np.eye(DIM), (len(i), DIM, DIM)).copy()
+                ikh = np.broadcast_to(np.eye(self.dim), (len(i), self.dim, self.dim)).copy()
                 ikh[:, :, :2] -= k
                 p_new = ikh @ p[i] @ ikh.transpose(0, 2, 1) + r[i, None, None] * (k @ k.transpose(0, 2, 1))
                 if self.gain_state:
@@ -195,12 +250,50 @@ class BatchBallKalman:
                     x_new[:, 4] = np.clip(x_new[:, 4], low, high)
                 self.x[i], self.p[i] = x_new, p_new
                 self.coasted[i] = 0
+                if self.disturbance_state:
+                    self.window.set_last_gain(appended, k[np.isin(i, np.flatnonzero(appended))])
+                    self.transition[i] = np.eye(self.dim)
             gated = run & ~ok
             self.coasted = np.where(gated, self.coasted + 1, self.coasted)
             lost = gated & (self.coasted > self.cfg.max_coast_frames)
             valid |= run & ~lost
             self._reset(lost)
         return self.x[:, :2].copy(), self.x[:, 2:4].copy(), valid
+
+    def _find_disturbance_change(self, t: float, ok, y, known: bool):
+        """BallKalman._find_disturbance_change for the balls `ok` (a detection within the gate,
+        innovation y (b, 2)), before their update: returns the balls whose frame joined their
+        window (their update's gain completes it)."""
+        w = self.window
+        if not known:
+            w.clear(ok)
+            return np.zeros(self.b, bool)
+        pushed = t <= self.hold_until
+        w.clear(ok & pushed)
+        add = ok & ~pushed
+        if not add.any():
+            return add
+        s = self.p[:, :2, :2] + self.r[:, None, None] * np.eye(2)
+        whitened = np.linalg.solve(np.linalg.cholesky(s), y[..., None])[..., 0]
+        w.append(add, t, whitened, self.nis, y, s, self.transition)
+        w.drop_older(add, t, DISTURBANCE_CHANGE_WINDOW_S)
+        w.start = np.where(add & np.isnan(w.start), t, w.start)
+        full = add & (t - w.start >= DISTURBANCE_CHANGE_WINDOW_S)
+        first_t, nis_before = w.oldest("t"), w.oldest("nis")
+        settle_s = CONSISTENCY_SETTLE_TIME_CONSTANTS * self.cfg.model_mismatch_time_constant_s
+        test = full & (nis_before <= MODEL_AGREED_NIS) & (first_t - self.track_start >= settle_s)
+        if not test.any():
+            return add
+        total = w.sum_whitened()
+        fire = test & (np.einsum("bi,bi->b", total, total) / np.maximum(w.n, 1) > DISTURBANCE_CHANGE_CHI2)
+        for i in np.flatnonzero(fire):
+            jump = estimate_change(w.frames(i), D_INDEX)
+            if jump is not None:
+                self.x[i] += jump
+            open_disturbance(self.p[i], (t - first_t[i]) / 2.0, D_INDEX)
+        self.disturbance_changes += fire
+        w.clear(fire)
+        return add & ~fire
 
     def _confirmed_pushes(self, seen, beyond, y, distance):
         """BallKalman._push_seen for the balls with a detection `seen` (`beyond` maneuver_sigma):
@@ -260,14 +353,21 @@ class BatchBallKalman:
             q = np.full(len(i), self.sigma_a_cmd ** 2)
         q = np.where(holding[i], np.maximum(q, self.cfg.maneuver_accel_noise_m_s2 ** 2), q)
         self.last_dt[i], self.last_q[i] = h, q
-        f = np.broadcast_to(np.eye(DIM), (len(i), DIM, DIM)).copy()
+        f = np.broadcast_to(np.eye(self.dim), (len(i), self.dim, self.dim)).copy()
         f[:, 0, 2] = f[:, 1, 3] = h
+        qm = np.zeros((len(i), self.dim, self.dim))
+        add_white_acceleration(qm, q, h)
         if known:
             a = accel[i]
             f[:, 0:2, 4] = a * (h ** 2 / 2)[:, None]
             f[:, 2:4, 4] = a * h[:, None]
-        qm = np.zeros((len(i), DIM, DIM))
-        add_white_acceleration(qm, q, h)
+            if self.disturbance_state:   # x' = ... + d dt^2/2, v' = ... + d dt, d' = d + w
+                f[:, 0, D_INDEX] = f[:, 1, D_INDEX + 1] = h ** 2 / 2
+                f[:, 2, D_INDEX] = f[:, 3, D_INDEX + 1] = h
+                rows = disturbance_rows(D_INDEX)
+                qm[:, rows[:, :, None], rows[:, None, :]] += disturbance_jerk(self.q_d, h)[:, None]
+        if self.disturbance_state:
+            self.transition[i] = f @ self.transition[i]
         if self.gain_state:
             qm[:, 4, 4] = self.cfg.input_gain_rate_per_s ** 2 * h
         self.x[i] = np.einsum("bij,bj->bi", f, self.x[i])
@@ -275,3 +375,75 @@ class BatchBallKalman:
         if self.gain_state:
             p[:, 4, 4] = np.minimum(p[:, 4, 4], self.gain_var_max)
         self.p[i] = p
+
+
+class _ChangeWindow:
+    """The change test's window per ball (BallKalman._innovations): a ring of the frames'
+    stamps, whitened innovations, running consistencies, innovations, their covariances, the
+    transitions since the previous update and the updates' gains, `n` frames from `head`. It
+    doubles when a ball's window would overflow it (a faster camera)."""
+
+    FIELDS = ("t", "whitened", "nis", "innovation", "S", "transition", "K")
+
+    def __init__(self, batch: int, dim: int, capacity: int):
+        self.b, self.dim, self.cap = batch, dim, capacity
+        self.t = np.full((batch, capacity), np.nan)
+        self.whitened = np.zeros((batch, capacity, 2))
+        self.nis = np.zeros((batch, capacity))
+        self.innovation = np.zeros((batch, capacity, 2))
+        self.S = np.zeros((batch, capacity, 2, 2))
+        self.transition = np.zeros((batch, capacity, dim, dim))
+        self.K = np.zeros((batch, capacity, dim, 2))
+        self.head = np.zeros(batch, int)
+        self.n = np.zeros(batch, int)
+        self.start = np.full(batch, np.nan)    # when the window began to fill (nan: not yet)
+
+    def clear(self, mask) -> None:
+        self.n[mask] = 0
+        self.start[mask] = np.nan
+
+    def _grow(self) -> None:
+        order = (self.head[:, None] + np.arange(self.cap)) % self.cap     # oldest first
+        rows = np.arange(self.b)[:, None]
+        for name in self.FIELDS:
+            old = getattr(self, name)[rows, order]
+            setattr(self, name, np.concatenate([old, np.zeros_like(old)], axis=1))
+        self.head[:] = 0
+        self.cap *= 2
+
+    def append(self, mask, t, whitened, nis, innovation, S, transition) -> None:
+        if (self.n[mask] >= self.cap).any():
+            self._grow()
+        i = np.flatnonzero(mask)
+        at = (self.head[i] + self.n[i]) % self.cap
+        self.t[i, at], self.whitened[i, at], self.nis[i, at] = t, whitened[i], nis[i]
+        self.innovation[i, at], self.S[i, at], self.transition[i, at] = innovation[i], S[i], transition[i]
+        self.n[i] += 1
+
+    def set_last_gain(self, mask, K) -> None:
+        """The update's gain K (m, dim, 2) of the frames just appended for the balls in mask."""
+        i = np.flatnonzero(mask)
+        self.K[i, (self.head[i] + self.n[i] - 1) % self.cap] = K
+
+    def drop_older(self, mask, t: float, span_s: float) -> None:
+        """Drop the frames more than span_s older than t."""
+        while True:
+            old = mask & (self.n > 0) & (t - self.oldest("t") > span_s)
+            if not old.any():
+                return
+            self.head = np.where(old, (self.head + 1) % self.cap, self.head)
+            self.n -= old
+
+    def oldest(self, name: str) -> np.ndarray:
+        return getattr(self, name)[np.arange(self.b), self.head]
+
+    def sum_whitened(self) -> np.ndarray:
+        order = (self.head[:, None] + np.arange(self.cap)) % self.cap
+        inside = np.arange(self.cap)[None, :] < self.n[:, None]
+        return np.einsum("bk,bki->bi", inside, self.whitened[np.arange(self.b)[:, None], order])
+
+    def frames(self, i: int) -> list:
+        """Ball i's window as BallKalman keeps it (its ChangeFrame, oldest first)."""
+        at = (self.head[i] + np.arange(self.n[i])) % self.cap
+        return [ChangeFrame(self.t[i, k], self.whitened[i, k], self.nis[i, k], self.innovation[i, k], self.S[i, k],
+                             self.transition[i, k], self.K[i, k]) for k in at]

@@ -6,12 +6,13 @@ rates the closed-loop benchmark uses (ball_balance/benchmark/episode.py):
     camera 30 Hz (the benchmark's EpisodeSpec.camera_rate_hz; frames dropped with
     frame_drop_prob) -> detection noise -> the tracker's Kalman filter as it runs
     (batch_kalman.py: its config, the commanded tilt as known acceleration with its gain
-    estimated, adaptive process and measurement noise) -> visible vision_delay_s later ->
-    control tick 60 Hz (the PID node's rate; config/policy.yaml): online plant estimate (k g
-    and a constant disturbance: the pipeline's own, control/estimation.py's BatchPlantEstimator,
-    a plate per episode) -> latency prediction over the state's age with that estimate -> the
-    PID as the pid node runs it (control/pid.py's own law over the batch; schema defaults, the
-    estimate in its feed-forward, disturbance tilt and feedback scale)
+    estimated, adaptive process and measurement noise, the disturbance state d) -> visible
+    vision_delay_s later -> control tick 60 Hz (the PID node's rate; config/policy.yaml):
+    online plant estimate (k g, and the tracker's d as the constant disturbance: the
+    pipeline's own, control/estimation.py's BatchPlantEstimator, a plate per episode) ->
+    latency prediction over the state's age with that estimate -> the PID as the pid node
+    runs it (control/pid.py's own law over the batch; schema defaults, the estimate in its
+    feed-forward, disturbance tilt and feedback scale)
     + policy correction -> shaping (tilt-rate limit per tick, total tilt limit) ->
     camera-to-command latency -> servo lag ->
     plate tilt -> x'' = -k g sin(tilt + bias)
@@ -134,12 +135,11 @@ class Nominal:
 
 def tracker_config():
     """The tracker's parameters as the benchmark and the node run them (config/ball_tracker.yaml
-    over the schema's defaults), without the disturbance state: the training plant has no
-    constant force, and its filter (BatchBallKalman) no such state."""
+    over the schema's defaults)."""
     from ball_balance.benchmark.episode import tracker_values
     from ball_balance.vision.config import TrackerConfig
 
-    return TrackerConfig.from_values({**tracker_values(), "disturbance_time_constant_s": 0.0})
+    return TrackerConfig.from_values(tracker_values())
 
 
 def reference_table(kind: str, n_ticks: int) -> np.ndarray:
@@ -277,7 +277,7 @@ class PlateBatch:
         # the tracker's filter; a fixed measurement noise stands in for one tuned to the
         # episode's noise (as the benchmark's fast mode does), an adaptive one starts from the config
         self.kalman = BatchBallKalman(b, KalmanConfig.from_tracker(self.tracker_cfg), fixed_meas_noise_m=self.noise)
-        self.pending = []                      # (visible_at, est x, est v, stamp, valid mask)
+        self.pending = []   # (visible_at, est x, est v, stamp, valid, tilt integrals, level offset)
         self.obs_x = np.zeros((b, 2))
         self.obs_v = np.zeros((b, 2))
         self.obs_stamp = np.full(b, np.nan)
@@ -324,12 +324,17 @@ class PlateBatch:
             accel = None if u_known is None else -self.tracker_k_g * np.sin(u_known)
             lever = None if u_known is None or self.lever_m == 0.0 else self.lever_m * u_known
             est_x, est_v, valid = self.kalman.step(t, z, arrived, accel, lever)
+            # the tracker's d as its plate-level offset (/ball_level_offset), which the
+            # pipeline's plant estimate takes as its disturbance
+            level = self.kalman.level_offset_rad(self.tracker_k_g) if self.kalman.disturbance_state else None
             self.pending.append((t + self.nom.vision_delay_s, est_x, est_v, t, valid,
-                                 self.tilt_p.copy(), self.tilt_v.copy()))
+                                 self.tilt_p.copy(), self.tilt_v.copy(), level))
         while self.pending and self.pending[0][0] <= t + 1e-9:
-            _, ex, ev, stamp, valid, tilt_p, tilt_v = self.pending.pop(0)
+            _, ex, ev, stamp, valid, tilt_p, tilt_v, level = self.pending.pop(0)
             self.obs_x[valid], self.obs_v[valid] = ex[valid], ev[valid]
             self.obs_stamp[valid] = stamp
+            if level is not None:
+                self.estimator.take_level_offset(np.where((valid & self.alive)[:, None], level, np.nan))
             # the pipeline adds each new state it controls on to the plant estimate
             self.estimator.add_state(np.full(self.b, stamp), ex, tilt_p, tilt_v, valid & self.alive)
 

@@ -129,7 +129,7 @@ def add_white_acceleration(M: np.ndarray, q, dt) -> None:
 
 
 @dataclass
-class _ChangeFrame:
+class ChangeFrame:
     """A detection in the change test's window: what the test and the change's estimate need."""
     t: float                     # stamp [s]
     whitened: np.ndarray         # the innovation whitened by its covariance
@@ -138,6 +138,69 @@ class _ChangeFrame:
     S: np.ndarray                # its covariance
     transition: np.ndarray       # the product of the F's since the previous update
     K: Optional[np.ndarray] = None   # the update's gain, once made
+
+
+def disturbance_rows(d_index: int) -> np.ndarray:
+    """The state indices (x, vx, d_x) and (y, vy, d_y) of a filter whose d starts at d_index."""
+    return np.array([[0, 2, d_index], [1, 3, d_index + 1]])
+
+
+def disturbance_jerk(q_d, dt) -> np.ndarray:
+    """The process noise (..., 3, 3) that a random walk of d with jerk density q_d adds over dt
+    to (x, vx, d_x) (likewise y); q_d and dt scalars, or one value per filter of a batch."""
+    q_d, dt = np.asarray(q_d, dtype=float)[..., None, None], np.asarray(dt, dtype=float)[..., None, None]
+    return q_d * np.array([[1 / 20, 1 / 8, 1 / 6], [1 / 8, 1 / 3, 1 / 2], [1 / 6, 1 / 2, 1.0]]) \
+        * dt ** np.array([[5, 4, 3], [4, 3, 2], [3, 2, 1]])
+
+
+def open_disturbance(P: np.ndarray, T, d_index: int) -> None:
+    """Widen the covariance P (n, n), or a batch of them (b, n, n) with T (b,), by that of a
+    change of d of 1-sigma DISTURBANCE_STD_M_S2 that happened T ago, with the velocity and
+    position it has moved since."""
+    T = np.asarray(T, dtype=float)[..., None]
+    J = np.concatenate([T * T / 2.0, T, np.ones_like(T)], axis=-1)        # (..., 3)
+    rows = disturbance_rows(d_index)
+    P[..., rows[:, :, None], rows[:, None, :]] += DISTURBANCE_STD_M_S2 ** 2 * (J[..., None, :, None]
+                                                                              * J[..., None, None, :])
+
+
+def estimate_change(frames, d_index: int) -> Optional[np.ndarray]:
+    """The state correction for the change of d that a change test's window shows, or None.
+    `frames` are the window's ChangeFrame in order, the current frame last (its innovation is
+    not used; its transition takes the correction to its prediction). For a change nu of d at
+    frame i, the innovations that follow are gamma_j = G_j nu + noise, with the signature
+    G_j = H (B_j - A_j): B_j is how the change moves the true state (F B per prediction), A_j
+    how much of it the filter took up (A + K G per update, F A per prediction). nu is the
+    estimate under the change's prior N(0, DISTURBANCE_STD_M_S2^2 I) given these, and i the
+    frame of the largest evidence (generalised likelihood ratio, Willsky and Jones). The
+    correction is (B - A) nu; the caller opens the covariance as for a change of unknown size
+    (open_disturbance), so the frames that follow still move d."""
+    n = frames[0].transition.shape[0]
+    M = np.zeros((n, 2))
+    M[d_index, 0] = M[d_index + 1, 1] = 1.0
+    H = np.eye(2, n)
+    prior_information = np.eye(2) / DISTURBANCE_STD_M_S2 ** 2
+    seen = frames[:-1]
+    best = None
+    for i in range(len(seen)):
+        B = seen[i].transition @ M     # the change happened in the prediction into frame i
+        A = np.zeros((n, 2))
+        information = prior_information.copy()
+        score = np.zeros(2)
+        for j in range(i, len(seen)):
+            G = H @ (B - A)
+            S_inv_G = np.linalg.solve(seen[j].S, G)
+            score += S_inv_G.T @ seen[j].innovation
+            information += G.T @ S_inv_G
+            A = A + seen[j].K @ G
+            transition = frames[j + 1].transition
+            B, A = transition @ B, transition @ A
+        covariance = np.linalg.inv(information)
+        # log evidence of a change at frame i against none (up to a constant)
+        evidence = float(score @ covariance @ score) - math.log(np.linalg.det(information) * DISTURBANCE_STD_M_S2 ** 4)
+        if best is None or evidence > best[0]:
+            best = (evidence, (B - A) @ (covariance @ score))
+    return None if best is None else best[1]
 
 
 @dataclass(frozen=True)
@@ -381,10 +444,10 @@ class BallKalman:
         if self.disturbance_state:
             self.d_index = self.dim
             self.dim += 2
-            self._disturbance_rows = np.array([[0, 2, self.d_index], [1, 3, self.d_index + 1]])
+            self._disturbance_rows = disturbance_rows(self.d_index)
         self._disturbance = (np.zeros(2), 0.0)   # kept over dropped tracks
         # (stamp, whitened innovation, running consistency before it), the last window
-        self._innovations: Deque[_ChangeFrame] = deque()
+        self._innovations: Deque[ChangeFrame] = deque()
         self._track_start_s = 0.0
         self._window_start_s: Optional[float] = None
         self.disturbance_changes = 0  # changes of d found (total)
@@ -501,11 +564,8 @@ class BallKalman:
             i = self.d_index
             F[0:2, i:i + 2] = dt ** 2 / 2 * I2
             F[2:4, i:i + 2] = dt * I2
-            jerk = self.q_d * np.array([[dt ** 5 / 20, dt ** 4 / 8, dt ** 3 / 6],
-                                        [dt ** 4 / 8, dt ** 3 / 3, dt ** 2 / 2],
-                                        [dt ** 3 / 6, dt ** 2 / 2, dt]])
             rows = self._disturbance_rows                # (x, vx, d_x) and (y, vy, d_y)
-            Q[rows[:, :, None], rows[:, None, :]] += jerk
+            Q[rows[:, :, None], rows[:, None, :]] += disturbance_jerk(self.q_d, dt)
         if self.gain_state:
             if a is not None:                        # x' = ... + s a dt^2/2, v' = ... + s a dt
                 F[0:2, 4] = a * dt ** 2 / 2
@@ -621,7 +681,7 @@ class BallKalman:
                     self._hold_until = t + self.maneuver_hold_s
                     if self.disturbance_state and accel is not None:
                         force = copy.deepcopy(self.kf)
-                        self._open_disturbance(DISTURBANCE_CHANGE_WINDOW_S / 2.0, force)
+                        open_disturbance(force.P, DISTURBANCE_CHANGE_WINDOW_S / 2.0, self.d_index)
                         self._force = (force, 0.0)
                 self._widen_last_prediction()
                 distance = self.mahalanobis(z)
@@ -654,7 +714,7 @@ class BallKalman:
     def _find_disturbance_change(self, t: float, z: Tuple[float, float], known: bool, pushed: bool) -> None:
         """Before the update with detection z: test the innovations of the last
         DISTURBANCE_CHANGE_WINDOW_S for a change of d and, on one, correct the state by the
-        change the window shows (_estimate_change) and widen the covariance by that of a change
+        change the window shows (estimate_change) and widen the covariance by that of a change
         of 1-sigma DISTURBANCE_STD_M_S2 that happened T ago (half the window): d by it, the
         velocity by it times T, the position by it times T^2/2, all correlated, so the
         innovations that follow still move d, and not the velocity, by what the change was.
@@ -670,7 +730,7 @@ class BallKalman:
         kf = self.kf
         innovation = np.asarray(z, dtype=np.float64) - kf.H @ kf.x
         S = kf.H @ kf.P @ kf.H.T + kf.R
-        window.append(_ChangeFrame(t, np.linalg.solve(np.linalg.cholesky(S), innovation), self.nis, innovation, S,
+        window.append(ChangeFrame(t, np.linalg.solve(np.linalg.cholesky(S), innovation), self.nis, innovation, S,
                                    self._transition))
         while t - window[0].t > DISTURBANCE_CHANGE_WINDOW_S:
             window.popleft()
@@ -685,58 +745,13 @@ class BallKalman:
         total = np.sum([frame.whitened for frame in window], axis=0)
         if float(total @ total) / len(window) <= DISTURBANCE_CHANGE_CHI2:
             return
-        jump = self._estimate_change(list(window))
+        jump = estimate_change(list(window), self.d_index)
         if jump is not None:
             kf.x = kf.x + jump
-        self._open_disturbance((t - window_start_s) / 2.0, kf)
+        open_disturbance(kf.P, (t - window_start_s) / 2.0, self.d_index)
         self.disturbance_changes += 1
         window.clear()
         self._window_start_s = None
-
-    def _estimate_change(self, window) -> Optional[np.ndarray]:
-        """The state correction for the change of d the window's innovations show (all but the
-        current frame's), at the current frame's prediction, or None. For a change nu of d at
-        frame i, the innovations that follow are gamma_j = G_j nu + noise, with the signature
-        G_j = H (B_j - A_j): B_j is how the change moves the true state (F B per prediction),
-        A_j how much of it the filter took up (A + K G per update, F A per prediction). nu is
-        the estimate under the change's prior N(0, DISTURBANCE_STD_M_S2^2 I) given these, and
-        i the frame of the largest evidence (generalised likelihood ratio, Willsky and Jones).
-        The correction is (B - A) nu; the covariance is opened as for a change of unknown size
-        (_open_disturbance), so the frames that follow still move d."""
-        n = self.dim
-        M = np.zeros((n, 2))
-        M[self.d_index, 0] = M[self.d_index + 1, 1] = 1.0
-        H = self.kf.H
-        prior_information = np.eye(2) / DISTURBANCE_STD_M_S2 ** 2
-        frames = window[:-1]
-        best = None
-        for i in range(len(frames)):
-            B = frames[i].transition @ M     # the change happened in the prediction into frame i
-            A = np.zeros((n, 2))
-            information = prior_information.copy()
-            score = np.zeros(2)
-            for j in range(i, len(frames)):
-                G = H @ (B - A)
-                S_inv_G = np.linalg.solve(frames[j].S, G)
-                score += S_inv_G.T @ frames[j].innovation
-                information += G.T @ S_inv_G
-                A = A + frames[j].K @ G
-                transition = window[j + 1].transition
-                B, A = transition @ B, transition @ A
-            covariance = np.linalg.inv(information)
-            # log evidence of a change at frame i against none (up to a constant)
-            evidence = float(score @ covariance @ score) \
-                - math.log(np.linalg.det(information) * DISTURBANCE_STD_M_S2 ** 4)
-            if best is None or evidence > best[0]:
-                best = (evidence, (B - A) @ (covariance @ score))
-        return None if best is None else best[1]
-
-    def _open_disturbance(self, T: float, kf: KalmanFilter) -> None:
-        """Widen kf's covariance by that of a change of d of 1-sigma DISTURBANCE_STD_M_S2 that
-        happened T ago, with the velocity and position it has moved since."""
-        J = np.array([T * T / 2.0, T, 1.0])
-        rows = self._disturbance_rows                    # (x, vx, d_x) and (y, vy, d_y)
-        kf.P[rows[:, :, None], rows[:, None, :]] += DISTURBANCE_STD_M_S2 ** 2 * np.outer(J, J)
 
     def _weigh_force(self, z: Tuple[float, float]) -> None:
         """Update the force hypothesis with detection z and add the log-likelihood ratio of z

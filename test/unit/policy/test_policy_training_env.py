@@ -181,7 +181,11 @@ def test_training_domains_cover_the_benchmark_extremes(knob):
     assert low <= min(values) and high >= max(values)
 
 
-@pytest.mark.parametrize("overrides", [{}, {"estimate_input_gain": False, "adaptive_meas_noise": False},
+@pytest.mark.parametrize("overrides", [{}, {"disturbance_time_constant_s": 0.0},
+                                       # without the gain's estimate, the gain error takes a hold's second
+                                       # filter in BallKalman (which the batch leaves out) for a force
+                                       {"estimate_input_gain": False, "adaptive_meas_noise": False,
+                                        "disturbance_time_constant_s": 0.0},
                                        {"model_mismatch_time_constant_s": 0.0, "use_plate_cmd": False},
                                        {"maneuver_sigma": 2.5}, {"maneuver_sigma": 2.5, "maneuver_confirm_frames": 2},
                                        {"maneuver_sigma": 2.5, "maneuver_confirm_frames": 2,
@@ -190,7 +194,8 @@ def test_batch_kalman_is_the_trackers_filter(overrides):
     """The plant's batched filter follows vision/kalman.py BallKalman frame by frame on the same
     detections and known accelerations: dropped frames, outliers (gate, coasting, a lost
     track), a gap that restarts the track, a wrong plant gain, noise that changes, pushes
-    (maneuver_sigma)."""
+    (maneuver_sigma), a constant force that starts (the disturbance state's change test and
+    its estimate of the change)."""
     from ball_balance.policy.batch_kalman import BatchBallKalman
     from ball_balance.policy.env import tracker_config
     from ball_balance.vision.kalman import BallKalman, KalmanConfig
@@ -212,11 +217,16 @@ def test_batch_kalman_is_the_trackers_filter(overrides):
         u = 0.05 * np.sin(2 * np.pi * t / np.array([1.5, 2.0, 2.5, 3.0, 1.0, 0.7]))[:, None] * np.array([1.0, -0.7])
         accel = None if (n < 3 or not tracker_cfg.use_plate_cmd) else -k_g * np.sin(u)
         a_true = -k_g * gain[:, None] * np.sin(u)
+        forced = [1, 3] if n >= 200 else []                 # a force of about 1.5 degrees
+        a_true[forced] += (0.15, -0.05)
         x, v = x + v * dt + 0.5 * a_true * dt * dt, v + a_true * dt
         if n % 40 == 20:
             v[n // 40 % b] += 0.15                          # a push
         z = x + rng.normal(0, 1, (b, 2)) * noise[:, None]
-        z[rng.random(b) < 0.03] += 0.1                      # outliers
+        outlier = rng.random(b) < 0.03
+        if n >= 170:   # an outlier starts a push's hold, and BallKalman would tell the force by its
+            outlier[[1, 3]] = False   # second filter then, which the batch leaves out
+        z[outlier] += 0.1                                   # outliers
         if 150 <= n < 160:
             z[2] += 0.2                                     # a lost track (coasting past max_coast_frames)
         det = rng.random(b) >= 0.1
@@ -236,9 +246,13 @@ def test_batch_kalman_is_the_trackers_filter(overrides):
     for i in range(b):
         assert batch.r[i] == pytest.approx(single[i].kf.R[0, 0], rel=1e-9)
         assert batch.gain[i] == pytest.approx(single[i].input_gain, rel=1e-7)
+        np.testing.assert_allclose(batch.disturbance_m_s2[i], single[i].disturbance_m_s2, rtol=1e-6, atol=1e-9)
+        assert batch.disturbance_changes[i] == single[i].disturbance_changes
     assert worst < 1e-9
     if cfg.maneuver_sigma > 0.0 and tracker_cfg.use_plate_cmd:
         assert sum(f.maneuver_count for f in single) > 0   # the pushes were taken as such
+    if cfg.disturbance_time_constant_s > 0.0 and tracker_cfg.use_plate_cmd:
+        assert batch.disturbance_changes[[1, 3]].all()     # the force was found
 
 
 def test_no_labels_between_a_push_and_the_frames_that_show_it():
