@@ -40,7 +40,7 @@ import numpy as np
 @dataclass(frozen=True)
 class PidGains:
     kp: float = 2.0                 # rad per m of error
-    ki: float = 0.4                 # rad per (m s)
+    ki: float = 0.0                 # rad per (m s); 0: the tracker's disturbance state holds the offset
     kd: float = 0.75                # rad per (m/s)
     u_max_rad: float = 0.15         # output clip (tilt)
     i_limit_rad: float = 0.03       # clamp on the integral's contribution ki*I

@@ -67,7 +67,7 @@ TRACKER_FILTER_KEYS = ("meas_noise_m", "accel_noise_m_s2", "init_vel_std_m_s", "
                        "meas_noise_max_m",
                        "meas_noise_window_frames", "maneuver_sigma", "maneuver_hold_s", "maneuver_accel_noise_m_s2",
                        "maneuver_confirm_frames", "maneuver_confirm_sigma", "maneuver_confirm_noise_m", "tilt_lever_m",
-                       "rolling_factor")
+                       "rolling_factor", "disturbance_time_constant_s")
 
 
 class MpcFirstMove(NamedTuple):
