@@ -14,9 +14,9 @@ batch against BallKalman on the same detections.
 With `disturbance_time_constant_s` > 0 the state also holds d = (d_x, d_y), the acceleration
 the known one does not explain, with BallKalman's change test over DISTURBANCE_CHANGE_WINDOW_S
 and its estimate of a change (vision/kalman.py estimate_change and open_disturbance, the same
-functions). The second filter BallKalman runs during a push's hold, in case the push was a
-force that started or turned, is left out: the training plant's plate bias is constant from
-the start of an episode, and a push there is always a push.
+functions). BallKalman's jump test after a push's detection (was it a push or a force that
+started or turned?) is left out: the training plant's plate bias is constant from the start
+of an episode, and a push there is always a push.
 """
 from __future__ import annotations
 

@@ -51,9 +51,11 @@ beyond `gate_sigma`): a push keeps pushing the detections the same way, noise sc
 Only while the measurement noise is at least `maneuver_confirm_noise_m`: with less, a push
 moves the ball beyond the noise within a frame and one detection tells, so waiting for a
 second only brakes it a frame later. With the disturbance state a large change of d looks
-like a push in its first frames: during the hold a second filter runs, in which the detection
-was a change of d and no push, and it replaces the first at the hold's end if the detections
-favour it (BallKalman._end_force_hypothesis).
+like a push in its first frames. So from a push's detection on, a reference filter runs with
+the model's own process noise, and the detections it sees are explained both ways, as a jump
+of the ball's velocity and as a jump of d, each at the onset that fits it best (_JumpTest).
+As soon as one explanation is better by the change test's bound, it stands: a change of d
+ends the hold and the reference filter, corrected by the change, takes over.
 
 Delay: the plate reaches a command some time after the tracker receives it (the arm's latency
 and servo lag, 0.03-0.2 s in the benchmark's latency domains); the known acceleration and the
@@ -104,13 +106,6 @@ DISTURBANCE_STD_M_S2 = 0.3   # 1-sigma of a change of d: a force up to about 3 d
 # learned, instead of being learned together with a gain that is still wrong
 DISTURBANCE_CHANGE_WINDOW_S = 0.3
 DISTURBANCE_CHANGE_CHI2 = 13.815510557964274
-
-
-def _log_likelihood(kf: KalmanFilter, z: np.ndarray) -> float:
-    """log N(z; H x, H P H^T + R) of the filter's prediction, up to a constant."""
-    y = z - kf.H @ kf.x
-    S = kf.H @ kf.P @ kf.H.T + kf.R
-    return -0.5 * (float(y @ np.linalg.solve(S, y)) + math.log(np.linalg.det(S)))
 
 
 def add_white_acceleration(M: np.ndarray, q, dt) -> None:
@@ -201,6 +196,110 @@ def estimate_change(frames, d_index: int) -> Optional[np.ndarray]:
         if best is None or evidence > best[0]:
             best = (evidence, (B - A) @ (covariance @ score))
     return None if best is None else best[1]
+
+
+class _Jump:
+    """One explanation of a push's detections for _JumpTest: a jump of the states that
+    `columns` (n, 2) picks, in the prediction into a frame at onset_s, with the terms of its
+    generalised likelihood ratio over the frames since (estimate_change, kept up frame by
+    frame): B and A as there, the information and the score."""
+
+    def __init__(self, onset_s: float, B: np.ndarray):
+        self.onset_s, self.B = onset_s, B
+        self.A = np.zeros_like(B)
+        self.information = np.zeros((2, 2))
+        self.score = np.zeros(2)
+        self._signature = None
+
+    def predict(self, F: np.ndarray) -> None:
+        self.B, self.A = F @ self.B, F @ self.A
+
+    def add(self, innovation: np.ndarray, S: np.ndarray) -> None:
+        """A frame's innovation and its covariance, before the update."""
+        G = (self.B - self.A)[:2]
+        S_inv_G = np.linalg.solve(S, G)
+        self.score += S_inv_G.T @ innovation
+        self.information += G.T @ S_inv_G
+        self._signature = G
+
+    def take_up(self, K: np.ndarray) -> None:
+        """The update's gain: how much of the jump the filter took up."""
+        self.A = self.A + K @ self._signature
+
+    def statistic(self) -> float:
+        """Twice the log-likelihood gained by the jump of the best size: score^T I^-1 score."""
+        if np.linalg.det(self.information) <= 0.0:
+            return 0.0
+        return float(self.score @ np.linalg.solve(self.information, self.score))
+
+    def posterior(self, prior_std: float):
+        """The jump's effect on the state now, given the frames since its onset and its prior
+        N(0, prior_std^2 I): the mean and the covariance to add to the reference filter's."""
+        covariance = np.linalg.inv(self.information + np.eye(2) / prior_std ** 2)
+        effect = self.B - self.A
+        return effect @ (covariance @ self.score), effect @ covariance @ effect.T
+
+
+class _JumpTest:
+    """After a push's detection (with the disturbance state and a known acceleration): was it a
+    push, a jump of the ball's velocity, or a force that started or turned, a change of d? A
+    reference filter runs on from before the detection with the model's own process noise, and
+    for each onset from the change test's window on, each of the two jumps is fitted to its
+    innovations (generalised likelihood ratio, as estimate_change). Both explanations have
+    two free parameters and an onset, so their best fits compare directly: once twice the
+    log-likelihood ratio between the best of each passes DISTURBANCE_CHANGE_CHI2 (the change
+    test's bound) the test has decided."""
+
+    def __init__(self, kf: KalmanFilter, window, transition: np.ndarray, t: float, d_index: int):
+        self.reference = copy.deepcopy(kf)
+        n = kf.x.shape[0]
+        self.force_columns, self.push_columns = np.zeros((n, 2)), np.zeros((n, 2))
+        self.force_columns[d_index, 0] = self.force_columns[d_index + 1, 1] = 1.0
+        self.push_columns[2, 0] = self.push_columns[3, 1] = 1.0
+        transitions = [frame.transition for frame in window] + [transition]
+        self.forces, self.pushes = [], []
+        for i, frame in enumerate(window):
+            self._add_onset(frame.t, transitions[i])
+            for j in range(i, len(window)):     # the window's frames since the onset
+                for jump in (self.forces[-1], self.pushes[-1]):
+                    jump.add(window[j].innovation, window[j].S)
+                    jump.take_up(window[j].K)
+                    jump.predict(transitions[j + 1])
+        self._add_onset(t, transition)
+
+    def _add_onset(self, t: float, transition: np.ndarray) -> None:
+        """Both jumps in the prediction into the frame at t, whose transition that is."""
+        self.forces.append(_Jump(t, transition @ self.force_columns))
+        self.pushes.append(_Jump(t, transition @ self.push_columns))
+
+    def predict(self, t: float) -> None:
+        """After the reference filter's prediction into the frame at t: the jumps so far move
+        on, and either may happen in this prediction too."""
+        for jump in self.forces + self.pushes:
+            jump.predict(self.reference.F)
+        self._add_onset(t, self.reference.F)
+
+    def update(self, z: np.ndarray) -> Optional[str]:
+        """Fold in detection z: "force" or "push" once decided, else None."""
+        kf = self.reference
+        innovation = z - kf.H @ kf.x
+        S = kf.H @ kf.P @ kf.H.T + kf.R
+        jumps = self.forces + self.pushes
+        for jump in jumps:
+            jump.add(innovation, S)
+        kf.update(z)
+        for jump in jumps:
+            jump.take_up(kf.K)
+        force = max(jump.statistic() for jump in self.forces)
+        push = max(jump.statistic() for jump in self.pushes)
+        if force - push > DISTURBANCE_CHANGE_CHI2:
+            return "force"
+        if push - force > DISTURBANCE_CHANGE_CHI2:
+            return "push"
+        return None
+
+    def best_force(self) -> _Jump:
+        return max(self.forces, key=_Jump.statistic)
 
 
 @dataclass(frozen=True)
@@ -451,9 +550,8 @@ class BallKalman:
         self._track_start_s = 0.0
         self._window_start_s: Optional[float] = None
         self.disturbance_changes = 0  # changes of d found (total)
-        # during a push's hold: (the filter as if it were a change of d, not a push, with the
-        # log-likelihood ratio of the detections since under the two)
-        self._force: Optional[Tuple[KalmanFilter, float]] = None
+        # after a push's detection, until it decides: was it a push or a change of d?
+        self._jump_test: Optional[_JumpTest] = None
         self._transition = np.eye(self.dim)   # F's product since the last update
         self.model_mismatch_time_constant_s = cfg.model_mismatch_time_constant_s
         self.nis = 1.0                # running mean of the normalised innovation squared (per axis)
@@ -525,7 +623,7 @@ class BallKalman:
         self.coasted = 0
         self.t_last = None
         self._excess = (0, np.zeros(2), 1.0)
-        self._force = None
+        self._jump_test = None
         self._innovations.clear()
         self._window_start_s = None
 
@@ -662,11 +760,12 @@ class BallKalman:
             elif dt > 0.0:            # a repeated or out-of-order stamp only updates
                 self._predict(dt, accel, holding=t <= self._hold_until)
                 self.t_last = t
-                if self._force is not None:
-                    if t > self._hold_until:
-                        self._end_force_hypothesis()
+                if self._jump_test is not None:
+                    if t > self._hold_until:     # undecided: the push stands
+                        self._jump_test = None
                     else:
-                        self._predict(dt, accel, kf=self._force[0])
+                        self._predict(dt, accel, kf=self._jump_test.reference)
+                        self._jump_test.predict(t)
         if not self.initialised:
             if z is None:
                 return self._estimate(fresh=False, valid=False)
@@ -679,10 +778,9 @@ class BallKalman:
                 nis = self._excess[2] if self._confirming() else self.nis
                 if nis <= MODEL_AGREED_NIS:   # a model that agreed until the push began
                     self._hold_until = t + self.maneuver_hold_s
-                    if self.disturbance_state and accel is not None:
-                        force = copy.deepcopy(self.kf)
-                        open_disturbance(force.P, DISTURBANCE_CHANGE_WINDOW_S / 2.0, self.d_index)
-                        self._force = (force, 0.0)
+                    if self.disturbance_state and accel is not None and self._jump_test is None:
+                        self._jump_test = _JumpTest(self.kf, list(self._innovations), self._transition, t,
+                                                    self.d_index)
                 self._widen_last_prediction()
                 distance = self.mahalanobis(z)
             if self.model_mismatch_time_constant_s > 0.0:   # a gated detection counts too, at the gate
@@ -691,8 +789,8 @@ class BallKalman:
             if distance <= self.gate_sigma:
                 if self.disturbance_state:
                     self._find_disturbance_change(t, z, known=accel is not None, pushed=t <= self._hold_until)
-                if self._force is not None:
-                    self._weigh_force(z)
+                if self._jump_test is not None and self._decide_jump(t, z):
+                    return self._estimate(fresh=True, valid=True)
                 self.kf.update(np.asarray(z, dtype=np.float64))
                 if self.disturbance_state:
                     if self._innovations and self._innovations[-1].K is None:
@@ -753,30 +851,30 @@ class BallKalman:
         window.clear()
         self._window_start_s = None
 
-    def _weigh_force(self, z: Tuple[float, float]) -> None:
-        """Update the force hypothesis with detection z and add the log-likelihood ratio of z
-        under it against the push's."""
-        force, log_ratio = self._force
-        z = np.asarray(z, dtype=np.float64)
-        log_ratio += _log_likelihood(force, z) - _log_likelihood(self.kf, z)
-        force.update(z)
+    def _decide_jump(self, t: float, z: Tuple[float, float]) -> bool:
+        """Fold detection z into the jump test. When it finds a change of d, the reference
+        filter, corrected by the change's best fit and its covariance opened from the change's
+        onset (open_disturbance), becomes the filter, the push's hold ends, and True is
+        returned (z is in it). When it finds a push, the test ends and the hold goes on."""
+        decision = self._jump_test.update(np.asarray(z, dtype=np.float64))
+        if decision is None:
+            return False
+        test, self._jump_test = self._jump_test, None
+        if decision == "push":
+            return False
+        kf = test.reference
+        mean, covariance = test.best_force().posterior(DISTURBANCE_STD_M_S2)
+        kf.x, kf.P = kf.x + mean, kf.P + covariance
         if self.gain_state:
-            force.x[4] = min(max(force.x[4], self.gain_bounds[0]), self.gain_bounds[1])
-        self._force = (force, log_ratio)
-
-    def _end_force_hypothesis(self) -> None:
-        """At the end of a push's hold: take the force hypothesis' state when it explained the
-        detections better (twice the log-likelihood ratio beyond DISTURBANCE_CHANGE_CHI2) and
-        its d differs from the push's by more than the same bound in its own covariance (a
-        change of d, not a better fit of a model error). Otherwise the push stands."""
-        force, log_ratio = self._force
-        self._force = None
-        i = self.d_index
-        change = force.x[i:i + 2] - self.kf.x[i:i + 2]
-        distance = float(change @ np.linalg.solve(force.P[i:i + 2, i:i + 2], change))
-        if 2.0 * log_ratio > DISTURBANCE_CHANGE_CHI2 and distance > DISTURBANCE_CHANGE_CHI2:
-            self.kf.x, self.kf.P = force.x, force.P
-            self.disturbance_changes += 1
+            kf.x[4] = min(max(kf.x[4], self.gain_bounds[0]), self.gain_bounds[1])
+        self.kf = kf
+        self._hold_until = -np.inf
+        self._innovations.clear()
+        self._window_start_s = None
+        self._transition = np.eye(self.dim)
+        self.disturbance_changes += 1
+        self.coasted = 0
+        return True
 
     def _push_seen(self, z: Tuple[float, float], distance: float) -> bool:
         """Whether this detection shows a push: beyond maneuver_sigma (maneuver_confirm_frames 1,
