@@ -50,13 +50,9 @@ PID_GAINS_SCHEMA = [
     Param("ki", PidGains.ki, "integral gain", "rad/(m s)", 0.0, 20.0, user_facing=True),
     Param("kd", PidGains.kd, "derivative gain on the measured velocity", "rad/(m/s)", 0.0, 20.0, user_facing=True),
     Param("i_limit_rad", PidGains.i_limit_rad, "clamp on ki*integral", "rad", 0.0, 0.5),
-    Param("i_zone_m", PidGains.i_zone_m, "integrate only while |error| below this", "m", 0.0, 1.0),
-    Param("deadband_m", PidGains.deadband_m, "error deadband", "m", 0.0, 0.05),
     Param("antiwindup_time_s", PidGains.antiwindup_time_s, "back-calculation time constant", "s", 0.0, 10.0),
     Param("derivative_filter_s", PidGains.derivative_filter_s, "time constant of a first-order low-pass on the "
           "velocity error of the D term (0: off)", "s", 0.0, 1.0),
-    Param("i_max_vel_error_m_s", PidGains.i_max_vel_error_m_s, "integrate only while the ball's speed relative to "
-          "the reference (the D term's filtered velocity error) is below this (0: off)", "m/s", 0.0, 10.0),
 ]
 
 MPC_SCHEMA = [
@@ -173,10 +169,8 @@ def k_g(values: Mapping[str, Any]) -> float:
 
 def pid_gains(values: Mapping[str, Any]) -> PidGains:
     return PidGains(kp=values["kp"], ki=values["ki"], kd=values["kd"], u_max_rad=values["max_tilt_cmd_rad"],
-                    i_limit_rad=values["i_limit_rad"], deadband_m=values["deadband_m"],
-                    i_zone_m=values["i_zone_m"], antiwindup_time_s=values["antiwindup_time_s"],
-                    derivative_filter_s=values["derivative_filter_s"],
-                    i_max_vel_error_m_s=values["i_max_vel_error_m_s"])
+                    i_limit_rad=values["i_limit_rad"], antiwindup_time_s=values["antiwindup_time_s"],
+                    derivative_filter_s=values["derivative_filter_s"])
 
 
 def pipeline_config(values: Mapping[str, Any], controller: str) -> PipelineConfig:

@@ -6,21 +6,13 @@ Sign: the plant is x'' = -k g u, so a ball on the +x side of its reference needs
 
     u = kp e + ki integral(e) + kd (v - v_ref) + u_ff,    u_ff = -a_ref / (k g)
 
-clipped to +-u_max. Anti-windup: conditional integration (the integral does not grow while
-the output is saturated in the direction of the error) plus back-calculation (while
-saturated, the part of the integral that pushes into the limit bleeds off at
-(u_raw - u_sat) / (ki * t_aw)), and a hard clamp |ki I| <= i_limit. Back-calculation only
-unwinds: it moves the integral toward zero and stops there, never charging it against the
-error (a saturation caused by P and D on a big error would otherwise drive the integral to
-its opposite clamp within ~0.1 s, leaving the ball 10-15 mm off target for seconds). A
-deadband around zero error stops the integral from hunting on tracker noise, and the
-integral only changes inside an error zone (|e| < i_zone_m): outside it, large moves are
-left to P and D and the integral is held, by integration and back-calculation alike. Nor
-does it grow while the ball moves off the reference's speed (|v - v_ref| >= i_max_vel_error_m_s,
-the D term's filtered velocity error): the integral is for a constant offset, which shows
-as an error at the reference's speed; a ball returning from a push crosses the zone at
-0.1 m/s and, integrated, the return charged it enough to carry the ball 5 mm past the target.
-The D term's velocity error passes a first-order low-pass (`derivative_filter_s`): the
+clipped to +-u_max. The integral is off by default (ki 0): the tracker's disturbance state,
+cancelled through u_bias_rad, is what removes a constant offset (docs/control.md). With
+ki > 0 it has the usual anti-windup: conditional integration (it does not grow while the
+output is saturated in the direction of the error), back-calculation (while saturated, the
+part of the integral that pushes into the limit bleeds off at (u_raw - u_sat) / (ki * t_aw),
+toward zero and no further, never charging it against the error) and a clamp
+|ki I| <= i_limit. The D term's velocity error passes a first-order low-pass (`derivative_filter_s`): the
 tracker's Kalman velocity is noisy enough that, unfiltered, it shook the plate (tilt-rate
 RMS 3x the MPC's), pulled the online plant estimate off through the loop and cost
 1-2 mm on the circle and 0.3-0.7 s of push recovery (docs/control.md).
@@ -44,11 +36,8 @@ class PidGains:
     kd: float = 0.75                # rad per (m/s)
     u_max_rad: float = 0.15         # output clip (tilt)
     i_limit_rad: float = 0.03       # clamp on the integral's contribution ki*I
-    deadband_m: float = 0.0         # |e| below this counts as zero for P and I (0: off)
-    i_zone_m: float = 0.02          # integrate only while |e| < i_zone (no wind-up on big moves)
     antiwindup_time_s: float = 0.2  # back-calculation time constant t_aw
     derivative_filter_s: float = 0.06  # first-order low-pass on v - v_ref for the D term (0: off)
-    i_max_vel_error_m_s: float = 0.03  # integrate only while |v - v_ref| is below this (0: off)
 
 
 class Pid:
@@ -82,8 +71,6 @@ class Pid:
         """
         g = self.gains
         e = np.asarray(error_m, dtype=float)
-        if g.deadband_m > 0.0:   # |e| below it counts as zero, above it is measured from its edge
-            e = e - np.minimum(np.maximum(e, -g.deadband_m), g.deadband_m)
         vel_error = np.array(vel_error_m_s, dtype=float)
         if g.derivative_filter_s > 0.0 and self.vel_error_filtered is not None:
             alpha = dt_s / (g.derivative_filter_s + dt_s)
@@ -91,25 +78,25 @@ class Pid:
         self.vel_error_filtered = vel_error
         u_ff = np.asarray(acc_ref_m_s2, dtype=float) / -self.k_g
         u_pd = gain_scale * (g.kp * e + g.kd * vel_error) + u_ff + u_bias_rad
+        if g.ki <= 0.0:
+            u = np.minimum(np.maximum(u_pd, -g.u_max_rad), g.u_max_rad)
+            self.saturated = u != u_pd
+            return u
         k_i = gain_scale * g.ki
-        # Integrate near the reference's speed, unless the output is saturated and the error
-        # would push it further.
-        in_zone = np.abs(e) < g.i_zone_m
-        grows = in_zone & (np.abs(vel_error) < g.i_max_vel_error_m_s) if g.i_max_vel_error_m_s > 0.0 else in_zone
-        candidate = self.integral + np.where(grows, e * dt_s, 0.0)
+        # integrate, unless the output is saturated and the error would push it further
+        candidate = self.integral + e * dt_s
         u_raw = u_pd + k_i * candidate
         pushing_out = np.sign(e) * u_raw > g.u_max_rad   # past the limit on the error's side
         integral = np.where(pushing_out, self.integral, candidate)
-        if g.ki > 0:
-            i_max = g.i_limit_rad / g.ki
-            integral = np.minimum(np.maximum(integral, -i_max), i_max)
+        i_max = g.i_limit_rad / g.ki
+        integral = np.minimum(np.maximum(integral, -i_max), i_max)
         u_raw = u_pd + k_i * integral
         u = np.minimum(np.maximum(u_raw, -g.u_max_rad), g.u_max_rad)
         self.saturated = u != u_raw
-        if g.ki > 0 and g.antiwindup_time_s > 0 and np.count_nonzero(self.saturated):
+        if g.antiwindup_time_s > 0 and np.count_nonzero(self.saturated):
             # back-calculation: unwind only the integral that pushes into the limit, to zero at most
             into_limit = np.sign(u_raw - u)
-            unwind = self.saturated & in_zone & (integral * into_limit > 0)
+            unwind = self.saturated & (integral * into_limit > 0)
             bleed = np.abs(u_raw - u) / (k_i * g.antiwindup_time_s) * dt_s
             integral = np.where(unwind, into_limit * np.maximum(0.0, np.abs(integral) - bleed), integral)
         self.integral = integral

@@ -2,7 +2,7 @@
 
 /ball_state -> 6 joint positions on /forward_position_controller/commands
 (std_msgs/Float64MultiArray, JOINT_NAMES order), plus /plate_cmd and /ball_reference (see
-balance_node_base). Gains kp, ki, kd, i_limit_rad, i_zone_m, deadband_m,
+balance_node_base). Gains kp, ki, kd, i_limit_rad,
 antiwindup_time_s and the reference_* parameters can be changed at run time
 (`ros2 param set /ball_balance_controller kp 2.0`); config/pid.yaml holds the defaults we run.
 """

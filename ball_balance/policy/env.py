@@ -53,8 +53,8 @@ REFERENCES = ("stationary", "circle", "figure_eight")
 # label a function of what the controller sees
 TEACHERS = ("pid", "pd", "mpc", "pid_mpc", "mpc_far")
 # the PID parameters the residual is trained on top of (recorded in the model, checked at run time)
-BASE_PID_KEYS = ("kp", "ki", "kd", "i_limit_rad", "i_zone_m", "deadband_m", "antiwindup_time_s", "max_tilt_cmd_rad",
-                 "rolling_factor", "gravity_m_s2", "derivative_filter_s", "i_max_vel_error_m_s", "adapt_pid_feedback",
+BASE_PID_KEYS = ("kp", "ki", "kd", "i_limit_rad", "antiwindup_time_s", "max_tilt_cmd_rad",
+                 "rolling_factor", "gravity_m_s2", "derivative_filter_s", "adapt_pid_feedback",
                  "adapt_plant_gain", "adapt_disturbance", "adapt_time_constant_s", "adapt_window_s",
                  "actuation_delay_s", "estimate_actuation_delay")
 

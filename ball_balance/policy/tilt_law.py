@@ -13,7 +13,6 @@ tilt and counts it (`held_count`).
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import Mapping, Optional
 
@@ -132,8 +131,6 @@ def load_tilt_law(values: Mapping) -> PolicyTiltLaw:
     base_pid = runner.metadata.training.get("base_pid") or {}
     use_estimate = "adapt_plant_gain" in base_pid
     gains = control_config.pid_gains(values)
-    if "i_max_vel_error_m_s" not in base_pid:   # trained before the integral's speed gate: without it
-        gains = dataclasses.replace(gains, i_max_vel_error_m_s=0.0)
     return PolicyTiltLaw(runner, gains, control_config.k_g(values), values["policy_blend_s"],
                          bool(values.get("adapt_pid_feedback", False)), use_estimate, values["policy_max_delay_s"])
 

@@ -16,8 +16,8 @@ from ball_balance.policy.env import (
 def test_the_policy_is_trained_on_the_pid_nodes_pid():
     """One PID: the policy's parameters leave the PID to the schema's defaults, as the pid node."""
     policy, pid = controller_values("policy", "stationary"), controller_values("pid", "stationary")
-    for name in ("kp", "ki", "kd", "i_limit_rad", "i_zone_m", "deadband_m", "derivative_filter_s",
-                 "i_max_vel_error_m_s", "adapt_pid_feedback", "adapt_plant_gain", "adapt_disturbance",
+    for name in ("kp", "ki", "kd", "i_limit_rad", "antiwindup_time_s", "derivative_filter_s",
+                 "adapt_pid_feedback", "adapt_plant_gain", "adapt_disturbance",
                  "adapt_time_constant_s"):
         assert policy[name] == pid[name], name
     env = PlateBatch(2, seed=0, duration_s=1.0)

@@ -7,8 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ball_balance.benchmark.episode import controller_values
-from ball_balance.policy.env import BASE_PID_KEYS
 from ball_balance.policy.export import write_mlp_onnx
 from ball_balance.policy.observation import flat_names
 from controller_manager_py.controllers import policy_model as meta
@@ -53,12 +51,6 @@ def main():
     write_mlp_onnx(HERE / "absolute_joint.onnx", mlp(rng, 3, 4), 3, 1,
                    metadata([joint, "target", "target[1]"], [joint], kind="absolute", rate_hz=100.0, scale=1.0,
                             low=-1.0, high=1.0))
-    # the ball's layout at the configured rate, trained on the configured PID as it was before the
-    # integral's speed gate (its base_pid has no i_max_vel_error_m_s): the runtime runs it without the gate
-    values = controller_values("policy", "stationary")   # config/policy.yaml over the schema
-    before_gate = {**TRAINING, "base_pid": {k: values[k] for k in BASE_PID_KEYS if k != "i_max_vel_error_m_s"}}
-    write_mlp_onnx(HERE / "before_speed_gate.onnx", mlp(rng, half, 4), half, 2,
-                   metadata(names, tilt, rate_hz=values["control_rate_hz"], training=before_gate))
 
 
 if __name__ == "__main__":
