@@ -466,6 +466,24 @@ def test_a_push_is_not_taken_for_a_change_of_the_disturbance():
     assert np.all(np.abs(d) < 0.01)
 
 
+def test_a_push_just_after_an_outlier_began_a_hold_is_still_a_push():
+    # the outlier starts the hold and the jump test; the push two frames later needs its own onset
+    kf = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=20.0, estimate_input_gain=False))
+    rng = np.random.default_rng(0)
+    p, v = np.zeros(2), np.zeros(2)
+    for k in range(8 * 30):
+        t = k / 30
+        if k == 120:
+            v = v + np.array([0.15, 0.0])
+        known = -9.0 * p - 4.0 * v
+        p, v = p + v / 30 + 0.5 * known / 900, v + known / 30
+        z = p + rng.normal(0.0, 0.0005, 2) + (np.array([0.1, 0.1]) if k == 118 else 0.0)
+        kf.step(t, tuple(z), tuple(known))
+    assert kf.gated_count >= 1 and kf.maneuver_count >= 1
+    assert kf.disturbance_changes == 0
+    assert np.all(np.abs(kf.disturbance_m_s2) < 0.01)
+
+
 def test_a_plate_off_level_from_the_start_is_found_as_a_change():
     # d starts at 0, known; the offset shows as a change once the track's consistency is known
     kf = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=20.0, estimate_input_gain=False))
