@@ -778,7 +778,8 @@ class BallKalman:
                 nis = self._excess[2] if self._confirming() else self.nis
                 if nis <= MODEL_AGREED_NIS:   # a model that agreed until the push began
                     self._hold_until = t + self.maneuver_hold_s
-                    if self.disturbance_state and accel is not None and self._jump_test is None:
+                    if self.disturbance_state and accel is not None and self._jump_test is None \
+                            and self._settled(t):
                         self._jump_test = _JumpTest(self.kf, list(self._innovations), self._transition, t,
                                                     self.d_index)
                 self._widen_last_prediction()
@@ -837,8 +838,7 @@ class BallKalman:
         if t - self._window_start_s < DISTURBANCE_CHANGE_WINDOW_S:
             return
         window_start_s, nis_before = window[0].t, window[0].nis
-        settle_s = CONSISTENCY_SETTLE_TIME_CONSTANTS * self.model_mismatch_time_constant_s
-        if nis_before > MODEL_AGREED_NIS or window_start_s - self._track_start_s < settle_s:
+        if nis_before > MODEL_AGREED_NIS or not self._settled(window_start_s):
             return                    # the model did not agree: a bias is its own error
         total = np.sum([frame.whitened for frame in window], axis=0)
         if float(total @ total) / len(window) <= DISTURBANCE_CHANGE_CHI2:
@@ -850,6 +850,13 @@ class BallKalman:
         self.disturbance_changes += 1
         window.clear()
         self._window_start_s = None
+
+    def _settled(self, t: float) -> bool:
+        """Whether the running consistency at t describes the detections rather than its start
+        value: the track is CONSISTENCY_SETTLE_TIME_CONSTANTS of its time constant old. Until
+        then neither a change of d nor a force behind a push is looked for."""
+        settle_s = CONSISTENCY_SETTLE_TIME_CONSTANTS * self.model_mismatch_time_constant_s
+        return t - self._track_start_s >= settle_s
 
     def _decide_jump(self, t: float, z: Tuple[float, float]) -> bool:
         """Fold detection z into the jump test. When it finds a change of d, the reference
