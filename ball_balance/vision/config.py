@@ -105,7 +105,7 @@ TRACKER_SCHEMA = (
     Param("cmd_accel_noise_m_s2", 0.05,
           "white-noise acceleration (1 sigma) of the process model while a commanded tilt is known "
           "(accel_noise_m_s2 without one)", "m/s^2", 1e-4, 1000.0),
-    Param("disturbance_time_constant_s", 10.0,
+    Param("disturbance_time_constant_s", 20.0,
           "the filter also estimates a constant acceleration of the ball besides the commanded tilt's "
           "(a plate off level, a force on the ball): a random walk over about this time constant between "
           "changes that a test on the innovations finds (docs/tracker.md), published as a plate-level "
