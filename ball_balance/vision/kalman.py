@@ -162,40 +162,21 @@ def open_disturbance(P: np.ndarray, T, d_index: int) -> None:
 def estimate_change(frames, d_index: int) -> Optional[np.ndarray]:
     """The state correction for the change of d that a change test's window shows, or None.
     `frames` are the window's ChangeFrame in order, the current frame last (its innovation is
-    not used; its transition takes the correction to its prediction). For a change nu of d at
-    frame i, the innovations that follow are gamma_j = G_j nu + noise, with the signature
-    G_j = H (B_j - A_j): B_j is how the change moves the true state (F B per prediction), A_j
-    how much of it the filter took up (A + K G per update, F A per prediction). nu is the
-    estimate under the change's prior N(0, DISTURBANCE_STD_M_S2^2 I) given these, and i the
-    frame of the largest evidence (generalised likelihood ratio, Willsky and Jones). The
-    correction is (B - A) nu; the caller opens the covariance as for a change of unknown size
-    (open_disturbance), so the frames that follow still move d."""
-    n = frames[0].transition.shape[0]
-    M = np.zeros((n, 2))
-    M[d_index, 0] = M[d_index + 1, 1] = 1.0
-    H = np.eye(2, n)
-    prior_information = np.eye(2) / DISTURBANCE_STD_M_S2 ** 2
+    not used; its transition takes the correction to its prediction). For each frame the
+    change may have happened in the prediction into, a _Jump of d is fitted to the
+    innovations since; the onset of the largest evidence under the change's prior
+    N(0, DISTURBANCE_STD_M_S2^2 I) is taken (generalised likelihood ratio, Willsky and Jones),
+    and the correction is that jump's posterior mean. The caller opens the covariance as for a
+    change of unknown size (open_disturbance), so the frames that follow still move d."""
+    columns = np.zeros((frames[0].transition.shape[0], 2))
+    columns[d_index, 0] = columns[d_index + 1, 1] = 1.0
+    transitions = [frame.transition for frame in frames]
     seen = frames[:-1]
-    best = None
-    for i in range(len(seen)):
-        B = seen[i].transition @ M     # the change happened in the prediction into frame i
-        A = np.zeros((n, 2))
-        information = prior_information.copy()
-        score = np.zeros(2)
-        for j in range(i, len(seen)):
-            G = H @ (B - A)
-            S_inv_G = np.linalg.solve(seen[j].S, G)
-            score += S_inv_G.T @ seen[j].innovation
-            information += G.T @ S_inv_G
-            A = A + seen[j].K @ G
-            transition = frames[j + 1].transition
-            B, A = transition @ B, transition @ A
-        covariance = np.linalg.inv(information)
-        # log evidence of a change at frame i against none (up to a constant)
-        evidence = float(score @ covariance @ score) - math.log(np.linalg.det(information) * DISTURBANCE_STD_M_S2 ** 4)
-        if best is None or evidence > best[0]:
-            best = (evidence, (B - A) @ (covariance @ score))
-    return None if best is None else best[1]
+    jumps = [_Jump.since(i, seen, transitions, columns) for i in range(len(seen))]
+    if not jumps:
+        return None
+    best = max(jumps, key=lambda jump: jump.evidence(DISTURBANCE_STD_M_S2))
+    return best.posterior(DISTURBANCE_STD_M_S2)[0]
 
 
 class _Jump:
@@ -210,6 +191,18 @@ class _Jump:
         self.information = np.zeros((2, 2))
         self.score = np.zeros(2)
         self._signature = None
+
+    @classmethod
+    def since(cls, i: int, frames, transitions, columns: np.ndarray) -> _Jump:
+        """The jump of `columns` in the prediction into frames[i], fitted to frames[i:] (each
+        with its update's gain); transitions[j] is the prediction into frame j, one more than
+        the frames: the last takes the jump to the frame after them."""
+        jump = cls(frames[i].t, transitions[i] @ columns)
+        for j in range(i, len(frames)):
+            jump.add(frames[j].innovation, frames[j].S)
+            jump.take_up(frames[j].K)
+            jump.predict(transitions[j + 1])
+        return jump
 
     def predict(self, F: np.ndarray) -> None:
         self.B, self.A = F @ self.B, F @ self.A
@@ -231,6 +224,13 @@ class _Jump:
         if np.linalg.det(self.information) <= 0.0:
             return 0.0
         return float(self.score @ np.linalg.solve(self.information, self.score))
+
+    def evidence(self, prior_std: float) -> float:
+        """Log evidence of the jump against none under its prior N(0, prior_std^2 I), up to a
+        constant."""
+        information = self.information + np.eye(2) / prior_std ** 2
+        return float(self.score @ np.linalg.solve(information, self.score)) \
+            - math.log(np.linalg.det(information) * prior_std ** 4)
 
     def posterior(self, prior_std: float):
         """The jump's effect on the state now, given the frames since its onset and its prior
@@ -257,14 +257,8 @@ class _JumpTest:
         self.force_columns[d_index, 0] = self.force_columns[d_index + 1, 1] = 1.0
         self.push_columns[2, 0] = self.push_columns[3, 1] = 1.0
         transitions = [frame.transition for frame in window] + [transition]
-        self.forces, self.pushes = [], []
-        for i, frame in enumerate(window):
-            self._add_onset(frame.t, transitions[i])
-            for j in range(i, len(window)):     # the window's frames since the onset
-                for jump in (self.forces[-1], self.pushes[-1]):
-                    jump.add(window[j].innovation, window[j].S)
-                    jump.take_up(window[j].K)
-                    jump.predict(transitions[j + 1])
+        self.forces = [_Jump.since(i, window, transitions, self.force_columns) for i in range(len(window))]
+        self.pushes = [_Jump.since(i, window, transitions, self.push_columns) for i in range(len(window))]
         self._add_onset(t, transition)
 
     def _add_onset(self, t: float, transition: np.ndarray) -> None:
