@@ -12,10 +12,10 @@ ki > 0 it has the usual anti-windup: conditional integration (it does not grow w
 output is saturated in the direction of the error), back-calculation (while saturated, the
 part of the integral that pushes into the limit bleeds off at (u_raw - u_sat) / (ki * t_aw),
 toward zero and no further, never charging it against the error) and a clamp
-|ki I| <= i_limit. The D term's velocity error passes a first-order low-pass (`derivative_filter_s`): the
-tracker's Kalman velocity is noisy enough that, unfiltered, it shook the plate (tilt-rate
-RMS 3x the MPC's), pulled the online plant estimate off through the loop and cost
-1-2 mm on the circle and 0.3-0.7 s of push recovery (docs/control.md).
+|ki I| <= i_limit. The D term's velocity error passes a first-order low-pass
+(`derivative_filter_s`): the tracker's Kalman velocity is noisy enough that, unfiltered, it
+shook the plate (tilt-rate RMS 3x the MPC's), pulled the online plant estimate off through
+the loop and cost 1-2 mm on the circle and 0.3-0.7 s of push recovery (docs/control.md).
 
 The law is written once, over arrays (`Pid`): every element is an independent axis, a
 plate's two at run time (`PlatePid`), a batch of plates' in the training plant

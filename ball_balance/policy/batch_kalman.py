@@ -24,21 +24,20 @@ import numpy as np
 
 from ball_balance.vision.kalman import (
     CHI2_1_MEDIAN,
-    CONSISTENCY_SETTLE_TIME_CONSTANTS,
     DISTURBANCE_CHANGE_CHI2,
     DISTURBANCE_CHANGE_WINDOW_S,
     MODEL_AGREED_NIS,
     ChangeFrame,
     KalmanConfig,
     add_white_acceleration,
+    consistency_settle_s,
     disturbance_jerk,
     disturbance_rows,
     estimate_change,
     open_disturbance,
 )
 
-GAIN = 4          # the state's index of s
-D_INDEX = 5       # ... and of d_x, d_y with the disturbance state
+D_INDEX = 5       # the state's index of d_x (d_y next) with the disturbance state (s is 4)
 
 
 class BatchBallKalman:
@@ -235,9 +234,10 @@ class BatchBallKalman:
                                     self.nis)
             ok = run & (distance <= gate)
             if self.disturbance_state and ok.any():
-                appended = self._find_disturbance_change(t, ok, y, accel is not None)
-                y = z - self.x[:, :2]         # a change found corrected the state
-                inv, _ = self._innovation(y)
+                appended, changed = self._find_disturbance_change(t, ok, y, accel is not None)
+                if changed:                   # a change found corrected the state
+                    y = z - self.x[:, :2]
+                    inv, _ = self._innovation(y)
             if ok.any():
                 i = np.flatnonzero(ok)
                 k = np.einsum("bij,bjk->bik", p[i, :, :2], inv[i])            # P H^T S^-1
@@ -263,16 +263,16 @@ class BatchBallKalman:
     def _find_disturbance_change(self, t: float, ok, y, known: bool):
         """BallKalman._find_disturbance_change for the balls `ok` (a detection within the gate,
         innovation y (b, 2)), before their update: returns the balls whose frame joined their
-        window (their update's gain completes it)."""
+        window (their update's gain completes it) and whether any ball's state was corrected."""
         w = self.window
         if not known:
             w.clear(ok)
-            return np.zeros(self.b, bool)
+            return np.zeros(self.b, bool), False
         pushed = t <= self.hold_until
         w.clear(ok & pushed)
         add = ok & ~pushed
         if not add.any():
-            return add
+            return add, False
         s = self.p[:, :2, :2] + self.r[:, None, None] * np.eye(2)
         whitened = np.linalg.solve(np.linalg.cholesky(s), y[..., None])[..., 0]
         w.append(add, t, whitened, self.nis, y, s, self.transition)
@@ -280,10 +280,10 @@ class BatchBallKalman:
         w.start = np.where(add & np.isnan(w.start), t, w.start)
         full = add & (t - w.start >= DISTURBANCE_CHANGE_WINDOW_S)
         first_t, nis_before = w.oldest("t"), w.oldest("nis")
-        settle_s = CONSISTENCY_SETTLE_TIME_CONSTANTS * self.cfg.model_mismatch_time_constant_s
+        settle_s = consistency_settle_s(self.cfg.model_mismatch_time_constant_s)
         test = full & (nis_before <= MODEL_AGREED_NIS) & (first_t - self.track_start >= settle_s)
         if not test.any():
-            return add
+            return add, False
         total = w.sum_whitened()
         fire = test & (np.einsum("bi,bi->b", total, total) / np.maximum(w.n, 1) > DISTURBANCE_CHANGE_CHI2)
         for i in np.flatnonzero(fire):
@@ -293,7 +293,7 @@ class BatchBallKalman:
             open_disturbance(self.p[i], (t - first_t[i]) / 2.0, D_INDEX)
         self.disturbance_changes += fire
         w.clear(fire)
-        return add & ~fire
+        return add & ~fire, bool(fire.any())
 
     def _confirmed_pushes(self, seen, beyond, y, distance):
         """BallKalman._push_seen for the balls with a detection `seen` (`beyond` maneuver_sigma):

@@ -135,6 +135,19 @@ class ChangeFrame:
     K: Optional[np.ndarray] = None   # the update's gain, once made
 
 
+def consistency_settle_s(time_constant_s: float) -> float:
+    """How old a track must be before its running consistency (time constant
+    `model_mismatch_time_constant_s`) describes the detections rather than its start value."""
+    return CONSISTENCY_SETTLE_TIME_CONSTANTS * time_constant_s
+
+
+def state_pair(n: int, first: int) -> np.ndarray:
+    """The columns (n, 2) that pick the states first and first + 1 (an x and y pair)."""
+    columns = np.zeros((n, 2))
+    columns[first, 0] = columns[first + 1, 1] = 1.0
+    return columns
+
+
 def disturbance_rows(d_index: int) -> np.ndarray:
     """The state indices (x, vx, d_x) and (y, vy, d_y) of a filter whose d starts at d_index."""
     return np.array([[0, 2, d_index], [1, 3, d_index + 1]])
@@ -168,8 +181,7 @@ def estimate_change(frames, d_index: int) -> Optional[np.ndarray]:
     N(0, DISTURBANCE_STD_M_S2^2 I) is taken (generalised likelihood ratio, Willsky and Jones),
     and the correction is that jump's posterior mean. The caller opens the covariance as for a
     change of unknown size (open_disturbance), so the frames that follow still move d."""
-    columns = np.zeros((frames[0].transition.shape[0], 2))
-    columns[d_index, 0] = columns[d_index + 1, 1] = 1.0
+    columns = state_pair(frames[0].transition.shape[0], d_index)
     transitions = [frame.transition for frame in frames]
     seen = frames[:-1]
     jumps = [_Jump.since(i, seen, transitions, columns) for i in range(len(seen))]
@@ -253,9 +265,7 @@ class _JumpTest:
     def __init__(self, kf: KalmanFilter, window, transition: np.ndarray, t: float, d_index: int):
         self.reference = copy.deepcopy(kf)
         n = kf.x.shape[0]
-        self.force_columns, self.push_columns = np.zeros((n, 2)), np.zeros((n, 2))
-        self.force_columns[d_index, 0] = self.force_columns[d_index + 1, 1] = 1.0
-        self.push_columns[2, 0] = self.push_columns[3, 1] = 1.0
+        self.force_columns, self.push_columns = state_pair(n, d_index), state_pair(n, 2)   # d, (vx, vy)
         transitions = [frame.transition for frame in window] + [transition]
         self.forces = [_Jump.since(i, window, transitions, self.force_columns) for i in range(len(window))]
         self.pushes = [_Jump.since(i, window, transitions, self.push_columns) for i in range(len(window))]
@@ -791,8 +801,7 @@ class BallKalman:
                     if self._innovations and self._innovations[-1].K is None:
                         self._innovations[-1].K = self.kf.K.copy()
                     self._transition = np.eye(self.dim)
-                if self.gain_state:
-                    self.kf.x[4] = min(max(self.kf.x[4], self.gain_bounds[0]), self.gain_bounds[1])
+                self._clamp_gain(self.kf)
                 self.coasted = 0
                 return self._estimate(fresh=True, valid=True)
             gated = True
@@ -845,18 +854,22 @@ class BallKalman:
         window.clear()
         self._window_start_s = None
 
+    def _clamp_gain(self, kf: KalmanFilter) -> None:
+        """Keep kf's input gain s within input_gain_bounds (after an update)."""
+        if self.gain_state:
+            kf.x[4] = min(max(kf.x[4], self.gain_bounds[0]), self.gain_bounds[1])
+
     def _settled(self, t: float) -> bool:
         """Whether the running consistency at t describes the detections rather than its start
         value: the track is CONSISTENCY_SETTLE_TIME_CONSTANTS of its time constant old. Until
         then neither a change of d nor a force behind a push is looked for."""
-        settle_s = CONSISTENCY_SETTLE_TIME_CONSTANTS * self.model_mismatch_time_constant_s
-        return t - self._track_start_s >= settle_s
+        return t - self._track_start_s >= consistency_settle_s(self.model_mismatch_time_constant_s)
 
     def _decide_jump(self, t: float, z: Tuple[float, float]) -> bool:
         """Fold detection z into the jump test. When it finds a change of d, the reference
-        filter, corrected by the change's best fit and its covariance opened from the change's
-        onset (open_disturbance), becomes the filter, the push's hold ends, and True is
-        returned (z is in it). When it finds a push, the test ends and the hold goes on."""
+        filter, with the change's posterior (its mean and covariance given the frames since its
+        onset, under the 0.3 m/s^2 prior) added, becomes the filter, the push's hold ends, and
+        True is returned (z is in it). When it finds a push, the test ends and the hold goes on."""
         decision = self._jump_test.update(np.asarray(z, dtype=np.float64))
         if decision is None:
             return False
@@ -866,8 +879,7 @@ class BallKalman:
         kf = test.reference
         mean, covariance = test.best_force().posterior(DISTURBANCE_STD_M_S2)
         kf.x, kf.P = kf.x + mean, kf.P + covariance
-        if self.gain_state:
-            kf.x[4] = min(max(kf.x[4], self.gain_bounds[0]), self.gain_bounds[1])
+        self._clamp_gain(kf)
         self.kf = kf
         self._hold_until = -np.inf
         self._innovations.clear()
