@@ -47,7 +47,8 @@ REFERENCE_SCHEMA = [
 
 PID_GAINS_SCHEMA = [
     Param("kp", PidGains.kp, "proportional gain", "rad/m", 0.0, 20.0, user_facing=True),
-    Param("ki", PidGains.ki, "integral gain", "rad/(m s)", 0.0, 20.0, user_facing=True),
+    Param("ki", PidGains.ki, "integral gain (0: none; the tracker's disturbance state removes a constant "
+          "offset)", "rad/(m s)", 0.0, 20.0),
     Param("kd", PidGains.kd, "derivative gain on the measured velocity", "rad/(m/s)", 0.0, 20.0, user_facing=True),
     Param("i_limit_rad", PidGains.i_limit_rad, "clamp on ki*integral", "rad", 0.0, 0.5),
     Param("antiwindup_time_s", PidGains.antiwindup_time_s, "back-calculation time constant", "s", 0.0, 10.0),
@@ -58,14 +59,10 @@ PID_GAINS_SCHEMA = [
 MPC_SCHEMA = [
     Param("mpc_horizon", MpcConfig.horizon, "prediction horizon N (steps of one control period)", "", 2, 200,
           read_only=True, user_facing=True),
-    Param("mpc_q_pos", MpcConfig.q_pos, "weight on position error", "1/m^2", 0.0, 1e6, read_only=True,
-          user_facing=True),
-    Param("mpc_q_vel", MpcConfig.q_vel, "weight on velocity error", "1/(m/s)^2", 0.0, 1e6, read_only=True,
-          user_facing=True),
-    Param("mpc_r_u", MpcConfig.r_u, "weight on tilt minus feed-forward", "1/rad^2", 1e-6, 1e6, read_only=True,
-          user_facing=True),
-    Param("mpc_r_du", MpcConfig.r_du, "weight on tilt change per step", "1/rad^2", 0.0, 1e6, read_only=True,
-          user_facing=True),
+    Param("mpc_q_pos", MpcConfig.q_pos, "weight on position error", "1/m^2", 0.0, 1e6, read_only=True),
+    Param("mpc_q_vel", MpcConfig.q_vel, "weight on velocity error", "1/(m/s)^2", 0.0, 1e6, read_only=True),
+    Param("mpc_r_u", MpcConfig.r_u, "weight on tilt minus feed-forward", "1/rad^2", 1e-6, 1e6, read_only=True),
+    Param("mpc_r_du", MpcConfig.r_du, "weight on tilt change per step", "1/rad^2", 0.0, 1e6, read_only=True),
     Param("max_tilt_rate_rad_s", MpcConfig.du_max_rad_s, "tilt-rate constraint", "rad/s", 0.01, 20.0,
           read_only=True),
 ]
