@@ -12,30 +12,24 @@ survives them). filterpy's update (Joseph form) is reproduced step for step; a t
 batch against BallKalman on the same detections.
 
 With `disturbance_time_constant_s` > 0 the state also holds d = (d_x, d_y), the acceleration
-the known one does not explain, with BallKalman's change test over DISTURBANCE_CHANGE_WINDOW_S
-and its estimate of a change (vision/kalman.py estimate_change and open_disturbance, the same
-functions). BallKalman's jump test after a push's detection (was it a push or a force that
-started or turned?) is left out: the training plant's plate bias is constant from the start
-of an episode, and a push there is always a push.
+the known one does not explain, with BallKalman's change test and its estimate of a change
+(vision/disturbance.py ChangeTest: the same code, over the batch). BallKalman's jump test
+after a push's detection (was it a push or a force that started or turned?) is left out: the
+training plant's plate bias is constant from the start of an episode, and a push there is
+always a push.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ball_balance.vision.kalman import (
-    CHI2_1_MEDIAN,
-    DISTURBANCE_CHANGE_CHI2,
-    DISTURBANCE_CHANGE_WINDOW_S,
+from ball_balance.vision.disturbance import (
     MODEL_AGREED_NIS,
-    ChangeFrame,
-    KalmanConfig,
-    add_white_acceleration,
+    ChangeTest,
     consistency_settle_s,
     disturbance_jerk,
     disturbance_rows,
-    estimate_change,
-    open_disturbance,
 )
+from ball_balance.vision.kalman import CHI2_1_MEDIAN, KalmanConfig, add_white_acceleration
 
 D_INDEX = 5       # the state's index of d_x (d_y next) with the disturbance state (s is 4)
 
@@ -75,7 +69,7 @@ class BatchBallKalman:
             else np.maximum(cfg.meas_noise_m, fixed_meas_noise_m)
         self.r = r0 ** 2
         # d (BallKalman's disturbance state): a random walk of jerk density q_d, its value kept
-        # over dropped tracks; the change test's window per ball (_ChangeWindow)
+        # over dropped tracks; the change test, a window per ball (disturbance.ChangeTest)
         self.disturbance_state = cfg.disturbance_time_constant_s > 0.0
         self.dim = D_INDEX + 2 if self.disturbance_state else D_INDEX
         self.q_d = (cfg.cmd_accel_noise_m_s2 / cfg.disturbance_time_constant_s) ** 2 if self.disturbance_state else 0.0
@@ -83,7 +77,7 @@ class BatchBallKalman:
         self.saved_d_var = np.zeros(batch)
         self.transition = np.broadcast_to(np.eye(self.dim), (batch, self.dim, self.dim)).copy()
         self.track_start = np.zeros(batch)
-        self.window = _ChangeWindow(batch, self.dim, int(np.ceil(DISTURBANCE_CHANGE_WINDOW_S * 60)) + 2)
+        self.window = ChangeTest(batch, self.dim, D_INDEX, consistency_settle_s(cfg.model_mismatch_time_constant_s))
         self.disturbance_changes = np.zeros(batch, int)
         self.x = np.zeros((batch, self.dim))
         self.p = np.zeros((batch, self.dim, self.dim))
@@ -274,26 +268,11 @@ class BatchBallKalman:
         if not add.any():
             return add, False
         s = self.p[:, :2, :2] + self.r[:, None, None] * np.eye(2)
-        whitened = np.linalg.solve(np.linalg.cholesky(s), y[..., None])[..., 0]
-        w.append(add, t, whitened, self.nis, y, s, self.transition)
-        w.drop_older(add, t, DISTURBANCE_CHANGE_WINDOW_S)
-        w.start = np.where(add & np.isnan(w.start), t, w.start)
-        full = add & (t - w.start >= DISTURBANCE_CHANGE_WINDOW_S)
-        first_t, nis_before = w.oldest("t"), w.oldest("nis")
-        settle_s = consistency_settle_s(self.cfg.model_mismatch_time_constant_s)
-        test = full & (nis_before <= MODEL_AGREED_NIS) & (first_t - self.track_start >= settle_s)
-        if not test.any():
-            return add, False
-        total = w.sum_whitened()
-        fire = test & (np.einsum("bi,bi->b", total, total) / np.maximum(w.n, 1) > DISTURBANCE_CHANGE_CHI2)
-        for i in np.flatnonzero(fire):
-            jump = estimate_change(w.frames(i), D_INDEX)
-            if jump is not None:
-                self.x[i] += jump
-            open_disturbance(self.p[i], (t - first_t[i]) / 2.0, D_INDEX)
-        self.disturbance_changes += fire
-        w.clear(fire)
-        return add & ~fire, bool(fire.any())
+        changed = w.test(t, add, y, s, self.nis, self.transition, self.track_start)
+        for i in np.flatnonzero(changed):
+            w.correct(i, t, self.x[i], self.p[i])
+        self.disturbance_changes += changed
+        return add & ~changed, bool(changed.any())
 
     def _confirmed_pushes(self, seen, beyond, y, distance):
         """BallKalman._push_seen for the balls with a detection `seen` (`beyond` maneuver_sigma):
@@ -375,75 +354,3 @@ class BatchBallKalman:
         if self.gain_state:
             p[:, 4, 4] = np.minimum(p[:, 4, 4], self.gain_var_max)
         self.p[i] = p
-
-
-class _ChangeWindow:
-    """The change test's window per ball (BallKalman._innovations): a ring of the frames'
-    stamps, whitened innovations, running consistencies, innovations, their covariances, the
-    transitions since the previous update and the updates' gains, `n` frames from `head`. It
-    doubles when a ball's window would overflow it (a faster camera)."""
-
-    FIELDS = ("t", "whitened", "nis", "innovation", "S", "transition", "K")
-
-    def __init__(self, batch: int, dim: int, capacity: int):
-        self.b, self.dim, self.cap = batch, dim, capacity
-        self.t = np.full((batch, capacity), np.nan)
-        self.whitened = np.zeros((batch, capacity, 2))
-        self.nis = np.zeros((batch, capacity))
-        self.innovation = np.zeros((batch, capacity, 2))
-        self.S = np.zeros((batch, capacity, 2, 2))
-        self.transition = np.zeros((batch, capacity, dim, dim))
-        self.K = np.zeros((batch, capacity, dim, 2))
-        self.head = np.zeros(batch, int)
-        self.n = np.zeros(batch, int)
-        self.start = np.full(batch, np.nan)    # when the window began to fill (nan: not yet)
-
-    def clear(self, mask) -> None:
-        self.n[mask] = 0
-        self.start[mask] = np.nan
-
-    def _grow(self) -> None:
-        order = (self.head[:, None] + np.arange(self.cap)) % self.cap     # oldest first
-        rows = np.arange(self.b)[:, None]
-        for name in self.FIELDS:
-            old = getattr(self, name)[rows, order]
-            setattr(self, name, np.concatenate([old, np.zeros_like(old)], axis=1))
-        self.head[:] = 0
-        self.cap *= 2
-
-    def append(self, mask, t, whitened, nis, innovation, S, transition) -> None:
-        if (self.n[mask] >= self.cap).any():
-            self._grow()
-        i = np.flatnonzero(mask)
-        at = (self.head[i] + self.n[i]) % self.cap
-        self.t[i, at], self.whitened[i, at], self.nis[i, at] = t, whitened[i], nis[i]
-        self.innovation[i, at], self.S[i, at], self.transition[i, at] = innovation[i], S[i], transition[i]
-        self.n[i] += 1
-
-    def set_last_gain(self, mask, K) -> None:
-        """The update's gain K (m, dim, 2) of the frames just appended for the balls in mask."""
-        i = np.flatnonzero(mask)
-        self.K[i, (self.head[i] + self.n[i] - 1) % self.cap] = K
-
-    def drop_older(self, mask, t: float, span_s: float) -> None:
-        """Drop the frames more than span_s older than t."""
-        while True:
-            old = mask & (self.n > 0) & (t - self.oldest("t") > span_s)
-            if not old.any():
-                return
-            self.head = np.where(old, (self.head + 1) % self.cap, self.head)
-            self.n -= old
-
-    def oldest(self, name: str) -> np.ndarray:
-        return getattr(self, name)[np.arange(self.b), self.head]
-
-    def sum_whitened(self) -> np.ndarray:
-        order = (self.head[:, None] + np.arange(self.cap)) % self.cap
-        inside = np.arange(self.cap)[None, :] < self.n[:, None]
-        return np.einsum("bk,bki->bi", inside, self.whitened[np.arange(self.b)[:, None], order])
-
-    def frames(self, i: int) -> list:
-        """Ball i's window as BallKalman keeps it (its ChangeFrame, oldest first)."""
-        at = (self.head[i] + np.arange(self.n[i])) % self.cap
-        return [ChangeFrame(self.t[i, k], self.whitened[i, k], self.nis[i, k], self.innovation[i, k], self.S[i, k],
-                             self.transition[i, k], self.K[i, k]) for k in at]

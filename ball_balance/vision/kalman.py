@@ -53,9 +53,10 @@ moves the ball beyond the noise within a frame and one detection tells, so waiti
 second only brakes it a frame later. With the disturbance state a large change of d looks
 like a push in its first frames. So from a push's detection on, a reference filter runs with
 the model's own process noise, and the detections it sees are explained both ways, as a jump
-of the ball's velocity and as a jump of d, each at the onset that fits it best (_JumpTest).
-As soon as one explanation is better by the change test's bound, it stands: a change of d
-ends the hold and the reference filter, corrected by the change, takes over.
+of the ball's velocity and as a jump of d, each at the onset that fits it best
+(vision/disturbance.py JumpTest). As soon as one explanation is better by the change test's
+bound, it stands: a change of d ends the hold and the reference filter, corrected by the
+change, takes over.
 
 Delay: the plate reaches a command some time after the tracker receives it (the arm's latency
 and servo lag, 0.03-0.2 s in the benchmark's latency domains); the known acceleration and the
@@ -71,7 +72,6 @@ estimates describe the camera and the plant, not the track: they survive a dropp
 """
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 from collections import deque
@@ -84,28 +84,18 @@ from filterpy.kalman import KalmanFilter
 from ball_balance.control.prediction import StampedDelayEstimator
 from ball_balance.rotations import matrix_to_rotvec
 from ball_balance.vision.config import TRACKER_SCHEMA
+from ball_balance.vision.disturbance import (
+    DISTURBANCE_STD_M_S2,
+    MODEL_AGREED_NIS,
+    ChangeTest,
+    JumpTest,
+    consistency_settle_s,
+    disturbance_jerk,
+    disturbance_rows,
+)
 
 CHI2_1_MEDIAN = 0.45493642311957283   # median of a chi-square variable with one degree of freedom
-# the running innovation consistency (1 when the model is right) at most this: the model agreed
-# with the detections. Only then is a detection beyond maneuver_sigma a push, or a bias of the
-# innovations a change of d: a model that has disagreed for a while (a delay or a gain still
-# being learned) is seeing its own error; the constant-velocity filter's velocity cost 1 mm in
-# extreme_dr when it took over there too, and d taken for such an error shook the ball
-MODEL_AGREED_NIS = 1.0
-# the running consistency starts at 1 with a track; after this many of its time constants its
-# start weighs 5 % and it describes the detections
-CONSISTENCY_SETTLE_TIME_CONSTANTS = 3.0
 _TRACKER_DEFAULTS = {p.name: p.default for p in TRACKER_SCHEMA}   # KalmanConfig's defaults
-DISTURBANCE_STD_M_S2 = 0.3   # 1-sigma of a change of d: a force up to about 3 degrees of tilt
-# A change of d (a force that starts, turns or ends) shows as innovations that keep one sign:
-# their whitened sum over DISTURBANCE_CHANGE_WINDOW_S, squared and over its frames, is
-# chi-square with 2 degrees of freedom while the model holds; beyond DISTURBANCE_CHANGE_CHI2
-# (a 0.1 % false alarm per test) d has changed by an unknown amount (1-sigma
-# DISTURBANCE_STD_M_S2) about half a window ago, and the filter's covariance says so. d starts
-# at 0, known: a plate off level from the start is found as such a change, once the gain is
-# learned, instead of being learned together with a gain that is still wrong
-DISTURBANCE_CHANGE_WINDOW_S = 0.3
-DISTURBANCE_CHANGE_CHI2 = 13.815510557964274
 
 
 def add_white_acceleration(M: np.ndarray, q, dt) -> None:
@@ -122,188 +112,6 @@ def add_white_acceleration(M: np.ndarray, q, dt) -> None:
     M[..., 2, 2] += vv
     M[..., 3, 3] += vv
 
-
-@dataclass
-class ChangeFrame:
-    """A detection in the change test's window: what the test and the change's estimate need."""
-    t: float                     # stamp [s]
-    whitened: np.ndarray         # the innovation whitened by its covariance
-    nis: float                   # the running consistency before it
-    innovation: np.ndarray       # z - H x of the prediction [m]
-    S: np.ndarray                # its covariance
-    transition: np.ndarray       # the product of the F's since the previous update
-    K: Optional[np.ndarray] = None   # the update's gain, once made
-
-
-def consistency_settle_s(time_constant_s: float) -> float:
-    """How old a track must be before its running consistency (time constant
-    `model_mismatch_time_constant_s`) describes the detections rather than its start value."""
-    return CONSISTENCY_SETTLE_TIME_CONSTANTS * time_constant_s
-
-
-def state_pair(n: int, first: int) -> np.ndarray:
-    """The columns (n, 2) that pick the states first and first + 1 (an x and y pair)."""
-    columns = np.zeros((n, 2))
-    columns[first, 0] = columns[first + 1, 1] = 1.0
-    return columns
-
-
-def disturbance_rows(d_index: int) -> np.ndarray:
-    """The state indices (x, vx, d_x) and (y, vy, d_y) of a filter whose d starts at d_index."""
-    return np.array([[0, 2, d_index], [1, 3, d_index + 1]])
-
-
-def disturbance_jerk(q_d, dt) -> np.ndarray:
-    """The process noise (..., 3, 3) that a random walk of d with jerk density q_d adds over dt
-    to (x, vx, d_x) (likewise y); q_d and dt scalars, or one value per filter of a batch."""
-    q_d, dt = np.asarray(q_d, dtype=float)[..., None, None], np.asarray(dt, dtype=float)[..., None, None]
-    return q_d * np.array([[1 / 20, 1 / 8, 1 / 6], [1 / 8, 1 / 3, 1 / 2], [1 / 6, 1 / 2, 1.0]]) \
-        * dt ** np.array([[5, 4, 3], [4, 3, 2], [3, 2, 1]])
-
-
-def open_disturbance(P: np.ndarray, T, d_index: int) -> None:
-    """Widen the covariance P (n, n), or a batch of them (b, n, n) with T (b,), by that of a
-    change of d of 1-sigma DISTURBANCE_STD_M_S2 that happened T ago, with the velocity and
-    position it has moved since."""
-    T = np.asarray(T, dtype=float)[..., None]
-    J = np.concatenate([T * T / 2.0, T, np.ones_like(T)], axis=-1)        # (..., 3)
-    rows = disturbance_rows(d_index)
-    P[..., rows[:, :, None], rows[:, None, :]] += DISTURBANCE_STD_M_S2 ** 2 * (J[..., None, :, None]
-                                                                              * J[..., None, None, :])
-
-
-def estimate_change(frames, d_index: int) -> Optional[np.ndarray]:
-    """The state correction for the change of d that a change test's window shows, or None.
-    `frames` are the window's ChangeFrame in order, the current frame last (its innovation is
-    not used; its transition takes the correction to its prediction). For each frame the
-    change may have happened in the prediction into, a _Jump of d is fitted to the
-    innovations since; the onset of the largest evidence under the change's prior
-    N(0, DISTURBANCE_STD_M_S2^2 I) is taken (generalised likelihood ratio, Willsky and Jones),
-    and the correction is that jump's posterior mean. The caller opens the covariance as for a
-    change of unknown size (open_disturbance), so the frames that follow still move d."""
-    columns = state_pair(frames[0].transition.shape[0], d_index)
-    transitions = [frame.transition for frame in frames]
-    seen = frames[:-1]
-    jumps = [_Jump.since(i, seen, transitions, columns) for i in range(len(seen))]
-    if not jumps:
-        return None
-    best = max(jumps, key=lambda jump: jump.evidence(DISTURBANCE_STD_M_S2))
-    return best.posterior(DISTURBANCE_STD_M_S2)[0]
-
-
-class _Jump:
-    """One explanation of a push's detections for _JumpTest: a jump of the states that
-    `columns` (n, 2) picks, in the prediction into a frame at onset_s, with the terms of its
-    generalised likelihood ratio over the frames since (estimate_change, kept up frame by
-    frame): B and A as there, the information and the score."""
-
-    def __init__(self, onset_s: float, B: np.ndarray):
-        self.onset_s, self.B = onset_s, B
-        self.A = np.zeros_like(B)
-        self.information = np.zeros((2, 2))
-        self.score = np.zeros(2)
-        self._signature = None
-
-    @classmethod
-    def since(cls, i: int, frames, transitions, columns: np.ndarray) -> _Jump:
-        """The jump of `columns` in the prediction into frames[i], fitted to frames[i:] (each
-        with its update's gain); transitions[j] is the prediction into frame j, one more than
-        the frames: the last takes the jump to the frame after them."""
-        jump = cls(frames[i].t, transitions[i] @ columns)
-        for j in range(i, len(frames)):
-            jump.add(frames[j].innovation, frames[j].S)
-            jump.take_up(frames[j].K)
-            jump.predict(transitions[j + 1])
-        return jump
-
-    def predict(self, F: np.ndarray) -> None:
-        self.B, self.A = F @ self.B, F @ self.A
-
-    def add(self, innovation: np.ndarray, S: np.ndarray) -> None:
-        """A frame's innovation and its covariance, before the update."""
-        G = (self.B - self.A)[:2]
-        S_inv_G = np.linalg.solve(S, G)
-        self.score += S_inv_G.T @ innovation
-        self.information += G.T @ S_inv_G
-        self._signature = G
-
-    def take_up(self, K: np.ndarray) -> None:
-        """The update's gain: how much of the jump the filter took up."""
-        self.A = self.A + K @ self._signature
-
-    def statistic(self) -> float:
-        """Twice the log-likelihood gained by the jump of the best size: score^T I^-1 score."""
-        if np.linalg.det(self.information) <= 0.0:
-            return 0.0
-        return float(self.score @ np.linalg.solve(self.information, self.score))
-
-    def evidence(self, prior_std: float) -> float:
-        """Log evidence of the jump against none under its prior N(0, prior_std^2 I), up to a
-        constant."""
-        information = self.information + np.eye(2) / prior_std ** 2
-        return float(self.score @ np.linalg.solve(information, self.score)) \
-            - math.log(np.linalg.det(information) * prior_std ** 4)
-
-    def posterior(self, prior_std: float):
-        """The jump's effect on the state now, given the frames since its onset and its prior
-        N(0, prior_std^2 I): the mean and the covariance to add to the reference filter's."""
-        covariance = np.linalg.inv(self.information + np.eye(2) / prior_std ** 2)
-        effect = self.B - self.A
-        return effect @ (covariance @ self.score), effect @ covariance @ effect.T
-
-
-class _JumpTest:
-    """After a push's detection (with the disturbance state and a known acceleration): was it a
-    push, a jump of the ball's velocity, or a force that started or turned, a change of d? A
-    reference filter runs on from before the detection with the model's own process noise, and
-    for each onset from the change test's window on, each of the two jumps is fitted to its
-    innovations (generalised likelihood ratio, as estimate_change). Both explanations have
-    two free parameters and an onset, so their best fits compare directly: once twice the
-    log-likelihood ratio between the best of each passes DISTURBANCE_CHANGE_CHI2 (the change
-    test's bound) the test has decided."""
-
-    def __init__(self, kf: KalmanFilter, window, transition: np.ndarray, t: float, d_index: int):
-        self.reference = copy.deepcopy(kf)
-        n = kf.x.shape[0]
-        self.force_columns, self.push_columns = state_pair(n, d_index), state_pair(n, 2)   # d, (vx, vy)
-        transitions = [frame.transition for frame in window] + [transition]
-        self.forces = [_Jump.since(i, window, transitions, self.force_columns) for i in range(len(window))]
-        self.pushes = [_Jump.since(i, window, transitions, self.push_columns) for i in range(len(window))]
-        self._add_onset(t, transition)
-
-    def _add_onset(self, t: float, transition: np.ndarray) -> None:
-        """Both jumps in the prediction into the frame at t, whose transition that is."""
-        self.forces.append(_Jump(t, transition @ self.force_columns))
-        self.pushes.append(_Jump(t, transition @ self.push_columns))
-
-    def predict(self, t: float) -> None:
-        """After the reference filter's prediction into the frame at t: the jumps so far move
-        on, and either may happen in this prediction too."""
-        for jump in self.forces + self.pushes:
-            jump.predict(self.reference.F)
-        self._add_onset(t, self.reference.F)
-
-    def update(self, z: np.ndarray) -> Optional[str]:
-        """Fold in detection z: "force" or "push" once decided, else None."""
-        kf = self.reference
-        innovation = z - kf.H @ kf.x
-        S = kf.H @ kf.P @ kf.H.T + kf.R
-        jumps = self.forces + self.pushes
-        for jump in jumps:
-            jump.add(innovation, S)
-        kf.update(z)
-        for jump in jumps:
-            jump.take_up(kf.K)
-        force = max(jump.statistic() for jump in self.forces)
-        push = max(jump.statistic() for jump in self.pushes)
-        if force - push > DISTURBANCE_CHANGE_CHI2:
-            return "force"
-        if push - force > DISTURBANCE_CHANGE_CHI2:
-            return "push"
-        return None
-
-    def best_force(self) -> _Jump:
-        return max(self.forces, key=_Jump.statistic)
 
 
 @dataclass(frozen=True)
@@ -549,13 +357,12 @@ class BallKalman:
             self.dim += 2
             self._disturbance_rows = disturbance_rows(self.d_index)
         self._disturbance = (np.zeros(2), 0.0)   # kept over dropped tracks
-        # (stamp, whitened innovation, running consistency before it), the last window
-        self._innovations: Deque[ChangeFrame] = deque()
+        self._change = ChangeTest(1, self.dim, self.d_index, consistency_settle_s(cfg.model_mismatch_time_constant_s)) \
+            if self.disturbance_state else None
         self._track_start_s = 0.0
-        self._window_start_s: Optional[float] = None
         self.disturbance_changes = 0  # changes of d found (total)
         # after a push's detection, until it decides: was it a push or a change of d?
-        self._jump_test: Optional[_JumpTest] = None
+        self._jump_test: Optional[JumpTest] = None
         self._transition = np.eye(self.dim)   # F's product since the last update
         self.model_mismatch_time_constant_s = cfg.model_mismatch_time_constant_s
         self.nis = 1.0                # running mean of the normalised innovation squared (per axis)
@@ -628,8 +435,8 @@ class BallKalman:
         self.t_last = None
         self._excess = (0, np.zeros(2), 1.0)
         self._jump_test = None
-        self._innovations.clear()
-        self._window_start_s = None
+        if self._change is not None:
+            self._change.clear()
 
     def _start(self, z: Tuple[float, float], t: float) -> None:
         kf = self.kf
@@ -784,22 +591,22 @@ class BallKalman:
                     self._hold_until = t + self.maneuver_hold_s
                     if self.disturbance_state and accel is not None and self._jump_test is None \
                             and self._settled(t):
-                        self._jump_test = _JumpTest(self.kf, list(self._innovations), self._transition, t,
-                                                    self.d_index)
+                        self._jump_test = JumpTest(self.kf, self._change.frames(0), self._transition, t,
+                                                   self.d_index)
                 self._widen_last_prediction()
                 distance = self.mahalanobis(z)
             if self.model_mismatch_time_constant_s > 0.0:   # a gated detection counts too, at the gate
                 alpha = min(1.0, dt_step / self.model_mismatch_time_constant_s)
                 self.nis += alpha * (min(distance, self.gate_sigma) ** 2 / 2.0 - self.nis)
             if distance <= self.gate_sigma:
-                if self.disturbance_state:
+                in_window = self.disturbance_state and \
                     self._find_disturbance_change(t, z, known=accel is not None, pushed=t <= self._hold_until)
                 if self._jump_test is not None and self._decide_jump(t, z):
                     return self._estimate(fresh=True, valid=True)
                 self.kf.update(np.asarray(z, dtype=np.float64))
                 if self.disturbance_state:
-                    if self._innovations and self._innovations[-1].K is None:
-                        self._innovations[-1].K = self.kf.K.copy()
+                    if in_window:
+                        self._change.set_last_gain([True], self.kf.K[None])
                     self._transition = np.eye(self.dim)
                 self._clamp_gain(self.kf)
                 self.coasted = 0
@@ -813,46 +620,25 @@ class BallKalman:
             return estimate
         return self._estimate(fresh=False, valid=True, gated=gated)
 
-    def _find_disturbance_change(self, t: float, z: Tuple[float, float], known: bool, pushed: bool) -> None:
-        """Before the update with detection z: test the innovations of the last
-        DISTURBANCE_CHANGE_WINDOW_S for a change of d and, on one, correct the state by the
-        change the window shows (estimate_change) and widen the covariance by that of a change
-        of 1-sigma DISTURBANCE_STD_M_S2 that happened T ago (half the window): d by it, the
-        velocity by it times T, the position by it times T^2/2, all correlated, so the
-        innovations that follow still move d, and not the velocity, by what the change was.
-        Without a known acceleration d is not in the model, and during a push's hold the
-        innovations are the push's: the window starts again. The test assumes the model agreed
-        with the detections before the window (MODEL_AGREED_NIS), measured over
-        CONSISTENCY_SETTLE_TIME_CONSTANTS of the track; otherwise a bias is the model's error."""
-        window = self._innovations
+    def _find_disturbance_change(self, t: float, z: Tuple[float, float], known: bool, pushed: bool) -> bool:
+        """Before the update with detection z: its frame joins the change test's window
+        (disturbance.ChangeTest), and a change the window shows corrects the state and widens
+        the covariance. Without a known acceleration d is not in the model, and during a push's
+        hold the innovations are the push's: the window starts again. Returns whether the frame
+        is in the window (its update's gain completes it)."""
         if not known or pushed:
-            window.clear()
-            self._window_start_s = None
-            return
+            self._change.clear()
+            return False
         kf = self.kf
         innovation = np.asarray(z, dtype=np.float64) - kf.H @ kf.x
         S = kf.H @ kf.P @ kf.H.T + kf.R
-        window.append(ChangeFrame(t, np.linalg.solve(np.linalg.cholesky(S), innovation), self.nis, innovation, S,
-                                   self._transition))
-        while t - window[0].t > DISTURBANCE_CHANGE_WINDOW_S:
-            window.popleft()
-        if self._window_start_s is None:
-            self._window_start_s = t
-        if t - self._window_start_s < DISTURBANCE_CHANGE_WINDOW_S:
-            return
-        window_start_s, nis_before = window[0].t, window[0].nis
-        if nis_before > MODEL_AGREED_NIS or not self._settled(window_start_s):
-            return                    # the model did not agree: a bias is its own error
-        total = np.sum([frame.whitened for frame in window], axis=0)
-        if float(total @ total) / len(window) <= DISTURBANCE_CHANGE_CHI2:
-            return
-        jump = estimate_change(list(window), self.d_index)
-        if jump is not None:
-            kf.x = kf.x + jump
-        open_disturbance(kf.P, (t - window_start_s) / 2.0, self.d_index)
+        changed = self._change.test(t, np.ones(1, bool), innovation[None], S[None], np.array([self.nis]),
+                                    self._transition[None], np.array([self._track_start_s]))
+        if not changed[0]:
+            return True
+        self._change.correct(0, t, kf.x, kf.P)
         self.disturbance_changes += 1
-        window.clear()
-        self._window_start_s = None
+        return False
 
     def _clamp_gain(self, kf: KalmanFilter) -> None:
         """Keep kf's input gain s within input_gain_bounds (after an update)."""
@@ -882,8 +668,7 @@ class BallKalman:
         self._clamp_gain(kf)
         self.kf = kf
         self._hold_until = -np.inf
-        self._innovations.clear()
-        self._window_start_s = None
+        self._change.clear()
         self._transition = np.eye(self.dim)
         self.disturbance_changes += 1
         self.coasted = 0

@@ -1,0 +1,332 @@
+"""The disturbance state's change test and jump fits (vision/kalman.py BallKalman), written
+once for a batch of filters: BallKalman is a batch of one, the training plant's filter
+(policy/batch_kalman.py) a batch of balls.
+
+A change of d (a force that starts, turns or ends) shows as innovations that keep one sign.
+`ChangeTest` keeps each filter's last DISTURBANCE_CHANGE_WINDOW_S of frames and tests their
+whitened sum; on a change, `estimate_change` sizes it from the window (a generalised
+likelihood ratio over the onsets, `Jump`) and `open_disturbance` widens the covariance by a
+change of unknown size. After a push's detection `JumpTest` tells a push from a force.
+"""
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+from filterpy.kalman import KalmanFilter
+
+# the running innovation consistency (1 when the model is right) at most this: the model agreed
+# with the detections. Only then is a detection beyond maneuver_sigma a push, or a bias of the
+# innovations a change of d: a model that has disagreed for a while (a delay or a gain still
+# being learned) is seeing its own error; the constant-velocity filter's velocity cost 1 mm in
+# extreme_dr when it took over there too, and d taken for such an error shook the ball
+MODEL_AGREED_NIS = 1.0
+# the running consistency starts at 1 with a track; after this many of its time constants its
+# start weighs 5 % and it describes the detections
+CONSISTENCY_SETTLE_TIME_CONSTANTS = 3.0
+DISTURBANCE_STD_M_S2 = 0.3   # 1-sigma of a change of d: a force up to about 3 degrees of tilt
+# A change of d (a force that starts, turns or ends) shows as innovations that keep one sign:
+# their whitened sum over DISTURBANCE_CHANGE_WINDOW_S, squared and over its frames, is
+# chi-square with 2 degrees of freedom while the model holds; beyond DISTURBANCE_CHANGE_CHI2
+# (a 0.1 % false alarm per test) d has changed by an unknown amount (1-sigma
+# DISTURBANCE_STD_M_S2) about half a window ago, and the filter's covariance says so. d starts
+# at 0, known: a plate off level from the start is found as such a change, once the gain is
+# learned, instead of being learned together with a gain that is still wrong
+DISTURBANCE_CHANGE_WINDOW_S = 0.3
+DISTURBANCE_CHANGE_CHI2 = 13.815510557964274
+
+
+@dataclass
+class ChangeFrame:
+    """A detection in the change test's window: what the test and the change's estimate need."""
+    t: float                     # stamp [s]
+    whitened: np.ndarray         # the innovation whitened by its covariance
+    nis: float                   # the running consistency before it
+    innovation: np.ndarray       # z - H x of the prediction [m]
+    S: np.ndarray                # its covariance
+    transition: np.ndarray       # the product of the F's since the previous update
+    K: Optional[np.ndarray] = None   # the update's gain, once made
+
+
+def consistency_settle_s(time_constant_s: float) -> float:
+    """How old a track must be before its running consistency (time constant
+    `model_mismatch_time_constant_s`) describes the detections rather than its start value."""
+    return CONSISTENCY_SETTLE_TIME_CONSTANTS * time_constant_s
+
+
+def state_pair(n: int, first: int) -> np.ndarray:
+    """The columns (n, 2) that pick the states first and first + 1 (an x and y pair)."""
+    columns = np.zeros((n, 2))
+    columns[first, 0] = columns[first + 1, 1] = 1.0
+    return columns
+
+
+def disturbance_rows(d_index: int) -> np.ndarray:
+    """The state indices (x, vx, d_x) and (y, vy, d_y) of a filter whose d starts at d_index."""
+    return np.array([[0, 2, d_index], [1, 3, d_index + 1]])
+
+
+def disturbance_jerk(q_d, dt) -> np.ndarray:
+    """The process noise (..., 3, 3) that a random walk of d with jerk density q_d adds over dt
+    to (x, vx, d_x) (likewise y); q_d and dt scalars, or one value per filter of a batch."""
+    q_d, dt = np.asarray(q_d, dtype=float)[..., None, None], np.asarray(dt, dtype=float)[..., None, None]
+    return q_d * np.array([[1 / 20, 1 / 8, 1 / 6], [1 / 8, 1 / 3, 1 / 2], [1 / 6, 1 / 2, 1.0]]) \
+        * dt ** np.array([[5, 4, 3], [4, 3, 2], [3, 2, 1]])
+
+
+def open_disturbance(P: np.ndarray, T, d_index: int) -> None:
+    """Widen the covariance P (n, n), or a batch of them (b, n, n) with T (b,), by that of a
+    change of d of 1-sigma DISTURBANCE_STD_M_S2 that happened T ago, with the velocity and
+    position it has moved since."""
+    T = np.asarray(T, dtype=float)[..., None]
+    J = np.concatenate([T * T / 2.0, T, np.ones_like(T)], axis=-1)        # (..., 3)
+    rows = disturbance_rows(d_index)
+    P[..., rows[:, :, None], rows[:, None, :]] += DISTURBANCE_STD_M_S2 ** 2 * (J[..., None, :, None]
+                                                                              * J[..., None, None, :])
+
+
+def estimate_change(frames, d_index: int) -> Optional[np.ndarray]:
+    """The state correction for the change of d that a change test's window shows, or None.
+    `frames` are the window's ChangeFrame in order, the current frame last (its innovation is
+    not used; its transition takes the correction to its prediction). For each frame the
+    change may have happened in the prediction into, a Jump of d is fitted to the
+    innovations since; the onset of the largest evidence under the change's prior
+    N(0, DISTURBANCE_STD_M_S2^2 I) is taken (generalised likelihood ratio, Willsky and Jones),
+    and the correction is that jump's posterior mean. The caller opens the covariance as for a
+    change of unknown size (open_disturbance), so the frames that follow still move d."""
+    columns = state_pair(frames[0].transition.shape[0], d_index)
+    transitions = [frame.transition for frame in frames]
+    seen = frames[:-1]
+    jumps = [Jump.since(i, seen, transitions, columns) for i in range(len(seen))]
+    if not jumps:
+        return None
+    best = max(jumps, key=lambda jump: jump.evidence(DISTURBANCE_STD_M_S2))
+    return best.posterior(DISTURBANCE_STD_M_S2)[0]
+
+
+class Jump:
+    """One explanation of a push's detections for JumpTest: a jump of the states that
+    `columns` (n, 2) picks, in the prediction into a frame at onset_s, with the terms of its
+    generalised likelihood ratio over the frames since (estimate_change, kept up frame by
+    frame): B and A as there, the information and the score."""
+
+    def __init__(self, onset_s: float, B: np.ndarray):
+        self.onset_s, self.B = onset_s, B
+        self.A = np.zeros_like(B)
+        self.information = np.zeros((2, 2))
+        self.score = np.zeros(2)
+        self._signature = None
+
+    @classmethod
+    def since(cls, i: int, frames, transitions, columns: np.ndarray) -> Jump:
+        """The jump of `columns` in the prediction into frames[i], fitted to frames[i:] (each
+        with its update's gain); transitions[j] is the prediction into frame j, one more than
+        the frames: the last takes the jump to the frame after them."""
+        jump = cls(frames[i].t, transitions[i] @ columns)
+        for j in range(i, len(frames)):
+            jump.add(frames[j].innovation, frames[j].S)
+            jump.take_up(frames[j].K)
+            jump.predict(transitions[j + 1])
+        return jump
+
+    def predict(self, F: np.ndarray) -> None:
+        self.B, self.A = F @ self.B, F @ self.A
+
+    def add(self, innovation: np.ndarray, S: np.ndarray) -> None:
+        """A frame's innovation and its covariance, before the update."""
+        G = (self.B - self.A)[:2]
+        S_inv_G = np.linalg.solve(S, G)
+        self.score += S_inv_G.T @ innovation
+        self.information += G.T @ S_inv_G
+        self._signature = G
+
+    def take_up(self, K: np.ndarray) -> None:
+        """The update's gain: how much of the jump the filter took up."""
+        self.A = self.A + K @ self._signature
+
+    def statistic(self) -> float:
+        """Twice the log-likelihood gained by the jump of the best size: score^T I^-1 score."""
+        if np.linalg.det(self.information) <= 0.0:
+            return 0.0
+        return float(self.score @ np.linalg.solve(self.information, self.score))
+
+    def evidence(self, prior_std: float) -> float:
+        """Log evidence of the jump against none under its prior N(0, prior_std^2 I), up to a
+        constant."""
+        information = self.information + np.eye(2) / prior_std ** 2
+        return float(self.score @ np.linalg.solve(information, self.score)) \
+            - math.log(np.linalg.det(information) * prior_std ** 4)
+
+    def posterior(self, prior_std: float):
+        """The jump's effect on the state now, given the frames since its onset and its prior
+        N(0, prior_std^2 I): the mean and the covariance to add to the reference filter's."""
+        covariance = np.linalg.inv(self.information + np.eye(2) / prior_std ** 2)
+        effect = self.B - self.A
+        return effect @ (covariance @ self.score), effect @ covariance @ effect.T
+
+
+class ChangeTest:
+    """The change test per filter of a batch of `batch` (BallKalman's is a batch of one): each
+    filter's window, a ring of its frames' stamps, whitened innovations, running consistencies
+    before them, innovations, their covariances, the transitions since the previous update and
+    the updates' gains, `n` frames from `head`, doubled when a window would overflow it (a
+    faster camera). A window is tested once it spans DISTURBANCE_CHANGE_WINDOW_S, if the model
+    agreed with the detections before it (MODEL_AGREED_NIS) and the track is
+    `settle_s` old at its first frame (consistency_settle_s); otherwise a bias is the model's
+    own error."""
+
+    FIELDS = ("t", "whitened", "nis", "innovation", "S", "transition", "K")
+
+    def __init__(self, batch: int, dim: int, d_index: int, settle_s: float, capacity: int = 32):
+        self.b, self.dim, self.cap = batch, dim, capacity
+        self.d_index, self.settle_s = d_index, settle_s
+        self.t = np.full((batch, capacity), np.nan)
+        self.whitened = np.zeros((batch, capacity, 2))
+        self.nis = np.zeros((batch, capacity))
+        self.innovation = np.zeros((batch, capacity, 2))
+        self.S = np.zeros((batch, capacity, 2, 2))
+        self.transition = np.zeros((batch, capacity, dim, dim))
+        self.K = np.zeros((batch, capacity, dim, 2))
+        self.head = np.zeros(batch, int)
+        self.n = np.zeros(batch, int)
+        self.start = np.full(batch, np.nan)    # when the window began to fill (nan: not yet)
+
+    def clear(self, mask=slice(None)) -> None:
+        """Start the windows of `mask` (all by default) again."""
+        self.n[mask] = 0
+        self.start[mask] = np.nan
+
+    def test(self, t: float, add, innovation, S, nis, transition, track_start_s) -> np.ndarray:
+        """The frame at t of the filters `add` (b,) joins their windows, before their update:
+        innovation (b, 2) and its covariance S (b, 2, 2), the running consistency before it nis
+        (b,), the transition since the previous update (b, dim, dim); track_start_s (b,) when
+        each track began. Returns the filters whose window shows a change of d (`correct`
+        them); for the others call `set_last_gain` after the update."""
+        whitened = np.linalg.solve(np.linalg.cholesky(S), innovation[..., None])[..., 0]
+        self._append(add, t, whitened, nis, innovation, S, transition)
+        self._drop_older(add, t, DISTURBANCE_CHANGE_WINDOW_S)
+        self.start = np.where(add & np.isnan(self.start), t, self.start)
+        full = add & (t - self.start >= DISTURBANCE_CHANGE_WINDOW_S)
+        first_t, nis_before = self._oldest("t"), self._oldest("nis")
+        tested = full & (nis_before <= MODEL_AGREED_NIS) & (first_t - np.asarray(track_start_s) >= self.settle_s)
+        if not tested.any():
+            return tested
+        total = self._sum_whitened()
+        return tested & (np.einsum("bi,bi->b", total, total) / np.maximum(self.n, 1) > DISTURBANCE_CHANGE_CHI2)
+
+    def correct(self, i: int, t: float, x: np.ndarray, P: np.ndarray) -> None:
+        """Filter i's window showed a change at t: correct its state x (n,) in place by the
+        change the window shows (estimate_change) and widen its covariance P (n, n) by that of
+        a change of 1-sigma DISTURBANCE_STD_M_S2 half the window ago (open_disturbance): d by
+        it, the velocity by it times T, the position by it times T^2/2, all correlated, so the
+        innovations that follow still move d, and not the velocity, by what the change was.
+        The window starts again."""
+        frames = self.frames(i)
+        jump = estimate_change(frames, self.d_index)
+        if jump is not None:
+            x += jump
+        open_disturbance(P, (t - frames[0].t) / 2.0, self.d_index)
+        self.clear(i)
+
+    def set_last_gain(self, mask, K) -> None:
+        """The update's gain K (m, dim, 2) of the frames just added for the filters in mask."""
+        i = np.flatnonzero(mask)
+        self.K[i, (self.head[i] + self.n[i] - 1) % self.cap] = K
+
+    def frames(self, i: int) -> list:
+        """Filter i's window, its ChangeFrame oldest first."""
+        at = (self.head[i] + np.arange(self.n[i])) % self.cap
+        return [ChangeFrame(self.t[i, k], self.whitened[i, k], self.nis[i, k], self.innovation[i, k], self.S[i, k],
+                            self.transition[i, k], self.K[i, k]) for k in at]
+
+    def _append(self, mask, t, whitened, nis, innovation, S, transition) -> None:
+        if (self.n[mask] >= self.cap).any():
+            self._grow()
+        i = np.flatnonzero(mask)
+        at = (self.head[i] + self.n[i]) % self.cap
+        self.t[i, at], self.whitened[i, at], self.nis[i, at] = t, whitened[i], nis[i]
+        self.innovation[i, at], self.S[i, at], self.transition[i, at] = innovation[i], S[i], transition[i]
+        self.n[i] += 1
+
+    def _grow(self) -> None:
+        order = (self.head[:, None] + np.arange(self.cap)) % self.cap     # oldest first
+        rows = np.arange(self.b)[:, None]
+        for name in self.FIELDS:
+            old = getattr(self, name)[rows, order]
+            setattr(self, name, np.concatenate([old, np.zeros_like(old)], axis=1))
+        self.head[:] = 0
+        self.cap *= 2
+
+    def _drop_older(self, mask, t: float, span_s: float) -> None:
+        """Drop the frames more than span_s older than t."""
+        while True:
+            old = mask & (self.n > 0) & (t - self._oldest("t") > span_s)
+            if not old.any():
+                return
+            self.head = np.where(old, (self.head + 1) % self.cap, self.head)
+            self.n -= old
+
+    def _oldest(self, name: str) -> np.ndarray:
+        return getattr(self, name)[np.arange(self.b), self.head]
+
+    def _sum_whitened(self) -> np.ndarray:
+        order = (self.head[:, None] + np.arange(self.cap)) % self.cap
+        inside = np.arange(self.cap)[None, :] < self.n[:, None]
+        return np.einsum("bk,bki->bi", inside, self.whitened[np.arange(self.b)[:, None], order])
+
+
+class JumpTest:
+    """After a push's detection (with the disturbance state and a known acceleration): was it a
+    push, a jump of the ball's velocity, or a force that started or turned, a change of d? A
+    reference filter runs on from before the detection with the model's own process noise, and
+    for each onset from the change test's window on, each of the two jumps is fitted to its
+    innovations (generalised likelihood ratio, as estimate_change). Both explanations have
+    two free parameters and an onset, so their best fits compare directly: once twice the
+    log-likelihood ratio between the best of each passes DISTURBANCE_CHANGE_CHI2 (the change
+    test's bound) the test has decided."""
+
+    def __init__(self, kf: KalmanFilter, window, transition: np.ndarray, t: float, d_index: int):
+        self.reference = copy.deepcopy(kf)
+        n = kf.x.shape[0]
+        self.force_columns, self.push_columns = state_pair(n, d_index), state_pair(n, 2)   # d, (vx, vy)
+        transitions = [frame.transition for frame in window] + [transition]
+        self.forces = [Jump.since(i, window, transitions, self.force_columns) for i in range(len(window))]
+        self.pushes = [Jump.since(i, window, transitions, self.push_columns) for i in range(len(window))]
+        self._add_onset(t, transition)
+
+    def _add_onset(self, t: float, transition: np.ndarray) -> None:
+        """Both jumps in the prediction into the frame at t, whose transition that is."""
+        self.forces.append(Jump(t, transition @ self.force_columns))
+        self.pushes.append(Jump(t, transition @ self.push_columns))
+
+    def predict(self, t: float) -> None:
+        """After the reference filter's prediction into the frame at t: the jumps so far move
+        on, and either may happen in this prediction too."""
+        for jump in self.forces + self.pushes:
+            jump.predict(self.reference.F)
+        self._add_onset(t, self.reference.F)
+
+    def update(self, z: np.ndarray) -> Optional[str]:
+        """Fold in detection z: "force" or "push" once decided, else None."""
+        kf = self.reference
+        innovation = z - kf.H @ kf.x
+        S = kf.H @ kf.P @ kf.H.T + kf.R
+        jumps = self.forces + self.pushes
+        for jump in jumps:
+            jump.add(innovation, S)
+        kf.update(z)
+        for jump in jumps:
+            jump.take_up(kf.K)
+        force = max(jump.statistic() for jump in self.forces)
+        push = max(jump.statistic() for jump in self.pushes)
+        if force - push > DISTURBANCE_CHANGE_CHI2:
+            return "force"
+        if push - force > DISTURBANCE_CHANGE_CHI2:
+            return "push"
+        return None
+
+    def best_force(self) -> Jump:
+        return max(self.forces, key=Jump.statistic)
