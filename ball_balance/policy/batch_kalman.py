@@ -6,8 +6,8 @@ the plant follows whatever config/ball_tracker.yaml and the tracker's schema set
 Per ball: state [x, y, vx, vy, s] (s the input gain; held at 1 with zero variance when
 `estimate_input_gain` is off, which is then the plain known-acceleration model), the commanded
 tilt's known acceleration, process noise raised by the running innovation consistency, the
-measurement noise estimated from the detections' scatter (median of the normalised triple
-residuals, DetectionNoiseEstimator), the gate, coasting and track restarts (the gain estimate
+measurement noise estimated from the detections' scatter (the tracker's own
+DetectionNoiseEstimator, over the batch), the gate, coasting and track restarts (the gain estimate
 survives them). filterpy's update (Joseph form) is reproduced step for step; a test checks the
 batch against BallKalman on the same detections.
 
@@ -29,7 +29,7 @@ from ball_balance.vision.disturbance import (
     disturbance_jerk,
     disturbance_rows,
 )
-from ball_balance.vision.kalman import CHI2_1_MEDIAN, KalmanConfig, add_white_acceleration
+from ball_balance.vision.kalman import DetectionNoiseEstimator, KalmanConfig, add_white_acceleration
 
 D_INDEX = 5       # the state's index of d_x (d_y next) with the disturbance state (s is 4)
 
@@ -87,17 +87,7 @@ class BatchBallKalman:
         self.t_last = np.zeros(batch)
         self.coasted = np.zeros(batch, int)
         self.nis = np.ones(batch)
-        # detection-noise estimator: the last three detections and a ring of 2 * window samples
-        self.span = window_max_span_s
-        self.min_samples = noise_min_samples
-        self.n_ring = 2 * cfg.meas_noise_window_frames
-        self.tri_t = np.full((batch, 3), np.nan)
-        self.tri_z = np.zeros((batch, 3, 2))
-        self.tri_a = np.zeros((batch, 3, 2))
-        self.n_tri = np.zeros(batch, int)
-        self.samples = np.full((batch, self.n_ring), np.inf)
-        self.n_samples = np.zeros(batch, int)
-        self.ring_at = np.zeros(batch, int)
+        self.noise = DetectionNoiseEstimator(cfg.meas_noise_window_frames, noise_min_samples, window_max_span_s, batch)
 
     @property
     def gain(self) -> np.ndarray:
@@ -129,41 +119,11 @@ class BatchBallKalman:
         self.excess_count[mask] = 0
 
     def _adapt_noise(self, t, z, a, det) -> None:
-        """DetectionNoiseEstimator.add + sigma_m for the balls with a detection `det`."""
-        if a is None:
-            a = np.zeros((self.b, 2))
-        else:
-            a = a * self.gain[:, None]
-        newer = det & ~(self.n_tri > 0) | det & (t > self.tri_t[:, 2])
-        self.tri_t[newer] = np.roll(self.tri_t[newer], -1, axis=1)
-        self.tri_z[newer] = np.roll(self.tri_z[newer], -1, axis=1)
-        self.tri_a[newer] = np.roll(self.tri_a[newer], -1, axis=1)
-        self.tri_t[newer, 2], self.tri_z[newer, 2], self.tri_a[newer, 2] = t, z[newer], a[newer]
-        self.n_tri = np.where(newer, np.minimum(self.n_tri + 1, 3), self.n_tri)
-        t0, t1, t2 = self.tri_t[:, 0], self.tri_t[:, 1], self.tri_t[:, 2]
-        use = newer & (self.n_tri >= 3)
-        use &= np.where(use, t2 - t0, np.inf) <= self.span
-        if use.any():
-            i = np.flatnonzero(use)
-            w0 = ((t2 - t1) / (t2 - t0))[i]
-            w2 = 1.0 - w0
-            acc = 0.5 * (self.tri_a[i, 1] + self.tri_a[i, 2])
-            r = self.tri_z[i, 1] - (w0[:, None] * self.tri_z[i, 0] + w2[:, None] * self.tri_z[i, 2]) \
-                + 0.5 * acc * ((t1 - t0) * (t2 - t1))[i, None]
-            s = r ** 2 / (1.0 + w0 ** 2 + w2 ** 2)[:, None]
-            at = self.ring_at[i]
-            self.samples[i, at % self.n_ring] = s[:, 0]
-            self.samples[i, (at + 1) % self.n_ring] = s[:, 1]
-            self.ring_at[i] = at + 2
-            self.n_samples[i] = np.minimum(self.n_samples[i] + 2, self.n_ring)
-        ready = det & (self.n_samples >= 2 * self.min_samples)
-        if ready.any():
-            i = np.flatnonzero(ready)
-            srt = np.sort(self.samples[i], axis=1)     # empty slots (inf) sort last
-            n = self.n_samples[i]
-            med = 0.5 * (srt[np.arange(len(i)), (n - 1) // 2] + srt[np.arange(len(i)), n // 2])
-            sigma = np.clip(np.sqrt(med / CHI2_1_MEDIAN), self.noise_min, self.noise_max)
-            self.r[i] = sigma ** 2
+        """BallKalman._adapt_noise for the balls with a detection `det`."""
+        self.noise.add(t, z, None if a is None else a * self.gain[:, None], det)
+        sigma = self.noise.sigma()
+        ready = det & np.isfinite(sigma)
+        self.r[ready] = np.clip(sigma[ready], self.noise_min, self.noise_max) ** 2
 
     def step(self, t: float, z: np.ndarray, det: np.ndarray, accel=None, lever=None):
         """Frame at stamp t: detections z (b, 2) where det (b,) is set (the others are not

@@ -126,7 +126,8 @@ class TrackEstimate:
 
 
 class DetectionNoiseEstimator:
-    """Standard deviation of the detections (per axis, m) from consecutive detection triples.
+    """Standard deviation of the detections (per axis, m) from consecutive detection triples,
+    for one ball or, with `batch`, for each ball of a batch (the training plant's filter).
 
     For detections z0, z1, z2 at t0 < t1 < t2, the middle one's distance from the straight line
     through its neighbours, r = z1 - (w0 z0 + w2 z2) with w0 = (t2 - t1) / (t2 - t0) and
@@ -134,37 +135,67 @@ class DetectionNoiseEstimator:
     constant acceleration a adds -a (t1 - t0)(t2 - t1) / 2, removed with the known acceleration
     when there is one. The estimate is the median of the normalised r^2 over the last `window`
     triples (both axes) divided by the chi-square median, so the frames around a push, a hand
-    or an outlier barely move it. None until `min_samples` triples are in.
+    or an outlier barely move it. None (nan in a batch) until `min_samples` triples are in.
     """
 
-    def __init__(self, window: int = 60, min_samples: int = 10, max_span_s: float = 0.25):
-        self.max_span_s = max_span_s
-        self.min_samples = min_samples
-        self._last: Deque[Tuple[float, np.ndarray, np.ndarray]] = deque(maxlen=3)
-        self._samples: Deque[float] = deque(maxlen=2 * window)
+    def __init__(self, window: int = 60, min_samples: int = 10, max_span_s: float = 0.25, batch: int = 1):
+        self.b, self.max_span_s, self.min_samples = batch, max_span_s, min_samples
+        self.t = np.full((batch, 3), np.nan)     # the last three detections, oldest first
+        self.z = np.zeros((batch, 3, 2))
+        self.a = np.zeros((batch, 3, 2))
+        self.n_last = np.zeros(batch, int)
+        self.samples = np.full((batch, 2 * window), np.inf)   # a ring; empty slots sort last
+        self.n_samples = np.zeros(batch, int)
+        self.ring_at = np.zeros(batch, int)
 
-    def add(self, t: float, z: Tuple[float, float], accel: Optional[Tuple[float, float]] = None) -> None:
-        """A detection z (m) at stamp t (s); accel (m/s^2) the known acceleration or None."""
-        if self._last and not t > self._last[-1][0]:
-            return                                    # repeated or out-of-order stamp
-        a = np.zeros(2) if accel is None else np.asarray(accel, dtype=float)
-        self._last.append((t, np.asarray(z, dtype=float), a))
-        if len(self._last) < 3:
+    def add(self, t: float, z, accel=None, det=None) -> None:
+        """Detections z (b, 2) [m] at stamp t [s] of the balls `det` (b,) (all by default);
+        accel (b, 2) [m/s^2] the known accelerations or None. For one ball, z and accel (2,).
+        A repeated or out-of-order stamp is ignored."""
+        z = np.asarray(z, dtype=float).reshape(self.b, 2)
+        a = np.zeros((self.b, 2)) if accel is None else np.asarray(accel, dtype=float).reshape(self.b, 2)
+        det = np.ones(self.b, bool) if det is None else det
+        newer = det & ((self.n_last == 0) | (t > self.t[:, 2]))
+        for name, value in (("t", t), ("z", z), ("a", a)):
+            last = getattr(self, name)
+            last[newer] = np.roll(last[newer], -1, axis=1)
+            last[newer, 2] = value if name == "t" else value[newer]
+        self.n_last = np.where(newer, np.minimum(self.n_last + 1, 3), self.n_last)
+        t0, t1, t2 = self.t[:, 0], self.t[:, 1], self.t[:, 2]
+        use = newer & (self.n_last >= 3)
+        use &= np.where(use, t2 - t0, np.inf) <= self.max_span_s   # a gap: the path between is no line
+        if not use.any():
             return
-        (t0, z0, _), (t1, z1, a1), (t2, z2, a2) = self._last
-        if t2 - t0 > self.max_span_s:
-            return                                    # a gap: the path between is not a line
-        w0 = (t2 - t1) / (t2 - t0)
+        i = np.flatnonzero(use)
+        w0 = ((t2 - t1) / (t2 - t0))[i]
         w2 = 1.0 - w0
-        a = 0.5 * (a1 + a2)                       # the known acceleration over the triple
-        r = z1 - (w0 * z0 + w2 * z2) + 0.5 * a * (t1 - t0) * (t2 - t1)
-        self._samples.extend((r ** 2 / (1.0 + w0 ** 2 + w2 ** 2)).tolist())
+        a = 0.5 * (self.a[i, 1] + self.a[i, 2])               # the known acceleration over the triple
+        r = self.z[i, 1] - (w0[:, None] * self.z[i, 0] + w2[:, None] * self.z[i, 2]) \
+            + 0.5 * a * ((t1 - t0) * (t2 - t1))[i, None]
+        normalised = r ** 2 / (1.0 + w0 ** 2 + w2 ** 2)[:, None]
+        ring = self.samples.shape[1]
+        at = self.ring_at[i]
+        self.samples[i, at % ring], self.samples[i, (at + 1) % ring] = normalised[:, 0], normalised[:, 1]
+        self.ring_at[i] = at + 2
+        self.n_samples[i] = np.minimum(self.n_samples[i] + 2, ring)
+
+    def sigma(self) -> np.ndarray:
+        """The estimated detection noise per ball (b,) [m, 1 sigma per axis], nan before enough
+        detections."""
+        out = np.full(self.b, np.nan)
+        ready = self.n_samples >= 2 * self.min_samples
+        if ready.any():
+            i = np.flatnonzero(ready)
+            ordered = np.sort(self.samples[i], axis=1)
+            n, rows = self.n_samples[i], np.arange(len(i))
+            median = 0.5 * (ordered[rows, (n - 1) // 2] + ordered[rows, n // 2])   # n is even
+            out[i] = np.sqrt(median / CHI2_1_MEDIAN)
+        return out
 
     def sigma_m(self) -> Optional[float]:
-        """The estimated detection noise (1 sigma per axis, m), None before enough detections."""
-        if len(self._samples) < 2 * self.min_samples:
-            return None
-        return float(np.sqrt(np.median(np.asarray(self._samples)) / CHI2_1_MEDIAN))
+        """One ball's estimated detection noise [m], None before enough detections."""
+        sigma = float(self.sigma()[0])
+        return None if math.isnan(sigma) else sigma
 
 
 class PlateCommandInput:
