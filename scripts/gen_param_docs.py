@@ -168,8 +168,8 @@ SHARED_MODULES = (
     "controller_manager_py.controller_interface.base",
     "controller_manager_py.manager.diagnostics",
     "ball_balance.vision.config",
-    "ball_balance.policy.params",
     "ball_balance.control.config",
+    "ball_balance.policy.params",      # after control.config: its POLICY_SCHEMA takes in the PID's
     "ball_balance.nodes.balance_node_base",
 )
 

@@ -32,31 +32,25 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Dict, Optional, Tuple
 
 import numpy as np
 
+from ball_balance.config_values import (  # noqa: F401 (the benchmark's public names)
+    CONFIG_DIR,
+    REFERENCES,
+    controller_schema,
+    controller_values,
+    tracker_values,
+)
 from ball_balance.control import config as control_config
 from ball_balance.control.kinematics import Chain, PlateKinematics
 from ball_balance.control.pipeline import ControlPipeline
 from ball_balance.control.safety import BallObservation, Mode
 from ball_balance.robot import HOME_POSITIONS_RAD, JOINT_NAMES, robot_description
+from ball_balance.sim.config import CAMERA_RATE_HZ, FAST_NOISE_FLOOR_M, VISION_DELAY_S
 from controller_manager_py.controllers.command_ramp import CommandRamp
-from controller_manager_py.parameters import validate
 
-CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
-PATHS_DIR = CONFIG_DIR / "paths"   # CSV paths of REFERENCES
-REFERENCES = {
-    "stationary": dict(reference_kind="stationary"),
-    "circle": dict(reference_kind="circle", reference_radius_m=0.10, reference_period_s=10.0),
-    "figure_eight": dict(reference_kind="figure_eight", reference_radius_m=0.10, reference_period_s=12.0),
-    # a 0.15 m square (the radius is its half side), one lap in 8 s
-    "square": dict(reference_kind="square", reference_radius_m=0.075, reference_period_s=8.0),
-    # a CSV path: a spiral in and out, r = 0.10 -> 0.03 -> 0.10 m, 2 turns in 16 s, a row every
-    # 0.2 s (config/paths/make_spiral.py writes it); the file from the repository, whatever the cwd
-    "spiral": dict(reference_kind="csv", reference_csv_path=str(PATHS_DIR / "spiral.csv")),
-}
 BALLS = {"": None, "shell": True, "solid": False}   # EpisodeSpec.ball -> DomainKnobs.ball_shell
 
 
@@ -118,9 +112,9 @@ class EpisodeSpec:
     seed: int = 0
     duration_s: float = 20.0
     mode: str = "fast"                      # fast | vision | truth
-    camera_rate_hz: float = 30.0
-    vision_delay_s: float = 0.015
-    fast_noise_floor_m: float = 0.0005      # pixel quantisation of the real tracker, roughly
+    camera_rate_hz: float = CAMERA_RATE_HZ
+    vision_delay_s: float = VISION_DELAY_S
+    fast_noise_floor_m: float = FAST_NOISE_FLOOR_M
     vision_noise_floor: float = 2.0         # sensor noise of a real camera, grey levels (vision mode)
     release_radius_m: tuple = (0.05, 0.10)
     release_xy_m: tuple = ()                # (x, y): released there instead (release_radius_m unused)
@@ -185,42 +179,6 @@ def _kinematics(values) -> PlateKinematics:
     if "chain" not in _CHAIN_CACHE:
         _CHAIN_CACHE["chain"] = Chain.from_urdf(robot_description(), JOINT_NAMES)
     return control_config.plate_kinematics(_CHAIN_CACHE["chain"], values)
-
-
-def controller_schema(controller: str):
-    """The parameter schema of a controller: control.config's `<NAME>_SCHEMA` (or
-    `<NAME>_NODE_SCHEMA`); PID and MPC have theirs, a controller without one gets the PID's."""
-    for name in (f"{controller.upper()}_SCHEMA", f"{controller.upper()}_NODE_SCHEMA"):
-        schema = getattr(control_config, name, None)
-        if schema is not None and (controller != "mpc" or name == "MPC_NODE_SCHEMA"):
-            return schema
-    return control_config.PID_SCHEMA
-
-
-def controller_values(controller: str, reference: str, overrides=()) -> dict:
-    """Validated controller parameters: schema defaults + config/<controller>.yaml (its node's
-    ros__parameters) + the reference + overrides."""
-    import yaml
-
-    path = CONFIG_DIR / f"{controller}.yaml"
-    values = {}
-    if path.exists():
-        loaded = yaml.safe_load(path.read_text()) or {}
-        nodes = [v["ros__parameters"] for v in loaded.values() if isinstance(v, dict) and "ros__parameters" in v]
-        values = dict(nodes[0]) if nodes else {}
-    values.update(REFERENCES[reference])
-    values.update(dict(overrides))
-    return dict(validate(controller_schema(controller), values, allow_unknown=True))
-
-
-def tracker_values() -> dict:
-    """The tracker parameters the graph runs with (config/ball_tracker.yaml), for both modes."""
-    import yaml
-
-    path = CONFIG_DIR / "ball_tracker.yaml"
-    if not path.exists():
-        return {}
-    return dict(yaml.safe_load(path.read_text())["ball_tracker"]["ros__parameters"])
 
 
 def episode_knobs(spec: EpisodeSpec):

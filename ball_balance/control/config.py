@@ -17,7 +17,6 @@ from ball_balance.control.pipeline import PipelineConfig
 from ball_balance.control.references import KINDS, Delayed, Reference, make_reference
 from ball_balance.control.safety import SafetyConfig
 from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL
-from ball_balance.policy.params import POLICY_PARAMS
 from ball_balance.robot import HOME_POSITIONS_RAD
 from controller_manager_py.parameters import Param
 
@@ -152,11 +151,6 @@ PID_ADAPT_SCHEMA = [
 
 PID_SCHEMA = COMMON_SCHEMA + REFERENCE_SCHEMA + PID_GAINS_SCHEMA + PID_ADAPT_SCHEMA
 MPC_NODE_SCHEMA = COMMON_SCHEMA + REFERENCE_SCHEMA + MPC_SCHEMA
-# the learned policy: a correction on top of the PID, so the PID's parameters plus the model's;
-# its history is per tick of the model's rate, so it steps on the timer only
-POLICY_SCHEMA = [p for p in PID_SCHEMA if p.name != "control_trigger"] + [
-    Param("control_trigger", "timer", "the policy steps every control_rate_hz tick (its history is per tick)",
-          choices=("timer",), read_only=True)] + POLICY_PARAMS
 RUNTIME_PARAMETERS = {p.name for p in PID_GAINS_SCHEMA + REFERENCE_SCHEMA}
 
 

@@ -17,9 +17,10 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from std_msgs.msg import Float64MultiArray
 
-from ball_balance.control.config import PID_GAINS_SCHEMA, POLICY_SCHEMA
+from ball_balance.control.config import PID_GAINS_SCHEMA
 from ball_balance.control.pipeline import ControlPipeline
 from ball_balance.nodes.balance_node_base import BalanceControllerNode
+from ball_balance.policy.params import POLICY_SCHEMA
 from controller_manager_py.controllers.policy_model import PolicyModelError
 from controller_manager_py.ros.node_main import StartupError, main_for
 

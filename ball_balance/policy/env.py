@@ -30,12 +30,14 @@ from typing import NamedTuple, Optional
 
 import numpy as np
 
+from ball_balance.config_values import controller_values, tracker_values
 from ball_balance.control import config as control_config
 from ball_balance.control.estimation import BatchPlantEstimator
 from ball_balance.control.pid import Pid
 from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
 from ball_balance.policy.batch_kalman import BatchBallKalman
 from ball_balance.policy.observation import ObservationBuilder, correction_weight, low_gain_share
+from ball_balance.sim.config import CAMERA_RATE_HZ, FAST_NOISE_FLOOR_M, VISION_DELAY_S
 from ball_balance.vision.kalman import KalmanConfig
 
 # the control tick: the PID node's rate (config/pid.yaml, 60 Hz); config/policy.yaml's
@@ -114,29 +116,25 @@ class Nominal:
     k_g: float = ROLLING_FACTOR_SHELL * GRAVITY_M_S2
     u_max_rad: float = 0.15
     max_total_tilt_rad: float = 0.20
-    vision_delay_s: float = 0.015
+    vision_delay_s: float = VISION_DELAY_S
     max_prediction_s: float = 0.5
-    fast_noise_floor_m: float = 0.0005   # the benchmark's fast mode: never less (pixel quantisation)
-    camera_rate_hz: float = 30.0
+    fast_noise_floor_m: float = FAST_NOISE_FLOOR_M   # the benchmark's fast mode: never less
+    camera_rate_hz: float = CAMERA_RATE_HZ
 
     @classmethod
     def from_config(cls) -> Nominal:
         """The policy's parameters; the camera's rate, vision delay and noise floor as the
-        closed-loop benchmark's episodes have them (EpisodeSpec's defaults)."""
-        from ball_balance.benchmark.episode import EpisodeSpec, controller_values
-
+        closed-loop benchmark's episodes have them (sim/config.py's camera)."""
         values = controller_values("policy", "stationary")
-        spec = EpisodeSpec()
         return cls(k_g=control_config.k_g(values), u_max_rad=values["max_tilt_cmd_rad"],
                    max_total_tilt_rad=values["max_total_tilt_rad"], max_prediction_s=values["max_prediction_s"],
-                   vision_delay_s=spec.vision_delay_s, fast_noise_floor_m=spec.fast_noise_floor_m,
-                   camera_rate_hz=spec.camera_rate_hz)
+                   vision_delay_s=VISION_DELAY_S, fast_noise_floor_m=FAST_NOISE_FLOOR_M,
+                   camera_rate_hz=CAMERA_RATE_HZ)
 
 
 def tracker_config():
     """The tracker's parameters as the benchmark and the node run them (config/ball_tracker.yaml
     over the schema's defaults)."""
-    from ball_balance.benchmark.episode import tracker_values
     from ball_balance.vision.config import TrackerConfig
 
     return TrackerConfig.from_values(tracker_values())
@@ -145,8 +143,6 @@ def tracker_config():
 def reference_table(kind: str, n_ticks: int) -> np.ndarray:
     """(n_ticks, 3, 2): p, v, a of the benchmark's reference `kind` at every control tick
     (the same Reference objects and parameters the pipeline builds)."""
-    from ball_balance.benchmark.episode import controller_values
-
     ref = control_config.reference(controller_values("pid", kind))
     out = np.zeros((n_ticks, 3, 2))
     for n in range(n_ticks):
@@ -181,9 +177,7 @@ class PlateBatch:
         # pid_mpc, mpc_far: the MPC's label near the reference too on a weak plant, and the correction
         # applied there (observation.low_gain_share of the plant estimate's gain ratio; 0: not)
         self.low_gain_onset = low_gain_onset
-        from ball_balance.benchmark.episode import controller_values
-
-        # the PID under the policy: config/policy.yaml over the schema (pid_overrides: (name, value) pairs
+            # the PID under the policy: config/policy.yaml over the schema (pid_overrides: (name, value) pairs
         # over those, to try another base; a model is refused unless the configuration matches it)
         self.pid_values = controller_values("policy", "stationary", tuple(pid_overrides))
         self.estimator_cfg = control_config.estimator_config(self.pid_values)
@@ -212,7 +206,6 @@ class PlateBatch:
     def _mpc_first_move() -> MpcFirstMove:
         """The MPC of config/mpc.yaml as the linear law of its first move, stepping at this
         plant's tick."""
-        from ball_balance.benchmark.episode import controller_values
         from ball_balance.control.mpc import PlateMpc
 
         cfg = control_config.pipeline_config(controller_values("mpc", "stationary"), "mpc").mpc

@@ -4,6 +4,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from ball_balance.control.config import PID_SCHEMA
 from controller_manager_py.parameters import Param
 
 PACKAGE = "ball_balance"
@@ -16,9 +17,14 @@ POLICY_PARAMS = [
           "long (0: at once)", "s", 0.0, 30.0, read_only=True),
     Param("policy_max_delay_s", 0.17, "the policy's correction applies in full up to this command-to-plate "
           "delay (the pipeline's estimate) and fades out over the next 20 ms: beyond it the PID alone (0: at "
-          "any delay). In the MuJoCo benchmark at 200 ms the correction cost 5 % against the PID, where the "
-          "training plant had it 1.5 % ahead", "s", 0.0, 1.0, read_only=True),
+          "any delay)", "s", 0.0, 1.0, read_only=True),
 ]
+
+# the policy node: a correction on top of the PID, so the PID's parameters plus the model's;
+# its history is per tick of the model's rate, so it steps on the timer only
+POLICY_SCHEMA = [p for p in PID_SCHEMA if p.name != "control_trigger"] + [
+    Param("control_trigger", "timer", "the policy steps every control_rate_hz tick (its history is per tick)",
+          choices=("timer",), read_only=True)] + POLICY_PARAMS
 
 
 def model_path(value: str) -> Path:

@@ -28,6 +28,12 @@ from ball_balance.plate_geometry import (
     ROLLING_FACTOR_SOLID,
 )
 
+# the camera of the benchmark's episodes (ball_balance/benchmark/episode.py EpisodeSpec), which
+# the policy's training plant models too
+CAMERA_RATE_HZ = 30.0
+VISION_DELAY_S = 0.015              # capture to the tracker's result (its processing time)
+FAST_NOISE_FLOOR_M = 0.0005         # detection noise at least: the real tracker's pixel quantisation
+
 # a domain's force steps (`force_step_deg`), simulated s from the release: on, turned by 90 degrees, off
 FORCE_STEP_ON_S, FORCE_STEP_TURN_S, FORCE_STEP_OFF_S = 5.0, 9.0, 13.0
 

@@ -1,5 +1,6 @@
-"""The packages' import graph: no cycles (imports only under TYPE_CHECKING aside), and the
-framework (controller_manager_py) imports nothing of the application (ball_balance)."""
+"""The packages' import graph: no cycles (imports only under TYPE_CHECKING aside), the
+framework (controller_manager_py) imports nothing of the application (ball_balance), and
+within the application no layer imports a higher one, nor an algorithm ROS."""
 import ast
 from pathlib import Path
 
@@ -7,6 +8,14 @@ from harness import ROOT
 
 PACKAGES = {"controller_manager_py": ROOT / "controller_manager_py" / "controller_manager_py",
             "ball_balance": ROOT / "ball_balance"}
+# ball_balance's layers, lowest first, by their first name under ball_balance: geometry, the
+# algorithms (plain Python, no ROS), the learned policy and the configuration both the benchmark
+# and the policy's training plant read; everything else (nodes, controllers, hardware, the
+# benchmark, tools) is above them and may import any of them
+LAYERS = [{"plate_geometry", "rotations", "robot"},
+          {"control", "vision", "sim"},
+          {"policy", "config_values"}]
+ROS_MODULES = ("rclpy", "rcl_interfaces", "ament_index_python")
 
 
 def _runtime_imports(tree: ast.AST):
@@ -105,3 +114,22 @@ def test_the_framework_imports_nothing_of_the_application():
 
 def test_the_cycle_finder_finds_a_cycle():
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def _layer(module: str) -> int:
+    """The layer of a ball_balance module (len(LAYERS) above them all)."""
+    name = module.split(".")[1] if "." in module else ""
+    return next((i for i, layer in enumerate(LAYERS) if name in layer), len(LAYERS))
+
+
+def test_no_layer_imports_a_higher_one():
+    graph = import_graph()
+    upward = {m: sorted(t for t in targets if t.startswith("ball_balance.") and _layer(t) > _layer(m))
+              for m, targets in graph.items() if m.startswith("ball_balance.")}
+    assert {m: t for m, t in upward.items() if t} == {}
+
+
+def test_the_algorithms_import_no_ros():
+    offenders = {m: sorted(t for t in targets if t.split(".")[0] in ROS_MODULES or t.split(".")[0].endswith("_msgs"))
+                 for m, targets in imports().items() if m.startswith("ball_balance.") and _layer(m) < len(LAYERS)}
+    assert {m: t for m, t in offenders.items() if t} == {}

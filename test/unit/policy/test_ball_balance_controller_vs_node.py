@@ -24,6 +24,7 @@ from ball_balance.control import config as control_config
 from ball_balance.control.kinematics import Chain
 from ball_balance.controllers.ball_balance_controller import NODE_ONLY, BallSample
 from ball_balance.nodes.balance_node_base import BalanceControllerNode
+from ball_balance.policy.params import POLICY_SCHEMA
 from ball_balance.robot import JOINT_NAMES, robot_description, robot_description_path
 from controller_manager_py.manager.controller_manager import ControllerManager
 
@@ -59,7 +60,7 @@ def activated(cm: ControllerManager, name: str, plugin: str, values: dict):
 def node_pipeline():
     """The pipeline ball_balance_policy builds: its schema's defaults, config/policy.yaml, its
     own make_pipeline() and the node's URDF."""
-    params = {p.name: p.default for p in control_config.POLICY_SCHEMA}
+    params = {p.name: p.default for p in POLICY_SCHEMA}
     params.update(section("config/policy.yaml", "ball_balance_policy"))
     chain = Chain.from_urdf(robot_description_path().read_text(), JOINT_NAMES)
     node = SimpleNamespace(params=params, kinematics=control_config.plate_kinematics(chain, params),

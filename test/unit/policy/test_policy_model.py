@@ -5,7 +5,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ball_balance.control import config as control_config
 from ball_balance.control.references import RefSample
 from ball_balance.policy.observation import (
     HISTORY,
@@ -15,6 +14,7 @@ from ball_balance.policy.observation import (
     flat_names,
     low_gain_share,
 )
+from ball_balance.policy.params import POLICY_SCHEMA
 from ball_balance.policy.tilt_law import ACTION_KIND, base_pid_mismatch, delay_share, load_tilt_law
 from controller_manager_py.controllers.policy_model import PolicyModelError, PolicyRunner, read_model
 from controller_manager_py.parameters import validate
@@ -29,7 +29,7 @@ def policy_values(**overrides):
 
     values = yaml.safe_load((ROOT / "config" / "policy.yaml").read_text())["ball_balance_policy"]["ros__parameters"]
     values.update(overrides)
-    return dict(validate(control_config.POLICY_SCHEMA, values))
+    return dict(validate(POLICY_SCHEMA, values))
 
 
 def configured_rate_hz() -> float:
