@@ -26,10 +26,14 @@ from ball_balance.vision.disturbance import (
     MODEL_AGREED_NIS,
     ChangeTest,
     consistency_settle_s,
-    disturbance_jerk,
-    disturbance_rows,
 )
-from ball_balance.vision.kalman import DetectionNoiseEstimator, KalmanConfig, add_white_acceleration
+from ball_balance.vision.kalman import (
+    DetectionNoiseEstimator,
+    KalmanConfig,
+    add_white_acceleration,
+    prediction,
+    process_noise,
+)
 
 D_INDEX = 5       # the state's index of d_x (d_y next) with the disturbance state (s is 4)
 
@@ -279,36 +283,17 @@ class BatchBallKalman:
 
     def _predict(self, mask, dt, accel, holding) -> None:
         """BallKalman._predict for the balls in mask, dt (b,) their time steps; holding (b,) the
-        balls in a maneuver hold."""
+        balls in a maneuver hold: the same F and Q (vision/kalman.py prediction)."""
         i = np.flatnonzero(mask)
         h = dt[i]
         known = accel is not None
-        if not known:
-            q = np.full(len(i), self.sigma_a ** 2)
-        elif self.cfg.model_mismatch_time_constant_s > 0.0:
-            q = np.minimum(np.maximum(self.nis[i], 1.0), max(1.0, (self.sigma_a / self.sigma_a_cmd) ** 2)) \
-                * self.sigma_a_cmd ** 2
-        else:
-            q = np.full(len(i), self.sigma_a_cmd ** 2)
-        q = np.where(holding[i], np.maximum(q, self.cfg.maneuver_accel_noise_m_s2 ** 2), q)
+        q = process_noise(self.nis[i], known, holding[i], self.cfg)
         self.last_dt[i], self.last_q[i] = h, q
-        f = np.broadcast_to(np.eye(self.dim), (len(i), self.dim, self.dim)).copy()
-        f[:, 0, 2] = f[:, 1, 3] = h
-        qm = np.zeros((len(i), self.dim, self.dim))
-        add_white_acceleration(qm, q, h)
-        if known:
-            a = accel[i]
-            f[:, 0:2, 4] = a * (h ** 2 / 2)[:, None]
-            f[:, 2:4, 4] = a * h[:, None]
-            if self.disturbance_state:   # x' = ... + d dt^2/2, v' = ... + d dt, d' = d + w
-                f[:, 0, D_INDEX] = f[:, 1, D_INDEX + 1] = h ** 2 / 2
-                f[:, 2, D_INDEX] = f[:, 3, D_INDEX + 1] = h
-                rows = disturbance_rows(D_INDEX)
-                qm[:, rows[:, :, None], rows[:, None, :]] += disturbance_jerk(self.q_d, h)[:, None]
+        f, qm = prediction(h, q, accel[i] if known else None, self.dim, 4,
+                           self.cfg.input_gain_rate_per_s if self.gain_state else 0.0,
+                           D_INDEX if self.disturbance_state else None, self.q_d)
         if self.disturbance_state:
             self.transition[i] = f @ self.transition[i]
-        if self.gain_state:
-            qm[:, 4, 4] = self.cfg.input_gain_rate_per_s ** 2 * h
         self.x[i] = np.einsum("bij,bj->bi", f, self.x[i])
         p = f @ self.p[i] @ f.transpose(0, 2, 1) + qm
         if self.gain_state:

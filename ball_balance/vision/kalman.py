@@ -113,6 +113,53 @@ def add_white_acceleration(M: np.ndarray, q, dt) -> None:
     M[..., 3, 3] += vv
 
 
+def process_noise(nis, known_accel: bool, holding, cfg: KalmanConfig) -> np.ndarray:
+    """q [m^2/s^4] of the next prediction of each filter of a batch (one: arrays of shape (1,)),
+    whose running innovation consistency is nis: sigma_a^2 (`accel_noise_m_s2`) without a known
+    acceleration; with one sigma_a_cmd^2 (`cmd_accel_noise_m_s2`), raised by the consistency
+    (up to sigma_a^2) while the detections disagree with the model more than its covariance
+    says (a wrong delay or gain). During a maneuver hold (`holding`) at least
+    `maneuver_accel_noise_m_s2` squared."""
+    nis = np.asarray(nis, dtype=float)
+    sigma_a, sigma_cmd = cfg.accel_noise_m_s2, cfg.cmd_accel_noise_m_s2
+    if not known_accel:
+        q = np.full(nis.shape, sigma_a ** 2)
+    elif cfg.model_mismatch_time_constant_s > 0.0:
+        q = np.minimum(np.maximum(nis, 1.0), max(1.0, (sigma_a / sigma_cmd) ** 2)) * sigma_cmd ** 2
+    else:
+        q = np.full(nis.shape, sigma_cmd ** 2)
+    return np.where(holding, np.maximum(q, cfg.maneuver_accel_noise_m_s2 ** 2), q)
+
+
+def prediction(dt, q, accel, dim: int, gain_index: Optional[int] = None, gain_rate_per_s: float = 0.0,
+               d_index: Optional[int] = None, q_d: float = 0.0) -> Tuple[np.ndarray, np.ndarray]:
+    """The transition F and the process noise Q (b, dim, dim) of the predictions over dt (b,)
+    with white accelerations q (b,), of a batch of filters (one: arrays of shape (1,)); accel
+    (b, 2) the known accelerations or None. With `gain_index`, the state there is s, the gain
+    on the known acceleration (x' = x + v dt + s a dt^2/2, v' = v + s a dt), a random walk
+    of `gain_rate_per_s`; with `d_index`, d = (d_x, d_y) from there on, an acceleration the
+    known one does not explain (x' = ... + d dt^2/2, v' = ... + d dt), a random walk of jerk
+    density q_d. Without a known acceleration the ball's acceleration is all process noise,
+    and d keeps its value."""
+    dt = np.asarray(dt, dtype=float)
+    F = np.broadcast_to(np.eye(dim), (len(dt), dim, dim)).copy()
+    F[:, 0, 2] = F[:, 1, 3] = dt
+    Q = np.zeros((len(dt), dim, dim))
+    add_white_acceleration(Q, q, dt)
+    if accel is not None:
+        if gain_index is not None:
+            F[:, 0:2, gain_index] = accel * (dt ** 2 / 2)[:, None]
+            F[:, 2:4, gain_index] = accel * dt[:, None]
+        if d_index is not None:
+            F[:, 0, d_index] = F[:, 1, d_index + 1] = dt ** 2 / 2
+            F[:, 2, d_index] = F[:, 3, d_index + 1] = dt
+            rows = disturbance_rows(d_index)                # (x, vx, d_x) and (y, vy, d_y)
+            Q[:, rows[:, :, None], rows[:, None, :]] += disturbance_jerk(q_d, dt)[:, None]
+    if gain_index is not None:
+        Q[:, gain_index, gain_index] = gain_rate_per_s ** 2 * dt
+    return F, Q
+
+
 
 @dataclass(frozen=True)
 class TrackEstimate:
@@ -492,25 +539,11 @@ class BallKalman:
         if main:
             kf = self.kf
             self._last_prediction = (dt, q)
-        I2 = np.eye(2)
-        F = np.eye(self.dim)
-        F[0:2, 2:4] = dt * I2
-        Q = np.zeros((self.dim, self.dim))
-        add_white_acceleration(Q, q, dt)
         a = None if accel is None else np.asarray(accel, dtype=np.float64)
-        if self.disturbance_state and a is not None:
-            # x' = ... + d dt^2/2, v' = ... + d dt, d' = d + w; without a known acceleration the
-            # ball's acceleration is all process noise and d keeps its value
-            i = self.d_index
-            F[0:2, i:i + 2] = dt ** 2 / 2 * I2
-            F[2:4, i:i + 2] = dt * I2
-            rows = self._disturbance_rows                # (x, vx, d_x) and (y, vy, d_y)
-            Q[rows[:, :, None], rows[:, None, :]] += disturbance_jerk(self.q_d, dt)
-        if self.gain_state:
-            if a is not None:                        # x' = ... + s a dt^2/2, v' = ... + s a dt
-                F[0:2, 4] = a * dt ** 2 / 2
-                F[2:4, 4] = a * dt
-            Q[4, 4] = self.gain_rate ** 2 * dt
+        F, Q = prediction(np.array([dt]), np.array([q]), None if a is None else a[None], self.dim,
+                          4 if self.gain_state else None, self.gain_rate,
+                          self.d_index if self.disturbance_state else None, self.q_d)
+        F, Q = F[0], Q[0]
         if main and self.disturbance_state:
             self._transition = F @ self._transition
         kf.F, kf.Q = F, Q
@@ -520,6 +553,7 @@ class BallKalman:
         elif a is None:
             kf.predict()
         else:
+            I2 = np.eye(2)
             kf.B = np.zeros((self.dim, 2))
             kf.B[0:2], kf.B[2:4] = dt ** 2 / 2 * I2, dt * I2
             kf.predict(u=a)
@@ -535,18 +569,8 @@ class BallKalman:
         self.maneuver_count += 1
 
     def process_noise(self, known_accel: bool, holding: bool = False) -> float:
-        """q (m^2/s^4) for the next prediction: sigma_a^2 without a known acceleration; with one
-        sigma_a_cmd^2, raised by the running innovation consistency (up to sigma_a^2) while the
-        detections disagree with the model more than its covariance says (a wrong delay or gain).
-        During a maneuver hold (`holding`) at least sigma_a_maneuver^2."""
-        if not known_accel:
-            q = self.sigma_a ** 2
-        else:
-            scale = 1.0
-            if self.model_mismatch_time_constant_s > 0.0:
-                scale = min(max(self.nis, 1.0), max(1.0, (self.sigma_a / self.sigma_a_cmd) ** 2))
-            q = scale * self.sigma_a_cmd ** 2
-        return max(q, self.sigma_a_maneuver ** 2) if holding else q
+        """q (m^2/s^4) for the next prediction (the module's process_noise)."""
+        return float(process_noise([self.nis], known_accel, holding, self.cfg)[0])
 
     @property
     def _gain_var_max(self) -> float:
