@@ -17,6 +17,7 @@ from ball_tracker_msgs.msg import BallState
 from ball_tracker_msgs.srv import SetBallForce
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from rcl_interfaces.srv import GetParameters
 from rclpy.clock import Clock as RosClock
 from rclpy.clock import ClockType
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -82,6 +83,9 @@ class SimRosIo:
                           if params["latency_trace"] else None)
         self.controls = controls
         self._closed = False
+        self._triggers = {}          # lock-step: /plate_cmd publisher node -> its control_trigger ("" if none)
+        self._trigger_clients = {}
+        self._commands_seen = False
         self.refused_force_requests = 0   # /sim/set_ball_force requests refused
         # stamps = sim time + this offset: 0 with sim_time (the component owns /clock), else
         # the wall-clock time at start, so stamps compare with wall-clock nodes
@@ -182,27 +186,59 @@ class SimRosIo:
     def follow_answers(self, answers, camera) -> None:
         """Lock-step: feed `answers` (a FrameAnswerGate) the /ball_state stamps and the /plate_cmd
         arrivals, and say every REPORT_PERIOD_S how fast simulated time runs and why."""
+        self._answers = answers
         self.subscriptions += [
             self.node.create_subscription(BallState, "/ball_state", lambda msg: answers.on_state(
                 stamp_to_ns(msg.header.stamp) * 1e-9 - self.stamp_offset_s), qos_profile_sensor_data),
-            self.node.create_subscription(Vector3Stamped, "/plate_cmd", lambda msg: answers.on_command(), 10),
+            self.node.create_subscription(Vector3Stamped, "/plate_cmd", self._on_command, 10),
         ]
         self._pace = PaceReport(answers, camera, self.world, 1.0 / self.params["camera_rate_hz"])
         steady = RosClock(clock_type=ClockType.STEADY_TIME)
         self.timers = [self.node.create_timer(REPORT_PERIOD_S, self._report_pace, clock=steady),
                        self.node.create_timer(1.0, self._check_hosted_controller, clock=steady)]
 
+    def _on_command(self, msg) -> None:
+        if not self._commands_seen:    # the first command: what answers a frame, before waiting on it
+            self._commands_seen = True
+            self._check_hosted_controller()
+        self._answers.on_command()
+
     def _check_hosted_controller(self) -> None:
-        """Whether /plate_cmd comes from this process: a controller hosted in the manager (on a
-        node of its own, like every ros2_control controller). The nodes of one process share
-        its DDS participant, whose GUID prefix begins every endpoint's GID."""
+        """Whether a /plate_cmd answers a state at once, or the state's arrival must count as
+        the answer (FrameAnswerGate.answer_on_state): a controller hosted in the manager (on a
+        node of its own, like every ros2_control controller) steps on the manager's time grid,
+        and a controller node stepping on its own timer (`control_trigger` 'timer', the policy
+        node) steps at its next tick of simulated time, which the waiting simulation would
+        never reach. The nodes of one process share its DDS participant, whose GUID prefix
+        begins every endpoint's GID; a node's trigger is asked once through its parameter
+        service, and until it answers the node counts as stepping on a timer (the simulation
+        then never waits for a command that cannot come)."""
         name, namespace = self.node.get_name(), self.node.get_namespace()
         ours = {bytes(info.endpoint_gid[:PARTICIPANT_PREFIX_BYTES])
                 for info in self.node.get_publishers_info_by_topic("/sim/ball_truth")
                 if info.node_name == name and info.node_namespace == namespace}
-        self._pace.answers.answer_on_state = any(
-            bytes(info.endpoint_gid[:PARTICIPANT_PREFIX_BYTES]) in ours
-            for info in self.node.get_publishers_info_by_topic("/plate_cmd"))
+        publishers = self.node.get_publishers_info_by_topic("/plate_cmd")
+        hosted = any(bytes(info.endpoint_gid[:PARTICIPANT_PREFIX_BYTES]) in ours for info in publishers)
+        nodes = {(info.node_namespace.rstrip("/") + "/" + info.node_name) for info in publishers
+                 if bytes(info.endpoint_gid[:PARTICIPANT_PREFIX_BYTES]) not in ours}
+        for node in nodes - set(self._triggers):
+            self._ask_trigger(node)
+        self._answers.answer_on_state = hosted or any(self._triggers.get(node, "timer") == "timer"
+                                                      for node in nodes)
+
+    def _ask_trigger(self, node: str) -> None:
+        """Ask `node` for its control_trigger (an empty answer for a node without one)."""
+        client = self._trigger_clients.get(node)
+        if client is None:
+            client = self._trigger_clients[node] = self.node.create_client(GetParameters, f"{node}/get_parameters")
+        if not client.service_is_ready():
+            return
+        future = client.call_async(GetParameters.Request(names=["control_trigger"]))
+
+        def take(done) -> None:
+            values = done.result().values if done.result() is not None else []
+            self._triggers[node] = values[0].string_value if values else ""
+        future.add_done_callback(take)
 
     def _report_pace(self) -> None:
         line = self._pace.line(time.monotonic())
@@ -300,3 +336,5 @@ class SimRosIo:
             self.node.destroy_service(service)
         for subscription in self.subscriptions:
             self.node.destroy_subscription(subscription)
+        for client in self._trigger_clients.values():
+            self.node.destroy_client(client)

@@ -15,9 +15,11 @@ The latency budget is therefore one camera period of simulated time, whatever th
 faster chain answers sooner and the simulation does not wait at all.
 
 A controller hosted in the simulation's own process (BallBalanceController in the controller
-manager) steps on the manager's time grid, which does not move while the simulation waits:
-for it the state's arrival in the process is the answer (`answer_on_state`), and its step
-follows within one control period of simulated time.
+manager) steps on the manager's time grid, which does not move while the simulation waits,
+and a controller node stepping on its own timer (the policy node) steps at its next tick of
+simulated time, which the waiting simulation would never reach: for them the state's
+arrival is the answer (`answer_on_state`), and their step follows within one control period
+of simulated time.
 
 Waiting starts with the first answer seen, so a graph with no tracker or no controller runs
 free. A frame left unanswered for `timeout_wall_s` of wall-clock time (a lost message, a dead
@@ -58,7 +60,20 @@ class FrameAnswerGate:
         self.frames_given_up = 0
         self.wait_wall_s = 0.0                       # wall time spent waiting (for the real-time factor)
         self._wait_started_wall_s: Optional[float] = None
-        self.answer_on_state = False                 # the controller is in this process (see above)
+        self._answer_on_state = False
+
+    @property
+    def answer_on_state(self) -> bool:
+        """Whether a frame's /ball_state is its answer, not the /plate_cmd after it: the
+        controller is in this process, or steps on its own timer (see above)."""
+        return self._answer_on_state
+
+    @answer_on_state.setter
+    def answer_on_state(self, value: bool) -> None:
+        with self._lock:
+            self._answer_on_state = bool(value)
+            if self._answer_on_state and self._state_seen_s is not None:
+                self._answered()      # a state already in answers its frame now
 
     def frame_captured(self, time_s: float) -> None:
         """(loop) Frame captured at simulated time `time_s`: its answer is awaited from now."""
@@ -71,7 +86,7 @@ class FrameAnswerGate:
         with self._lock:
             if any(abs(stamp_s - t) <= STAMP_TOLERANCE_S for t in self._unanswered):
                 self._state_seen_s = stamp_s
-                if self.answer_on_state:
+                if self._answer_on_state:
                     self._answered()
 
     def on_command(self) -> None:

@@ -1,7 +1,7 @@
 """Lock-step on a slower machine: the whole simulated graph (camera, tracker, PID, monitor) with
 its rendering slowed to several times a frame period gives the monitor's figures of an
 unslowed run, only later. Both graphs run at once on private domains, so each also has the
-other's load."""
+other's load. A controller node stepping on its own timer (the policy) keeps the pace too."""
 import re
 from pathlib import Path
 
@@ -44,6 +44,25 @@ def test_slower_rendering_changes_how_long_the_run_takes_not_its_figures(tmp_pat
     assert abs(quick["settle_s"] - slowed["settle_s"]) <= 0.5, (quick, slowed)
     renders_ms = [float(ms) for ms in re.findall(r"a frame renders in ([0-9.]+) ms", sim_log(graphs[1][0].output()))]
     assert renders_ms and min(renders_ms) >= 1e3 * EXTRA_RENDER_S   # it was slowed, and said how fast it ran
+
+
+@pytest.mark.timeout(900)
+def test_a_controller_stepping_on_its_own_timer_is_answered_by_its_state(tmp_path):
+    # the policy node steps at its next tick of simulated time, which a simulation waiting for
+    # its /plate_cmd would never reach: the state's arrival answers the frame instead
+    lease = DomainLease()
+    launcher = Launcher(lease.domain_id, tmp_path)
+    try:
+        out = tmp_path / "policy"
+        graph = launcher.start([str(ROOT / "scripts" / "sim_balance.sh"), "--controller", "policy", "--duration",
+                                "4", "--out", str(out)], name=out.name)
+        assert graph.wait(timeout=800) == 0, graph.output()[-3000:]
+    finally:
+        launcher.stop_all()
+        lease.release()
+    log = sim_log(graph.output())
+    assert "simulated time at" in log and "never answered" not in log, log[-3000:]
+    assert metrics(out)["drop"] == 0
 
 
 def sim_log(script_output: str) -> str:
