@@ -86,6 +86,7 @@ class SimRosIo:
         self._triggers = {}          # lock-step: /plate_cmd publisher node -> its control_trigger ("" if none)
         self._trigger_clients = {}
         self._commands_seen = False
+        self._pace = None            # lock-step's pace report (follow_answers)
         self.refused_force_requests = 0   # /sim/set_ball_force requests refused
         # stamps = sim time + this offset: 0 with sim_time (the component owns /clock), else
         # the wall-clock time at start, so stamps compare with wall-clock nodes
@@ -217,10 +218,11 @@ class SimRosIo:
         ours = {bytes(info.endpoint_gid[:PARTICIPANT_PREFIX_BYTES])
                 for info in self.node.get_publishers_info_by_topic("/sim/ball_truth")
                 if info.node_name == name and info.node_namespace == namespace}
-        publishers = self.node.get_publishers_info_by_topic("/plate_cmd")
-        hosted = any(bytes(info.endpoint_gid[:PARTICIPANT_PREFIX_BYTES]) in ours for info in publishers)
-        nodes = {(info.node_namespace.rstrip("/") + "/" + info.node_name) for info in publishers
-                 if bytes(info.endpoint_gid[:PARTICIPANT_PREFIX_BYTES]) not in ours}
+        publishers = [(bytes(info.endpoint_gid[:PARTICIPANT_PREFIX_BYTES]) in ours,
+                       info.node_namespace.rstrip("/") + "/" + info.node_name)
+                      for info in self.node.get_publishers_info_by_topic("/plate_cmd")]
+        hosted = any(in_process for in_process, _ in publishers)
+        nodes = {node for in_process, node in publishers if not in_process}
         for node in nodes - set(self._triggers):
             self._ask_trigger(node)
         self._answers.answer_on_state = hosted or any(self._triggers.get(node, "timer") == "timer"
@@ -325,6 +327,8 @@ class SimRosIo:
             self.controls.request_push(values, axes)
 
     def close(self) -> None:
+        if self._pace is not None and not self._closed:
+            self.logger.info(self._pace.summary())
         self._closed = True
         for entity in (self.image_pub, self.info_pub, self.truth_pub, self.dropped_pub, self.pushed_pub,
                        self.clock_pub, self.detection_pub, self.trace_pub):

@@ -136,6 +136,11 @@ class PaceReport:
         self._last = None   # (wall s, sim s, wait s, given up)
         self._explained = False
 
+    def summary(self) -> str:
+        """The line for the end of a run: how many frames were answered and given up."""
+        return (f"lock-step at t = {self.world.time_s:.1f} s: {self.answers.frames_answered} frame(s) answered, "
+                f"{self.answers.frames_given_up} given up")
+
     def line(self, wall_s: float) -> str:
         sim_s, wait_s, given_up = self.world.time_s, self.answers.wait_wall_s, self.answers.frames_given_up
         last, self._last = self._last, (wall_s, sim_s, wait_s, given_up)
