@@ -60,7 +60,6 @@ class BatchBallKalman:
         self.last_dt = np.zeros(batch)                 # (dt, q) of each ball's last prediction
         self.last_q = np.zeros(batch)
         self.sigma_a = cfg.accel_noise_m_s2
-        self.sigma_a_cmd = cfg.cmd_accel_noise_m_s2
         self.adaptive = bool(cfg.adaptive_meas_noise)
         self.gain_state = bool(cfg.estimate_input_gain)
         self.noise_min = cfg.meas_noise_m
@@ -125,8 +124,8 @@ class BatchBallKalman:
     def _adapt_noise(self, t, z, a, det) -> None:
         """BallKalman._adapt_noise for the balls with a detection `det`."""
         self.noise.add(t, z, None if a is None else a * self.gain[:, None], det)
-        sigma = self.noise.sigma()
-        ready = det & np.isfinite(sigma)
+        sigma = self.noise.sigma(det)
+        ready = np.isfinite(sigma)
         self.r[ready] = np.clip(sigma[ready], self.noise_min, self.noise_max) ** 2
 
     def step(self, t: float, z: np.ndarray, det: np.ndarray, accel=None, lever=None):

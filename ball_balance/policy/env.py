@@ -123,13 +123,11 @@ class Nominal:
 
     @classmethod
     def from_config(cls) -> Nominal:
-        """The policy's parameters; the camera's rate, vision delay and noise floor as the
-        closed-loop benchmark's episodes have them (sim/config.py's camera)."""
+        """The policy's parameters; the camera's rate, vision delay and noise floor are the
+        defaults, the closed-loop benchmark's episodes' (sim/config.py)."""
         values = controller_values("policy", "stationary")
         return cls(k_g=control_config.k_g(values), u_max_rad=values["max_tilt_cmd_rad"],
-                   max_total_tilt_rad=values["max_total_tilt_rad"], max_prediction_s=values["max_prediction_s"],
-                   vision_delay_s=VISION_DELAY_S, fast_noise_floor_m=FAST_NOISE_FLOOR_M,
-                   camera_rate_hz=CAMERA_RATE_HZ)
+                   max_total_tilt_rad=values["max_total_tilt_rad"], max_prediction_s=values["max_prediction_s"])
 
 
 def tracker_config():
@@ -177,7 +175,7 @@ class PlateBatch:
         # pid_mpc, mpc_far: the MPC's label near the reference too on a weak plant, and the correction
         # applied there (observation.low_gain_share of the plant estimate's gain ratio; 0: not)
         self.low_gain_onset = low_gain_onset
-            # the PID under the policy: config/policy.yaml over the schema (pid_overrides: (name, value) pairs
+        # the PID under the policy: config/policy.yaml over the schema (pid_overrides: (name, value) pairs
         # over those, to try another base; a model is refused unless the configuration matches it)
         self.pid_values = controller_values("policy", "stationary", tuple(pid_overrides))
         self.estimator_cfg = control_config.estimator_config(self.pid_values)

@@ -211,11 +211,16 @@ class ChangeTest:
         self.start = np.where(add & np.isnan(self.start), t, self.start)
         full = add & (t - self.start >= DISTURBANCE_CHANGE_WINDOW_S)
         first_t, nis_before = self._oldest("t"), self._oldest("nis")
-        tested = full & (nis_before <= MODEL_AGREED_NIS) & (first_t - np.asarray(track_start_s) >= self.settle_s)
+        tested = full & (nis_before <= MODEL_AGREED_NIS) & self.settled(first_t, track_start_s)
         if not tested.any():
             return tested
         total = self._sum_whitened()
         return tested & (np.einsum("bi,bi->b", total, total) / np.maximum(self.n, 1) > DISTURBANCE_CHANGE_CHI2)
+
+    def settled(self, t, track_start_s) -> np.ndarray:
+        """Whether tracks begun at track_start_s are `settle_s` old at t: their running
+        consistency describes the detections rather than its start value."""
+        return np.asarray(t) - np.asarray(track_start_s) >= self.settle_s
 
     def correct(self, i: int, t: float, x: np.ndarray, P: np.ndarray) -> None:
         """Filter i's window showed a change at t: correct its state x (n,) in place by the

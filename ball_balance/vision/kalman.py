@@ -203,10 +203,9 @@ class DetectionNoiseEstimator:
         a = np.zeros((self.b, 2)) if accel is None else np.asarray(accel, dtype=float).reshape(self.b, 2)
         det = np.ones(self.b, bool) if det is None else det
         newer = det & ((self.n_last == 0) | (t > self.t[:, 2]))
-        for name, value in (("t", t), ("z", z), ("a", a)):
-            last = getattr(self, name)
+        for last, value in ((self.t, np.full(self.b, t)), (self.z, z), (self.a, a)):
             last[newer] = np.roll(last[newer], -1, axis=1)
-            last[newer, 2] = value if name == "t" else value[newer]
+            last[newer, 2] = value[newer]
         self.n_last = np.where(newer, np.minimum(self.n_last + 1, 3), self.n_last)
         t0, t1, t2 = self.t[:, 0], self.t[:, 1], self.t[:, 2]
         use = newer & (self.n_last >= 3)
@@ -226,11 +225,13 @@ class DetectionNoiseEstimator:
         self.ring_at[i] = at + 2
         self.n_samples[i] = np.minimum(self.n_samples[i] + 2, ring)
 
-    def sigma(self) -> np.ndarray:
+    def sigma(self, balls=None) -> np.ndarray:
         """The estimated detection noise per ball (b,) [m, 1 sigma per axis], nan before enough
-        detections."""
+        detections and for the balls not in the mask `balls` (all by default)."""
         out = np.full(self.b, np.nan)
         ready = self.n_samples >= 2 * self.min_samples
+        if balls is not None:
+            ready &= balls
         if ready.any():
             i = np.flatnonzero(ready)
             ordered = np.sort(self.samples[i], axis=1)
@@ -433,7 +434,6 @@ class BallKalman:
         if self.disturbance_state:
             self.d_index = self.dim
             self.dim += 2
-            self._disturbance_rows = disturbance_rows(self.d_index)
         self._disturbance = (np.zeros(2), 0.0)   # kept over dropped tracks
         self._change = ChangeTest(1, self.dim, self.d_index, consistency_settle_s(cfg.model_mismatch_time_constant_s)) \
             if self.disturbance_state else None
@@ -454,9 +454,7 @@ class BallKalman:
         self._excess = (0, np.zeros(2), 1.0)
         # after a push: the velocity of a plain constant-velocity filter run alongside
         self.maneuver_hold_s = cfg.maneuver_hold_s
-        self._hold_until = -np.inf
-        # ... during which the model's process noise is at least this
-        self.sigma_a_maneuver = cfg.maneuver_accel_noise_m_s2
+        self._hold_until = -np.inf     # during which process_noise keeps maneuver_accel_noise_m_s2
         self.fast: Optional[BallKalman] = None
         if cfg.maneuver_hold_s > 0.0 and cfg.maneuver_sigma > 0.0:
             self.fast = BallKalman(cfg.constant_velocity())
@@ -704,7 +702,7 @@ class BallKalman:
         """Whether the running consistency at t describes the detections rather than its start
         value: the track is CONSISTENCY_SETTLE_TIME_CONSTANTS of its time constant old. Until
         then neither a change of d nor a force behind a push is looked for."""
-        return t - self._track_start_s >= consistency_settle_s(self.model_mismatch_time_constant_s)
+        return bool(self._change.settled(t, self._track_start_s))
 
     def _decide_jump(self, t: float, z: Tuple[float, float]) -> bool:
         """Fold detection z into the jump test. When it finds a change of d, the reference
