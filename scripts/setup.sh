@@ -82,7 +82,7 @@ if ! stamp_ok pip "$want" || [[ ! -x "$VENV/bin/python" ]]; then
   "$VENV/bin/python" -m pip install -q --disable-pip-version-check --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
   "$VENV/bin/python" -m pip install -q --disable-pip-version-check \
       -r "$ROS_REQUIREMENTS" -r "$ROOT/requirements/python.txt" 2>&1 | grep -v '^WARNING: Location' || true
-  "$VENV/bin/python" -c 'import mujoco, cv2, numpy, yaml, filterpy, yourdfpy' \
+  "$VENV/bin/python" -c 'import mujoco, cv2, numpy, yaml, yourdfpy' \
       || die "Python packages did not install; see the pip output above"
   stamp_set pip "$want"
   rm -f "$STAMPS/build"  # new packages: rebuild our workspace against them

@@ -5,8 +5,9 @@ rates the closed-loop benchmark uses (ball_balance/benchmark/episode.py):
 
     camera 30 Hz (the benchmark's EpisodeSpec.camera_rate_hz; frames dropped with
     frame_drop_prob) -> detection noise -> the tracker's Kalman filter as it runs
-    (batch_kalman.py: its config, the commanded tilt as known acceleration with its gain
-    estimated, adaptive process and measurement noise, the disturbance state d) -> visible
+    (vision/kalman.py BatchBallKalman, the tracker's own over the batch: its config, the
+    commanded tilt as known acceleration with its gain estimated, adaptive process and
+    measurement noise, the disturbance state d) -> visible
     vision_delay_s later -> control tick 60 Hz (the PID node's rate; config/policy.yaml):
     online plant estimate (k g, and the tracker's d as the constant disturbance: the
     pipeline's own, control/estimation.py's BatchPlantEstimator, a plate per episode) ->
@@ -35,10 +36,9 @@ from ball_balance.control import config as control_config
 from ball_balance.control.estimation import BatchPlantEstimator
 from ball_balance.control.pid import Pid
 from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
-from ball_balance.policy.batch_kalman import BatchBallKalman
 from ball_balance.policy.observation import ObservationBuilder, correction_weight, low_gain_share
 from ball_balance.sim.config import CAMERA_RATE_HZ, FAST_NOISE_FLOOR_M, VISION_DELAY_S
-from ball_balance.vision.kalman import KalmanConfig
+from ball_balance.vision.kalman import BatchBallKalman, KalmanConfig
 
 # the control tick: the PID node's rate (config/pid.yaml, 60 Hz); config/policy.yaml's
 # control_rate_hz must equal it (checked here) and the model records it (rate_hz, checked at run time)

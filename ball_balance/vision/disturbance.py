@@ -1,6 +1,6 @@
 """The disturbance state's change test and jump fits (vision/kalman.py BallKalman), written
-once for a batch of filters: BallKalman is a batch of one, the training plant's filter
-(policy/batch_kalman.py) a batch of balls.
+once for a batch of filters (BatchBallKalman): the tracker's BallKalman is a batch of one,
+the training plant's filter a batch of balls.
 
 A change of d (a force that starts, turns or ends) shows as innovations that keep one sign.
 `ChangeTest` keeps each filter's last DISTURBANCE_CHANGE_WINDOW_S of frames and tests their
@@ -10,13 +10,11 @@ change of unknown size. After a push's detection `JumpTest` tells a push from a 
 """
 from __future__ import annotations
 
-import copy
 import math
 from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 
 # the running innovation consistency (1 when the model is right) at most this: the model agreed
 # with the detections. Only then is a detection beyond maneuver_sigma a push, or a bias of the
@@ -286,16 +284,19 @@ class ChangeTest:
 class JumpTest:
     """After a push's detection (with the disturbance state and a known acceleration): was it a
     push, a jump of the ball's velocity, or a force that started or turned, a change of d? A
-    reference filter runs on from before the detection with the model's own process noise, and
-    for each onset from the change test's window on, each of the two jumps is fitted to its
-    innovations (generalised likelihood ratio, as estimate_change). Both explanations have
-    two free parameters and an onset, so their best fits compare directly: once twice the
+    reference filter (its state x, covariance P and measurement variance r, copied from the
+    filter before the push) runs on with the model's own process noise, and for each onset from
+    the change test's window on, each of the two jumps is fitted to its innovations
+    (generalised likelihood ratio, as estimate_change). Both explanations have two free
+    parameters and an onset, so their best fits compare directly: once twice the
     log-likelihood ratio between the best of each passes DISTURBANCE_CHANGE_CHI2 (the change
-    test's bound) the test has decided."""
+    test's bound) the test has decided. The filter (vision/kalman.py BatchBallKalman) predicts
+    and updates the reference filter; this class keeps the fits."""
 
-    def __init__(self, kf: KalmanFilter, window, transition: np.ndarray, t: float, d_index: int):
-        self.reference = copy.deepcopy(kf)
-        n = kf.x.shape[0]
+    def __init__(self, x: np.ndarray, P: np.ndarray, r: float, window, transition: np.ndarray, t: float,
+                 d_index: int):
+        self.x, self.P, self.r = x.copy(), P.copy(), r
+        n = x.shape[0]
         self.force_columns, self.push_columns = state_pair(n, d_index), state_pair(n, 2)   # d, (vx, vy)
         transitions = [frame.transition for frame in window] + [transition]
         self.forces = [Jump.since(i, window, transitions, self.force_columns) for i in range(len(window))]
@@ -307,24 +308,23 @@ class JumpTest:
         self.forces.append(Jump(t, transition @ self.force_columns))
         self.pushes.append(Jump(t, transition @ self.push_columns))
 
-    def predict(self, t: float) -> None:
-        """After the reference filter's prediction into the frame at t: the jumps so far move
+    def predict(self, t: float, F: np.ndarray) -> None:
+        """After the reference filter's prediction F into the frame at t: the jumps so far move
         on, and either may happen in this prediction too."""
         for jump in self.forces + self.pushes:
-            jump.predict(self.reference.F)
-        self._add_onset(t, self.reference.F)
+            jump.predict(F)
+        self._add_onset(t, F)
 
-    def update(self, z: np.ndarray) -> Optional[str]:
-        """Fold in detection z: "force" or "push" once decided, else None."""
-        kf = self.reference
-        innovation = z - kf.H @ kf.x
-        S = kf.H @ kf.P @ kf.H.T + kf.R
-        jumps = self.forces + self.pushes
-        for jump in jumps:
+    def add(self, innovation: np.ndarray, S: np.ndarray) -> None:
+        """The reference filter's innovation of a detection and its covariance, before its update."""
+        for jump in self.forces + self.pushes:
             jump.add(innovation, S)
-        kf.update(z)
-        for jump in jumps:
-            jump.take_up(kf.K)
+
+    def take_up(self, K: np.ndarray) -> Optional[str]:
+        """The reference filter's update gain K for the detection just added: "force" or "push"
+        once decided, else None."""
+        for jump in self.forces + self.pushes:
+            jump.take_up(K)
         force = max(jump.statistic() for jump in self.forces)
         push = max(jump.statistic() for jump in self.pushes)
         if force - push > DISTURBANCE_CHANGE_CHI2:

@@ -1,13 +1,16 @@
-"""Kalman filter of the ball in the plate frame (filterpy), constant velocity plus an optional
-known acceleration from the commanded plate tilt.
+"""Kalman filter of the ball in the plate frame, constant velocity plus an optional known
+acceleration from the commanded plate tilt. `BatchBallKalman` runs it for a batch of balls
+in numpy; the tracker's `BallKalman` is a batch of one, the training plant (policy/env.py)
+steps a batch of episodes.
 
-State x = [x, y, vx, vy] (m, m/s), with `estimate_input_gain` also s, the ratio of the
-acceleration the ball really shows to the known one; measurement z = [x, y] (m). Per frame,
+State x = [x, y, vx, vy, s] (m, m/s), s the ratio of the acceleration the ball really shows
+to the known one, estimated with `estimate_input_gain` and else held at 1; measurement
+z = [x, y] (m). Per frame,
 with the time step dt from the frame stamps and the known acceleration a = (a_x, a_y):
 
     x' = x + vx dt + s a_x dt^2/2,   vx' = vx + s a_x dt,   s' = s      (likewise y)
     Q = q [[dt^4/4 I, dt^3/2 I], [dt^3/2 I, dt^2 I]],  q = sigma_a^2      white-noise acceleration
-    H = [I 0],  R = sigma_z^2 I
+    H = [I 0],  R = sigma_z^2 I,  update in Joseph form
 
 The known acceleration is -k g sin(u) of the commanded tilt (the tracker's `known_acceleration`).
 With it the model explains most of the ball's motion, so its process noise
@@ -76,10 +79,9 @@ import dataclasses
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Deque, Optional, Tuple
+from typing import Deque, Dict, Optional, Tuple
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 
 from ball_balance.control.prediction import StampedDelayEstimator
 from ball_balance.rotations import matrix_to_rotvec
@@ -203,9 +205,11 @@ class DetectionNoiseEstimator:
         a = np.zeros((self.b, 2)) if accel is None else np.asarray(accel, dtype=float).reshape(self.b, 2)
         det = np.ones(self.b, bool) if det is None else det
         newer = det & ((self.n_last == 0) | (t > self.t[:, 2]))
-        for last, value in ((self.t, np.full(self.b, t)), (self.z, z), (self.a, a)):
-            last[newer] = np.roll(last[newer], -1, axis=1)
-            last[newer, 2] = value[newer]
+        if not newer.any():
+            return
+        for last, value in ((self.t, t), (self.z, z[newer]), (self.a, a[newer])):
+            last[newer, :2] = last[newer, 1:]
+            last[newer, 2] = value
         self.n_last = np.where(newer, np.minimum(self.n_last + 1, 3), self.n_last)
         t0, t1, t2 = self.t[:, 0], self.t[:, 1], self.t[:, 2]
         use = newer & (self.n_last >= 3)
@@ -400,7 +404,7 @@ class KalmanConfig:
         return cls(**{**values, "input_gain_bounds": tuple(cfg.input_gain_bounds)})
 
     def constant_velocity(self) -> KalmanConfig:
-        """These settings for a plain constant-velocity filter (BallKalman.fast): the same
+        """These settings for a plain constant-velocity filter (BatchBallKalman.fast): the same
         noises, gate and coasting, no adaptation, no push detection; without a known
         acceleration its process noise is accel_noise_m_s2 anyway."""
         return dataclasses.replace(self, cmd_accel_noise_m_s2=self.accel_noise_m_s2, estimate_input_gain=False,
@@ -408,189 +412,405 @@ class KalmanConfig:
                                    disturbance_time_constant_s=0.0)
 
 
+GAIN_INDEX = 4    # the state's index of s, the input gain (held at 1 without its estimate)
+D_INDEX = 5       # ... of d_x (d_y next), with the disturbance state
+
+
+def innovation_inverse(P: np.ndarray, r: np.ndarray, y: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """S^-1 (b, 2, 2) of the innovations y (b, 2) of a batch of filters with covariances
+    P (b, n, n) and measurement variances r (b,) (S = H P H^T + r I, H = [I 0]), and their
+    Mahalanobis distances sqrt(y^T S^-1 y) (b,)."""
+    s00, s01, s11 = P[:, 0, 0] + r, P[:, 0, 1], P[:, 1, 1] + r
+    det_s = s00 * s11 - s01 * s01
+    inv = np.empty((len(P), 2, 2))
+    inv[:, 0, 0], inv[:, 1, 1] = s11 / det_s, s00 / det_s
+    inv[:, 0, 1] = inv[:, 1, 0] = -s01 / det_s
+    return inv, np.sqrt(np.maximum(np.einsum("bi,bij,bj->b", y, inv, y), 0.0))
+
+
+def kalman_update(x: np.ndarray, P: np.ndarray, r: np.ndarray, y: np.ndarray, S_inv: np.ndarray):
+    """The update of a batch of filters (x (b, n), P (b, n, n), r (b,)) with the innovations
+    y (b, 2) and S^-1 (b, 2, 2): K = P H^T S^-1, x + K y and P in Joseph form,
+    (I - K H) P (I - K H)^T + r K K^T, which stays symmetric and positive. Returns
+    (x, P, K)."""
+    K = np.einsum("bij,bjk->bik", P[:, :, :2], S_inv)
+    x_new = x + np.einsum("bij,bj->bi", K, y)
+    n = x.shape[1]
+    IKH = np.broadcast_to(np.eye(n), (len(x), n, n)).copy()
+    IKH[:, :, :2] -= K
+    P_new = IKH @ P @ IKH.transpose(0, 2, 1) + r[:, None, None] * (K @ K.transpose(0, 2, 1))
+    return x_new, P_new, K
+
+
+class BatchBallKalman:
+    """The tracker's filter for a batch of balls, numpy, all at once: the tracker's BallKalman
+    is a batch of one, the training plant (policy/env.py) steps a batch of episodes with it.
+
+    Per ball: state [x, y, vx, vy, s] (s held at 1 with zero variance without
+    `estimate_input_gain`, which is then the plain known-acceleration model), with the
+    disturbance state also [d_x, d_y]; the module's prediction and process noise; the
+    measurement noise estimated from the detections' scatter (DetectionNoiseEstimator, over
+    the batch), or fixed per ball (`fixed_meas_noise_m`, as the benchmark's fast mode sets it);
+    the gate, coasting, track restarts (the noise, gain and d estimates survive them); pushes
+    (maneuver_*), their constant-velocity filter `fast`, the change test of d and, after a
+    push's detection, the jump test (vision/disturbance.py)."""
+
+    def __init__(self, batch: int, cfg: KalmanConfig, fixed_meas_noise_m=None, noise_window_max_span_s: float = 0.25,
+                 noise_min_samples: int = 10):
+        self.b, self.cfg = batch, cfg
+        self.sigma_a = cfg.accel_noise_m_s2
+        self.gain_state = bool(cfg.estimate_input_gain)
+        self.disturbance_state = cfg.disturbance_time_constant_s > 0.0
+        self.dim = D_INDEX + 2 if self.disturbance_state else D_INDEX
+        self.noise_min = cfg.meas_noise_m
+        self.noise_max = max(cfg.meas_noise_max_m, cfg.meas_noise_m)
+        self.noise = DetectionNoiseEstimator(cfg.meas_noise_window_frames, noise_min_samples, noise_window_max_span_s,
+                                             batch) if cfg.adaptive_meas_noise else None
+        low, high = cfg.input_gain_bounds
+        self.gain_var_max = ((high - low) / 4.0) ** 2   # s's variance after long without a command
+        # R per ball: the configured noise, or with a fixed noise the larger of it and the ball's
+        r0 = np.full(batch, cfg.meas_noise_m) if fixed_meas_noise_m is None or self.noise is not None \
+            else np.maximum(cfg.meas_noise_m, fixed_meas_noise_m)
+        self.r = r0 ** 2
+        # d: a random walk whose jerk density is the model's white acceleration over the time
+        # constant squared, so d is the part of the acceleration error that persists longer
+        self.q_d = (cfg.cmd_accel_noise_m_s2 / cfg.disturbance_time_constant_s) ** 2 if self.disturbance_state else 0.0
+        self.change = ChangeTest(batch, self.dim, D_INDEX, consistency_settle_s(cfg.model_mismatch_time_constant_s))
+        self.transition = np.broadcast_to(np.eye(self.dim), (batch, self.dim, self.dim)).copy()  # F's since the update
+        self.track_start = np.zeros(batch)
+        self.jump_tests: Dict[int, JumpTest] = {}   # after a push's detection: a push or a change of d?
+        # the estimates kept over dropped tracks: s, d and their variances
+        self.saved_gain = np.ones(batch)
+        self.saved_gain_var = np.full(batch, cfg.input_gain_std ** 2 if self.gain_state else 0.0)
+        self.saved_d = np.zeros((batch, 2))
+        self.saved_d_var = np.zeros(batch)
+        self.x = np.zeros((batch, self.dim))
+        self.p = np.zeros((batch, self.dim, self.dim))
+        self.init = np.zeros(batch, bool)
+        self.t_last = np.zeros(batch)
+        self.coasted = np.zeros(batch, int)    # frames without a usable detection since the last one
+        self.nis = np.ones(batch)              # running mean of the normalised innovation squared (per axis)
+        self.last_dt = np.zeros(batch)         # the last prediction's dt, q and Q
+        self.last_q = np.zeros(batch)
+        self.last_Q = np.zeros((batch, self.dim, self.dim))
+        # pushes: the hold (process noise at least maneuver_accel_noise_m_s2, the velocity of a
+        # constant-velocity filter), and with maneuver_confirm_frames > 1 the detections in
+        # the current run that may be a push, the last one's innovation, the consistency
+        # before the run began
+        self.hold_until = np.full(batch, -np.inf)
+        self.excess_count = np.zeros(batch, int)
+        self.excess_y = np.zeros((batch, 2))
+        self.excess_nis = np.ones(batch)
+        self.fast: Optional[BatchBallKalman] = None
+        if cfg.maneuver_hold_s > 0.0 and cfg.maneuver_sigma > 0.0:
+            self.fast = BatchBallKalman(batch, cfg.constant_velocity())
+        # the last frame's outcome per ball, and totals
+        self.fresh = np.zeros(batch, bool)     # its detection was used
+        self.gated = np.zeros(batch, bool)     # its detection was rejected as an outlier
+        self.gated_count = np.zeros(batch, int)
+        self.reset_count = np.zeros(batch, int)
+        self.maneuver_count = np.zeros(batch, int)       # predictions widened for a push
+        self.disturbance_changes = np.zeros(batch, int)  # changes of d found
+
+    @property
+    def gain(self) -> np.ndarray:
+        """s per ball (the saved estimate between tracks)."""
+        return np.where(self.init, self.x[:, GAIN_INDEX], self.saved_gain) if self.gain_state else np.ones(self.b)
+
+    @property
+    def disturbance_m_s2(self) -> np.ndarray:
+        """d per ball (b, 2) [m/s^2] (the saved estimate between tracks; 0 without the state)."""
+        if not self.disturbance_state:
+            return np.zeros((self.b, 2))
+        return np.where(self.init[:, None], self.x[:, D_INDEX:D_INDEX + 2], self.saved_d)
+
+    def level_offset_rad(self, k_g: float) -> np.ndarray:
+        """d as a plate-level offset per ball and axis (b, 2) [rad]: the tilt u at which the ball
+        stays still, s k_g sin(u) = d, for the known acceleration -k_g sin(u)
+        (PlateCommandInput.k_g)."""
+        scale = (self.gain * k_g)[:, None]
+        return np.arcsin(np.clip(self.disturbance_m_s2 / scale, -1.0, 1.0))
+
+    def reset(self, mask) -> None:
+        """Drop the tracks of the balls in mask: their next detection starts a new one."""
+        mask = np.asarray(mask, bool)
+        if not mask.any():
+            return
+        dropped = mask & self.init
+        self.reset_count += dropped
+        if self.gain_state:
+            self.saved_gain = np.where(dropped, self.x[:, GAIN_INDEX], self.saved_gain)
+            self.saved_gain_var = np.where(dropped, self.p[:, GAIN_INDEX, GAIN_INDEX], self.saved_gain_var)
+        if self.disturbance_state:
+            self.saved_d = np.where(dropped[:, None], self.x[:, D_INDEX:D_INDEX + 2], self.saved_d)
+            self.saved_d_var = np.where(dropped, self.p[:, D_INDEX, D_INDEX], self.saved_d_var)
+            self.change.clear(mask)
+        for i in np.flatnonzero(mask):
+            self.jump_tests.pop(int(i), None)
+        self.init &= ~mask
+        self.coasted[mask] = 0
+        self.excess_count[mask] = 0
+
+    def step(self, t: float, z: np.ndarray, det: np.ndarray, accel=None, lever=None, stepped=None):
+        """Frame at stamp t: detections z (b, 2) [m] where det (b,) is set; accel (b, 2) the
+        known accelerations [m/s^2] or None; lever (b, 2) the tilt's lever offsets
+        (PlateCommandInput.lever_offset) or None: the part of the ball's plate-frame position
+        the plate's tilt causes, which the filter takes from the detections and adds back to
+        its position. `stepped` (b,): the balls this frame is for, which predict and, without a
+        detection, coast (default det: a ball without a detection is not stepped, as a dropped
+        frame). Returns (position (b, 2), velocity (b, 2), valid (b,)) after it; `fresh` and
+        `gated` tell what became of each detection."""
+        stepped = det if stepped is None else (stepped | det)
+        pos, vel, valid = self._step(t, z if lever is None else z - lever, det, stepped, accel)
+        if lever is not None:
+            pos = pos + lever
+        if self.fast is not None:   # after a push: the constant-velocity filter's velocity
+            self.fast.r = self.r.copy()
+            _, fast_vel, fast_valid = self.fast.step(t, z, det, stepped=stepped)
+            use = valid & fast_valid & (t <= self.hold_until)
+            vel[use] = fast_vel[use]
+        return pos, vel, valid
+
+    def _step(self, t: float, z: np.ndarray, det: np.ndarray, stepped: np.ndarray, accel):
+        if self.noise is not None:
+            self._adapt_noise(t, z, accel, det)
+        dt = np.where(self.init, t - self.t_last, 0.0)
+        self.reset(stepped & self.init & (dt > self.cfg.max_dt_s))
+        pred = stepped & self.init & (dt > 0.0)   # a repeated or out-of-order stamp only updates
+        if pred.any():
+            self._predict(pred, np.where(pred, dt, 0.0), accel, t)
+            self.t_last = np.where(pred, t, self.t_last)
+        start = det & ~self.init
+        if start.any():
+            self._start(start, z, t)
+        run = det & self.init & ~start
+        coast = stepped & ~det & self.init
+        self.fresh, self.gated = start.copy(), np.zeros(self.b, bool)
+        if run.any():
+            self._update(t, z, run, dt, accel)
+        missed = coast | self.gated
+        self.coasted = np.where(missed, self.coasted + 1, self.coasted)
+        lost = missed & (self.coasted > self.cfg.max_coast_frames)
+        valid = start | ((run | coast) & ~lost)
+        self.reset(lost)
+        return self.x[:, :2].copy(), np.where(valid[:, None], self.x[:, 2:4], 0.0), valid
+
+    def _start(self, mask, z, t: float) -> None:
+        i = np.flatnonzero(mask)
+        self.x[i] = 0.0
+        self.x[i, :2] = z[i]
+        self.x[i, GAIN_INDEX] = self.saved_gain[i]
+        self.p[i] = 0.0
+        self.p[i, 0, 0] = self.p[i, 1, 1] = self.r[i]
+        self.p[i, 2, 2] = self.p[i, 3, 3] = self.cfg.init_vel_std_m_s ** 2
+        self.p[i, GAIN_INDEX, GAIN_INDEX] = self.saved_gain_var[i]
+        if self.disturbance_state:
+            self.x[i, D_INDEX:D_INDEX + 2] = self.saved_d[i]
+            self.p[i, D_INDEX, D_INDEX] = self.p[i, D_INDEX + 1, D_INDEX + 1] = self.saved_d_var[i]
+        self.transition[i] = np.eye(self.dim)
+        self.track_start[i] = t
+        self.init[i], self.coasted[i], self.t_last[i] = True, 0, t
+
+    def _update(self, t: float, z, run, dt, accel) -> None:
+        """The balls `run` (a track and a detection): the push test, the running consistency,
+        the gate, the change and jump tests of d, the update."""
+        y = z - self.x[:, :2]
+        inv, distance = innovation_inverse(self.p, self.r, y)
+        if self.cfg.maneuver_sigma > 0.0:
+            seen = run & (dt > 0.0)
+            push, nis = seen & (distance > self.cfg.maneuver_sigma), self.nis
+            if self.cfg.maneuver_confirm_frames > 1:
+                push, nis = self._confirmed_pushes(seen, push, y, distance)
+            agreed = push & (nis <= MODEL_AGREED_NIS)   # a model that agreed until the push began
+            self.hold_until = np.where(agreed, t + self.cfg.maneuver_hold_s, self.hold_until)
+            if self.disturbance_state and accel is not None:
+                self._start_jump_tests(t, agreed)
+            if push.any() and self._widen(push):
+                inv, widened_distance = innovation_inverse(self.p, self.r, y)
+                distance = np.where(push, widened_distance, distance)
+        gate = self.cfg.gate_sigma
+        if self.cfg.model_mismatch_time_constant_s > 0.0:   # a gated detection counts too, at the gate
+            alpha = np.minimum(1.0, dt / self.cfg.model_mismatch_time_constant_s)
+            self.nis = np.where(run, self.nis + alpha * (np.minimum(distance, gate) ** 2 / 2.0 - self.nis), self.nis)
+        ok = run & (distance <= gate)
+        self.fresh |= ok
+        self.gated = run & ~ok
+        self.gated_count += self.gated
+        if not ok.any():
+            return
+        appended = np.zeros(self.b, bool)
+        if self.disturbance_state:
+            appended, changed = self._find_disturbance_change(t, ok, y, accel is not None)
+            if changed:                   # a change found corrected the state
+                y = z - self.x[:, :2]
+                inv, _ = innovation_inverse(self.p, self.r, y)
+            ok = ok & ~self._decide_jumps(ok, z)
+        if not ok.any():
+            return
+        i = np.flatnonzero(ok)
+        x_new, p_new, k = kalman_update(self.x[i], self.p[i], self.r[i], y[i], inv[i])
+        low, high = self.cfg.input_gain_bounds
+        x_new[:, GAIN_INDEX] = np.clip(x_new[:, GAIN_INDEX], low, high) if self.gain_state else 1.0
+        self.x[i], self.p[i] = x_new, p_new
+        self.coasted[i] = 0
+        if self.disturbance_state:
+            self.change.set_last_gain(appended, k[appended[i]])
+            self.transition[i] = np.eye(self.dim)
+
+    def _find_disturbance_change(self, t: float, ok, y, known: bool):
+        """Before the update of the balls `ok` (a detection within the gate, innovation y
+        (b, 2)): their frame joins the change test's window (disturbance.ChangeTest), and a
+        change the window shows corrects the state and widens the covariance. Without a known
+        acceleration d is not in the model, and during a push's hold the innovations are the
+        push's: the window starts again. Returns the balls whose frame joined their window
+        (their update's gain completes it) and whether any ball's state was corrected."""
+        w = self.change
+        if not known:
+            w.clear(ok)
+            return np.zeros(self.b, bool), False
+        pushed = t <= self.hold_until
+        w.clear(ok & pushed)
+        add = ok & ~pushed
+        if not add.any():
+            return add, False
+        S = self.p[:, :2, :2] + self.r[:, None, None] * np.eye(2)
+        changed = w.test(t, add, y, S, self.nis, self.transition, self.track_start)
+        for i in np.flatnonzero(changed):
+            w.correct(i, t, self.x[i], self.p[i])
+        self.disturbance_changes += changed
+        return add & ~changed, bool(changed.any())
+
+    def _start_jump_tests(self, t: float, pushed) -> None:
+        """A jump test for each ball in `pushed` whose track has settled and has none yet: the
+        reference filter from before the push's detection."""
+        for i in np.flatnonzero(pushed & self.change.settled(t, self.track_start)):
+            if int(i) not in self.jump_tests:
+                self.jump_tests[int(i)] = JumpTest(self.x[i], self.p[i], float(self.r[i]), self.change.frames(i),
+                                                   self.transition[i], t, D_INDEX)
+
+    def _decide_jumps(self, ok, z) -> np.ndarray:
+        """The balls `ok` with a jump test fold their detection into it. When it finds a change
+        of d, the reference filter, with the change's posterior (its mean and covariance given
+        the frames since its onset, under the DISTURBANCE_STD_M_S2 prior) added, becomes the
+        ball's filter and the push's hold ends; when it finds a push, the test ends and the
+        hold goes on. Returns the balls whose filter was replaced (their detection is in it)."""
+        adopted = np.zeros(self.b, bool)
+        for i in [i for i in self.jump_tests if ok[i]]:
+            test = self.jump_tests[i]
+            x, P, r = test.x[None], test.P[None], np.array([test.r])
+            y = z[i][None] - x[:, :2]
+            inv, _ = innovation_inverse(P, r, y)
+            test.add(y[0], P[0, :2, :2] + test.r * np.eye(2))
+            x, P, K = kalman_update(x, P, r, y, inv)
+            test.x, test.P = x[0], P[0]
+            decision = test.take_up(K[0])
+            if decision is None:
+                continue
+            del self.jump_tests[i]
+            if decision == "push":
+                continue
+            mean, covariance = test.best_force().posterior(DISTURBANCE_STD_M_S2)
+            self.x[i], self.p[i], self.r[i] = test.x + mean, test.P + covariance, test.r
+            if self.gain_state:
+                low, high = self.cfg.input_gain_bounds
+                self.x[i, GAIN_INDEX] = min(max(self.x[i, GAIN_INDEX], low), high)
+            self.hold_until[i] = -np.inf
+            self.change.clear(i)
+            self.transition[i] = np.eye(self.dim)
+            self.disturbance_changes[i] += 1
+            self.coasted[i] = 0
+            adopted[i] = True
+        return adopted
+
+    def _confirmed_pushes(self, seen, beyond, y, distance):
+        """The balls with a detection `seen` (`beyond` maneuver_sigma) whose detection shows a
+        push, and the consistency to judge its hold by. A push keeps pushing the detections the
+        same way, noise scatters them: it needs a detection beyond maneuver_sigma followed by
+        maneuver_confirm_frames - 1 whose innovations point the same way and lie beyond
+        maneuver_confirm_sigma (or one beyond the gate). Only while the measurement noise is
+        at least maneuver_confirm_noise_m: below it a push moves the ball beyond the noise
+        within a frame, and one detection tells."""
+        single = self.r < self.cfg.maneuver_confirm_noise_m ** 2
+        runs = seen & ~single
+        goes_on = runs & (self.excess_count > 0) & (np.einsum("bi,bi->b", y, self.excess_y) > 0.0) \
+            & (distance > self.cfg.maneuver_confirm_sigma)
+        self.excess_nis = np.where(runs & ~goes_on, self.nis, self.excess_nis)
+        self.excess_count = np.where(goes_on, self.excess_count + 1,
+                                     np.where(runs, beyond.astype(int), self.excess_count))
+        self.excess_y = np.where(runs[:, None], y, self.excess_y)
+        push = runs & ((self.excess_count >= self.cfg.maneuver_confirm_frames) | (distance > self.cfg.gate_sigma))
+        self.excess_count = np.where(seen & single, 0, self.excess_count)   # a run in progress ends
+        return np.where(single, beyond, push), np.where(single, self.nis, self.excess_nis)
+
+    def _widen(self, mask) -> bool:
+        """Add to the last prediction of the balls in mask the process noise it would have had
+        without a known acceleration (a push or a hand on the ball: the model did not see it
+        coming). Returns whether any was widened."""
+        h = self.last_dt
+        extra = np.maximum(self.sigma_a ** 2 - self.last_q, 0.0)
+        mask = mask & (h > 0.0) & (extra > 0.0)
+        if not mask.any():
+            return False
+        i = np.flatnonzero(mask)
+        p = self.p[i]
+        add_white_acceleration(p, extra[i], h[i])
+        self.p[i] = p
+        self.maneuver_count += mask
+        return True
+
+    def _adapt_noise(self, t: float, z, accel, det) -> None:
+        """The measurement noise of the balls with a detection `det`: their detections' scatter
+        (with the known acceleration times s removed), within [meas_noise_m, meas_noise_max_m]."""
+        self.noise.add(t, z, None if accel is None else accel * self.gain[:, None], det)
+        sigma = self.noise.sigma(det)
+        ready = np.isfinite(sigma)
+        self.r[ready] = np.clip(sigma[ready], self.noise_min, self.noise_max) ** 2
+
+    def _predict(self, mask, dt, accel, t: float) -> None:
+        """The prediction of the balls in mask over dt (b,) (the module's prediction and
+        process_noise), and of their jump tests' reference filters with the model's own
+        process noise."""
+        i = np.flatnonzero(mask)
+        h = dt[i]
+        known = accel is not None
+        a = accel[i] if known else None
+        q = process_noise(self.nis[i], known, t <= self.hold_until[i], self.cfg)
+        self.last_dt[i], self.last_q[i] = h, q
+        f, Q = prediction(h, q, a, self.dim, GAIN_INDEX, self.cfg.input_gain_rate_per_s if self.gain_state else 0.0,
+                          D_INDEX if self.disturbance_state else None, self.q_d)
+        self.last_Q[i] = Q
+        if self.disturbance_state:
+            self.transition[i] = f @ self.transition[i]
+        self.x[i] = np.einsum("bij,bj->bi", f, self.x[i])
+        self.p[i] = self._clamp_gain_variance(f @ self.p[i] @ f.transpose(0, 2, 1) + Q)
+        for k in [k for k, ball in enumerate(i) if int(ball) in self.jump_tests]:
+            ball = int(i[k])
+            test = self.jump_tests[ball]
+            if t > self.hold_until[ball]:     # undecided: the push stands
+                del self.jump_tests[ball]
+                continue
+            q_model = process_noise(self.nis[[ball]], known, False, self.cfg)
+            F, Q = prediction(h[[k]], q_model, None if a is None else a[[k]], self.dim, GAIN_INDEX,
+                              self.cfg.input_gain_rate_per_s if self.gain_state else 0.0, D_INDEX, self.q_d)
+            test.x = F[0] @ test.x
+            test.P = self._clamp_gain_variance(F @ test.P[None] @ F.transpose(0, 2, 1) + Q)[0]
+            test.predict(t, F[0])
+
+    def _clamp_gain_variance(self, P: np.ndarray) -> np.ndarray:
+        if self.gain_state:
+            P[:, GAIN_INDEX, GAIN_INDEX] = np.minimum(P[:, GAIN_INDEX, GAIN_INDEX], self.gain_var_max)
+        return P
+
+
 class BallKalman:
-    """Tracks one ball with the settings `cfg`; `step()` once per frame with the frame's stamp."""
+    """Tracks one ball with the settings `cfg`; `step()` once per frame with the frame's stamp,
+    with or without a detection (BatchBallKalman, a batch of one)."""
 
     def __init__(self, cfg: KalmanConfig):
         self.cfg = cfg
-        self.sigma_a = cfg.accel_noise_m_s2
-        self.sigma_a_cmd = cfg.cmd_accel_noise_m_s2
-        self.init_vel_std = cfg.init_vel_std_m_s
-        self.gate_sigma = cfg.gate_sigma
-        self.max_coast_frames = cfg.max_coast_frames
-        self.max_dt_s = cfg.max_dt_s
-        self.meas_noise_min_m = cfg.meas_noise_m
-        self.meas_noise_max_m = max(cfg.meas_noise_max_m, cfg.meas_noise_m)
-        self.noise = DetectionNoiseEstimator(cfg.meas_noise_window_frames) if cfg.adaptive_meas_noise else None
-        self.gain_state = cfg.estimate_input_gain
-        self.gain_bounds = cfg.input_gain_bounds
-        self.gain_rate = cfg.input_gain_rate_per_s
-        self.dim = 5 if cfg.estimate_input_gain else 4
-        # the disturbance d = (d_x, d_y) [m/s^2], the last two states, a random walk whose jerk
-        # density is the model's white acceleration over the time constant squared: d is then
-        # the part of the acceleration error that persists longer than about that
-        self.disturbance_state = cfg.disturbance_time_constant_s > 0.0
-        self.q_d = (cfg.cmd_accel_noise_m_s2 / cfg.disturbance_time_constant_s) ** 2 if self.disturbance_state else 0.0
-        if self.disturbance_state:
-            self.d_index = self.dim
-            self.dim += 2
-        self._disturbance = (np.zeros(2), 0.0)   # kept over dropped tracks
-        self._change = ChangeTest(1, self.dim, self.d_index, consistency_settle_s(cfg.model_mismatch_time_constant_s)) \
-            if self.disturbance_state else None
-        self._track_start_s = 0.0
-        self.disturbance_changes = 0  # changes of d found (total)
-        # after a push's detection, until it decides: was it a push or a change of d?
-        self._jump_test: Optional[JumpTest] = None
-        self._transition = np.eye(self.dim)   # F's product since the last update
-        self.model_mismatch_time_constant_s = cfg.model_mismatch_time_constant_s
-        self.nis = 1.0                # running mean of the normalised innovation squared (per axis)
-        self.maneuver_sigma = cfg.maneuver_sigma
-        self.maneuver_count = 0       # detections that re-predicted with accel_noise_m_s2 (total)
-        self.maneuver_confirm_frames = cfg.maneuver_confirm_frames
-        self.maneuver_confirm_sigma = cfg.maneuver_confirm_sigma
-        self.maneuver_confirm_noise_m = cfg.maneuver_confirm_noise_m
-        # detections in the current run that may be a push, the last one's innovation, and the
-        # running innovation consistency before the run began (the first one raised it)
-        self._excess = (0, np.zeros(2), 1.0)
-        # after a push: the velocity of a plain constant-velocity filter run alongside
-        self.maneuver_hold_s = cfg.maneuver_hold_s
-        self._hold_until = -np.inf     # during which process_noise keeps maneuver_accel_noise_m_s2
-        self.fast: Optional[BallKalman] = None
-        if cfg.maneuver_hold_s > 0.0 and cfg.maneuver_sigma > 0.0:
-            self.fast = BallKalman(cfg.constant_velocity())
-        self._last_prediction = (0.0, 0.0)   # (dt, q) of the last prediction
-        kf = KalmanFilter(dim_x=self.dim, dim_z=2, dim_u=2)
-        kf.H = np.eye(2, self.dim)                                           # z = H x
-        kf.R = np.eye(2) * cfg.meas_noise_m ** 2                             # measurement noise
-        self.kf = kf
-        self._gain = (1.0, cfg.input_gain_std ** 2)   # s and its variance, kept over dropped tracks
-        self.initialised = False
-        self.coasted = 0              # frames predicted without a detection since the last one
-        self.t_last: Optional[float] = None
-        self.gated_count = 0          # detections rejected as outliers (total)
-        self.reset_count = 0          # tracks dropped (total)
-
-    @property
-    def meas_noise_m(self) -> float:
-        """The measurement noise (1 sigma per axis, m) in use."""
-        return float(np.sqrt(self.kf.R[0, 0]))
-
-    @property
-    def disturbance_m_s2(self) -> Tuple[float, float]:
-        """d: the ball's acceleration the known one does not explain [m/s^2] (0 without the state)."""
-        if not self.disturbance_state:
-            return 0.0, 0.0
-        d = self.kf.x[self.d_index:self.d_index + 2] if self.initialised else self._disturbance[0]
-        return float(d[0]), float(d[1])
-
-    def level_offset_rad(self, k_g: float) -> Tuple[float, float]:
-        """d as a plate-level offset per axis [rad]: the tilt u at which the ball stays still,
-        s k_g sin(u) = d, for the known acceleration -k_g sin(u) (PlateCommandInput.k_g)."""
-        scale = self.input_gain * k_g
-        d = self.disturbance_m_s2
-        return (math.asin(min(1.0, max(-1.0, d[0] / scale))), math.asin(min(1.0, max(-1.0, d[1] / scale))))
-
-    @property
-    def input_gain(self) -> float:
-        """s: the acceleration the ball shows per unit of the known one (1 without the estimate)."""
-        if not self.gain_state:
-            return 1.0
-        return float(self.kf.x[4]) if self.initialised else self._gain[0]
-
-    def reset(self) -> None:
-        """Drop the track: the next detection starts a new one."""
-        if self.initialised:
-            self.reset_count += 1
-            if self.gain_state:
-                self._gain = (float(self.kf.x[4]), float(self.kf.P[4, 4]))
-            if self.disturbance_state:
-                i = self.d_index
-                self._disturbance = (np.array(self.kf.x[i:i + 2], dtype=float), float(self.kf.P[i, i]))
-        self.initialised = False
-        self.coasted = 0
-        self.t_last = None
-        self._excess = (0, np.zeros(2), 1.0)
-        self._jump_test = None
-        if self._change is not None:
-            self._change.clear()
-
-    def _start(self, z: Tuple[float, float], t: float) -> None:
-        kf = self.kf
-        P = [kf.R[0, 0], kf.R[1, 1], self.init_vel_std ** 2, self.init_vel_std ** 2]
-        x = [z[0], z[1], 0.0, 0.0]
-        if self.gain_state:
-            x.append(self._gain[0])
-            P.append(self._gain[1])
-        if self.disturbance_state:
-            x += list(self._disturbance[0])
-            P += [self._disturbance[1]] * 2
-        kf.x = np.array(x)
-        kf.P = np.diag(P)
-        self.initialised, self.coasted, self.t_last = True, 0, t
-        self._transition = np.eye(self.dim)
-        self._track_start_s = t
-
-    def _predict(self, dt: float, accel: Optional[Tuple[float, float]], holding: bool = False,
-                 kf: Optional[KalmanFilter] = None) -> None:
-        q = self.process_noise(accel is not None, holding)
-        main = kf is None
-        if main:
-            kf = self.kf
-            self._last_prediction = (dt, q)
-        a = None if accel is None else np.asarray(accel, dtype=np.float64)
-        F, Q = prediction(np.array([dt]), np.array([q]), None if a is None else a[None], self.dim,
-                          4 if self.gain_state else None, self.gain_rate,
-                          self.d_index if self.disturbance_state else None, self.q_d)
-        F, Q = F[0], Q[0]
-        if main and self.disturbance_state:
-            self._transition = F @ self._transition
-        kf.F, kf.Q = F, Q
-        if self.gain_state:
-            kf.predict()
-            kf.P[4, 4] = min(kf.P[4, 4], self._gain_var_max)
-        elif a is None:
-            kf.predict()
-        else:
-            I2 = np.eye(2)
-            kf.B = np.zeros((self.dim, 2))
-            kf.B[0:2], kf.B[2:4] = dt ** 2 / 2 * I2, dt * I2
-            kf.predict(u=a)
-
-    def _widen_last_prediction(self) -> None:
-        """Add the process noise the last prediction would have had without a known acceleration
-        (a push or a hand on the ball: the model did not see it coming)."""
-        dt, q = self._last_prediction
-        extra = self.sigma_a ** 2 - q
-        if extra <= 0.0 or dt <= 0.0:
-            return
-        add_white_acceleration(self.kf.P, extra, dt)
-        self.maneuver_count += 1
-
-    def process_noise(self, known_accel: bool, holding: bool = False) -> float:
-        """q (m^2/s^4) for the next prediction (the module's process_noise)."""
-        return float(process_noise([self.nis], known_accel, holding, self.cfg)[0])
-
-    @property
-    def _gain_var_max(self) -> float:
-        """s's variance never grows past a quarter of its range squared (no command for long)."""
-        low, high = self.gain_bounds
-        return ((high - low) / 4.0) ** 2
-
-    def mahalanobis(self, z: Tuple[float, float]) -> float:
-        """Distance of z from the predicted measurement, in standard deviations."""
-        kf = self.kf
-        y = np.asarray(z) - kf.H @ kf.x                    # innovation
-        S = kf.H @ kf.P @ kf.H.T + kf.R                    # innovation covariance
-        return float(np.sqrt(y @ np.linalg.solve(S, y)))
-
-    def _adapt_noise(self, t: float, z: Tuple[float, float], accel) -> None:
-        if accel is not None:
-            accel = (self.input_gain * accel[0], self.input_gain * accel[1])
-        self.noise.add(t, z, accel)
-        sigma = self.noise.sigma_m()
-        if sigma is not None:
-            sigma = min(max(sigma, self.meas_noise_min_m), self.meas_noise_max_m)
-            self.kf.R = np.eye(2) * sigma ** 2
+        self.filter = BatchBallKalman(1, cfg)
+        self.disturbance_state = self.filter.disturbance_state
+        self.dim = self.filter.dim
 
     def step(self, t: float, z: Optional[Tuple[float, float]],
              accel: Optional[Tuple[float, float]] = None,
@@ -598,163 +818,73 @@ class BallKalman:
         """Advance to stamp t (s) and fold in detection z (m) if any; accel in m/s^2 or None.
         lever (m; PlateCommandInput.lever_offset): the part of the ball's plate-frame position
         the plate's tilt causes at t. The filter tracks the rest (the rolling the known
-        acceleration explains) and adds it back to its position estimate."""
-        if lever is None or z is None:
-            estimate = self._step(t, z, accel)
-        else:
-            estimate = self._step(t, (z[0] - lever[0], z[1] - lever[1]), accel)
-        if lever is not None:
-            estimate = dataclasses.replace(estimate, x=estimate.x + lever[0], y=estimate.y + lever[1])
-        if self.fast is not None:
-            self.fast.kf.R = self.kf.R.copy()
-            fast = self.fast.step(t, z)
-            if estimate.valid and fast.valid and t <= self._hold_until:
-                estimate = dataclasses.replace(estimate, vx=fast.vx, vy=fast.vy)
-        return estimate
+        acceleration explains) and adds it back to its position estimate. Without a usable
+        detection the estimate coasts; an invalid one keeps the last position with zero
+        velocity."""
+        det = np.array([z is not None])
+        pos, vel, valid = self.filter.step(
+            t, np.array([(0.0, 0.0) if z is None else z], dtype=float), det,
+            None if accel is None else np.array([accel], dtype=float),
+            None if lever is None else np.array([lever], dtype=float), stepped=np.ones(1, bool))
+        f = self.filter
+        return TrackEstimate(float(pos[0, 0]), float(pos[0, 1]), float(vel[0, 0]), float(vel[0, 1]),
+                             bool(f.fresh[0]), bool(valid[0]), bool(f.gated[0]))
 
-    def _step(self, t: float, z: Optional[Tuple[float, float]],
-              accel: Optional[Tuple[float, float]] = None) -> TrackEstimate:
-        if z is not None and self.noise is not None:
-            self._adapt_noise(t, z, accel)
-        dt_step = 0.0
-        if self.initialised:
-            dt = dt_step = t - self.t_last
-            if dt > self.max_dt_s:
-                self.reset()
-            elif dt > 0.0:            # a repeated or out-of-order stamp only updates
-                self._predict(dt, accel, holding=t <= self._hold_until)
-                self.t_last = t
-                if self._jump_test is not None:
-                    if t > self._hold_until:     # undecided: the push stands
-                        self._jump_test = None
-                    else:
-                        self._predict(dt, accel, kf=self._jump_test.reference)
-                        self._jump_test.predict(t)
-        if not self.initialised:
-            if z is None:
-                return self._estimate(fresh=False, valid=False)
-            self._start(z, t)
-            return self._estimate(fresh=True, valid=True)
-        gated = False
-        if z is not None:
-            distance = self.mahalanobis(z)
-            if self.maneuver_sigma > 0.0 and dt_step > 0.0 and self._push_seen(z, distance):
-                nis = self._excess[2] if self._confirming() else self.nis
-                if nis <= MODEL_AGREED_NIS:   # a model that agreed until the push began
-                    self._hold_until = t + self.maneuver_hold_s
-                    if self.disturbance_state and accel is not None and self._jump_test is None \
-                            and self._settled(t):
-                        self._jump_test = JumpTest(self.kf, self._change.frames(0), self._transition, t,
-                                                   self.d_index)
-                self._widen_last_prediction()
-                distance = self.mahalanobis(z)
-            if self.model_mismatch_time_constant_s > 0.0:   # a gated detection counts too, at the gate
-                alpha = min(1.0, dt_step / self.model_mismatch_time_constant_s)
-                self.nis += alpha * (min(distance, self.gate_sigma) ** 2 / 2.0 - self.nis)
-            if distance <= self.gate_sigma:
-                in_window = self.disturbance_state and \
-                    self._find_disturbance_change(t, z, known=accel is not None, pushed=t <= self._hold_until)
-                if self._jump_test is not None and self._decide_jump(t, z):
-                    return self._estimate(fresh=True, valid=True)
-                self.kf.update(np.asarray(z, dtype=np.float64))
-                if self.disturbance_state:
-                    if in_window:
-                        self._change.set_last_gain([True], self.kf.K[None])
-                    self._transition = np.eye(self.dim)
-                self._clamp_gain(self.kf)
-                self.coasted = 0
-                return self._estimate(fresh=True, valid=True)
-            gated = True
-            self.gated_count += 1
-        self.coasted += 1
-        if self.coasted > self.max_coast_frames:
-            estimate = self._estimate(fresh=False, valid=False, gated=gated)
-            self.reset()
-            return estimate
-        return self._estimate(fresh=False, valid=True, gated=gated)
+    def reset(self) -> None:
+        """Drop the track: the next detection starts a new one."""
+        self.filter.reset(np.ones(1, bool))
 
-    def _find_disturbance_change(self, t: float, z: Tuple[float, float], known: bool, pushed: bool) -> bool:
-        """Before the update with detection z: its frame joins the change test's window
-        (disturbance.ChangeTest), and a change the window shows corrects the state and widens
-        the covariance. Without a known acceleration d is not in the model, and during a push's
-        hold the innovations are the push's: the window starts again. Returns whether the frame
-        is in the window (its update's gain completes it)."""
-        if not known or pushed:
-            self._change.clear()
-            return False
-        kf = self.kf
-        innovation = np.asarray(z, dtype=np.float64) - kf.H @ kf.x
-        S = kf.H @ kf.P @ kf.H.T + kf.R
-        changed = self._change.test(t, np.ones(1, bool), innovation[None], S[None], np.array([self.nis]),
-                                    self._transition[None], np.array([self._track_start_s]))
-        if not changed[0]:
-            return True
-        self._change.correct(0, t, kf.x, kf.P)
-        self.disturbance_changes += 1
-        return False
+    @property
+    def x(self) -> np.ndarray:
+        """The state [x, y, vx, vy, s] (+ [d_x, d_y]) of the current or last track."""
+        return self.filter.x[0]
 
-    def _clamp_gain(self, kf: KalmanFilter) -> None:
-        """Keep kf's input gain s within input_gain_bounds (after an update)."""
-        if self.gain_state:
-            kf.x[4] = min(max(kf.x[4], self.gain_bounds[0]), self.gain_bounds[1])
+    @property
+    def meas_noise_m(self) -> float:
+        """The measurement noise (1 sigma per axis, m) in use."""
+        return float(np.sqrt(self.filter.r[0]))
 
-    def _settled(self, t: float) -> bool:
-        """Whether the running consistency at t describes the detections rather than its start
-        value: the track is CONSISTENCY_SETTLE_TIME_CONSTANTS of its time constant old. Until
-        then neither a change of d nor a force behind a push is looked for."""
-        return bool(self._change.settled(t, self._track_start_s))
+    def process_noise(self, known_accel: bool, holding: bool = False) -> float:
+        """q [m^2/s^4] of the next prediction (the module's process_noise)."""
+        return float(process_noise(self.filter.nis, known_accel, holding, self.cfg)[0])
 
-    def _decide_jump(self, t: float, z: Tuple[float, float]) -> bool:
-        """Fold detection z into the jump test. When it finds a change of d, the reference
-        filter, with the change's posterior (its mean and covariance given the frames since its
-        onset, under the 0.3 m/s^2 prior) added, becomes the filter, the push's hold ends, and
-        True is returned (z is in it). When it finds a push, the test ends and the hold goes on."""
-        decision = self._jump_test.update(np.asarray(z, dtype=np.float64))
-        if decision is None:
-            return False
-        test, self._jump_test = self._jump_test, None
-        if decision == "push":
-            return False
-        kf = test.reference
-        mean, covariance = test.best_force().posterior(DISTURBANCE_STD_M_S2)
-        kf.x, kf.P = kf.x + mean, kf.P + covariance
-        self._clamp_gain(kf)
-        self.kf = kf
-        self._hold_until = -np.inf
-        self._change.clear()
-        self._transition = np.eye(self.dim)
-        self.disturbance_changes += 1
-        self.coasted = 0
-        return True
+    @property
+    def nis(self) -> float:
+        """The running mean of the normalised innovation squared, per axis (1: the model holds)."""
+        return float(self.filter.nis[0])
 
-    def _push_seen(self, z: Tuple[float, float], distance: float) -> bool:
-        """Whether this detection shows a push: beyond maneuver_sigma (maneuver_confirm_frames 1,
-        or a measurement noise below maneuver_confirm_noise_m); else the maneuver_confirm_frames-th
-        of a run that began beyond maneuver_sigma and went on the same way beyond
-        maneuver_confirm_sigma; or beyond the gate."""
-        if not self._confirming():
-            if self._excess[0]:   # a run in progress ends (the next one records its own start)
-                self._excess = (0, self._excess[1], self._excess[2])
-            return distance > self.maneuver_sigma
-        innovation = np.asarray(z, dtype=np.float64) - np.ravel(self.kf.x)[:2]
-        count, previous, nis_before = self._excess
-        if count and float(innovation @ previous) > 0.0 and distance > self.maneuver_confirm_sigma:
-            count += 1
-        else:
-            count, nis_before = (1 if distance > self.maneuver_sigma else 0), self.nis
-        self._excess = (count, innovation, nis_before)
-        return count >= self.maneuver_confirm_frames or distance > self.gate_sigma
+    @property
+    def input_gain(self) -> float:
+        """s: the acceleration the ball shows per unit of the known one (1 without the estimate)."""
+        return float(self.filter.gain[0])
 
-    def _confirming(self) -> bool:
-        """Whether a push needs maneuver_confirm_frames detections: only while the measurement
-        noise is at least maneuver_confirm_noise_m. Below it a push shows in one detection; above
-        it a frame's step of a push is within the noise, so one detection cannot tell them apart."""
-        return self.maneuver_confirm_frames > 1 and self.meas_noise_m >= self.maneuver_confirm_noise_m
+    @property
+    def disturbance_m_s2(self) -> Tuple[float, float]:
+        """d: the ball's acceleration the known one does not explain [m/s^2] (0 without the state)."""
+        d = self.filter.disturbance_m_s2[0]
+        return float(d[0]), float(d[1])
 
-    def _estimate(self, fresh: bool, valid: bool, gated: bool = False) -> TrackEstimate:
-        """The current state; an invalid estimate keeps the last position with zero velocity
-        (all zeros before the first track)."""
-        x = np.ravel(self.kf.x)
-        if not valid:
-            return TrackEstimate(float(x[0]), float(x[1]), 0.0, 0.0, fresh, False, gated)
-        return TrackEstimate(float(x[0]), float(x[1]), float(x[2]), float(x[3]), fresh, valid, gated)
+    def level_offset_rad(self, k_g: float) -> Tuple[float, float]:
+        """d as a plate-level offset per axis [rad] (BatchBallKalman.level_offset_rad)."""
+        u = self.filter.level_offset_rad(k_g)[0]
+        return float(u[0]), float(u[1])
+
+    @property
+    def gated_count(self) -> int:
+        """Detections rejected as outliers (total)."""
+        return int(self.filter.gated_count[0])
+
+    @property
+    def reset_count(self) -> int:
+        """Tracks dropped (total)."""
+        return int(self.filter.reset_count[0])
+
+    @property
+    def maneuver_count(self) -> int:
+        """Predictions widened for a push (total)."""
+        return int(self.filter.maneuver_count[0])
+
+    @property
+    def disturbance_changes(self) -> int:
+        """Changes of d found (total)."""
+        return int(self.filter.disturbance_changes[0])

@@ -3,7 +3,7 @@
 Stages (each timed, see `STAGES`): optional undistortion of the image, ArUco marker
 search, plate homography, ball segmentation (in a window around the last frame's blob,
 the plate's whole image region when there was none or the ball left that window) with
-mapping to plate metres, Kalman filter. Pure Python + OpenCV + filterpy, no ROS.
+mapping to plate metres, Kalman filter. Pure Python + OpenCV + numpy, no ROS.
 
 Parallax: the camera sees the ball's centre 20 mm above the plate, so the plate-plane
 homography alone would put it too far from the point under the camera (by r/C_z of the

@@ -3,7 +3,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-from filterpy.common import Q_discrete_white_noise
 
 from ball_balance.vision.kalman import BallKalman, DetectionNoiseEstimator, KalmanConfig, PlateCommandInput
 
@@ -24,13 +23,14 @@ def filter_with(**settings) -> BallKalman:
     return BallKalman(cfg)
 
 
-def test_process_noise_matches_filterpys_white_noise_acceleration_model():
+def test_process_noise_is_the_discrete_white_noise_acceleration_model():
     kf = filter_with(accel_noise_m_s2=2.0)
     kf.step(0.0, (0.0, 0.0))
     kf.step(0.04, (0.0, 0.0))
-    Q_axis = Q_discrete_white_noise(dim=2, dt=0.04, var=4.0)            # [x, vx] of one axis
-    np.testing.assert_allclose(kf.kf.Q[np.ix_([0, 2], [0, 2])], Q_axis, atol=1e-12)
-    np.testing.assert_allclose(kf.kf.Q[np.ix_([1, 3], [1, 3])], Q_axis, atol=1e-12)
+    dt, var = 0.04, 4.0            # [x, vx] of one axis: G var G^T with G = [dt^2/2, dt]
+    Q_axis = var * np.outer([dt ** 2 / 2, dt], [dt ** 2 / 2, dt])
+    np.testing.assert_allclose(kf.filter.last_Q[0][np.ix_([0, 2], [0, 2])], Q_axis, atol=1e-12)
+    np.testing.assert_allclose(kf.filter.last_Q[0][np.ix_([1, 3], [1, 3])], Q_axis, atol=1e-12)
 
 
 def test_velocity_converges_with_jittered_frame_times():
@@ -82,8 +82,8 @@ def test_known_acceleration_is_used_in_the_prediction():
         z = (0.5 * a * t * t, 0.0)
         with_accel.step(t, z, accel=(a, 0.0))
         without.step(t, z)
-    assert abs(with_accel.kf.x[2] - a * 29 / 30) < abs(without.kf.x[2] - a * 29 / 30)
-    assert with_accel.kf.x[2] == pytest.approx(a * 29 / 30, abs=0.01)
+    assert abs(with_accel.x[2] - a * 29 / 30) < abs(without.x[2] - a * 29 / 30)
+    assert with_accel.x[2] == pytest.approx(a * 29 / 30, abs=0.01)
 
 
 def test_no_detection_before_any_track_is_invalid_zero():
@@ -176,7 +176,7 @@ def test_input_gain_is_estimated_and_bounded_and_kept_over_a_dropped_track():
     kf.reset()
     assert kf.input_gain == pytest.approx(1.6, abs=0.15)
     kf.step(100.0, (0.0, 0.0))
-    assert kf.kf.x[4] == pytest.approx(1.6, abs=0.15)
+    assert kf.x[4] == pytest.approx(1.6, abs=0.15)
     bounded = filter_with(meas_noise_m=0.003, cmd_accel_noise_m_s2=0.05, estimate_input_gain=True,
                           input_gain_bounds=(0.5, 1.2))
     _run_with_gain(bounded, 1.6, rng)
@@ -187,9 +187,9 @@ def test_smaller_process_noise_while_the_acceleration_is_known():
     kf = filter_with(accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1)
     kf.step(0.0, (0.0, 0.0))
     kf.step(0.04, (0.0, 0.0), accel=(0.0, 0.0))
-    assert kf.kf.Q[2, 2] == pytest.approx(0.1 ** 2 * 0.04 ** 2)
+    assert kf.filter.last_Q[0][2, 2] == pytest.approx(0.1 ** 2 * 0.04 ** 2)
     kf.step(0.08, (0.0, 0.0))
-    assert kf.kf.Q[2, 2] == pytest.approx(1.0 * 0.04 ** 2)
+    assert kf.filter.last_Q[0][2, 2] == pytest.approx(1.0 * 0.04 ** 2)
 
 
 def test_the_settings_and_their_defaults_are_the_trackers():
@@ -200,9 +200,10 @@ def test_the_settings_and_their_defaults_are_the_trackers():
                                      "meas_noise_max_m": 0.01, "estimate_input_gain": True,
                                      "input_gain_bounds": [0.4, 2.0]})
     kf = BallKalman(KalmanConfig.from_tracker(cfg))
-    assert (kf.meas_noise_m, kf.sigma_a_cmd, kf.meas_noise_max_m, kf.gain_bounds, kf.dim) == \
+    f = kf.filter
+    assert (kf.meas_noise_m, f.cfg.cmd_accel_noise_m_s2, f.noise_max, f.cfg.input_gain_bounds, kf.dim) == \
         (pytest.approx(0.002), 0.2, 0.01, (0.4, 2.0), 7)   # x, y, vx, vy, s, d_x, d_y
-    assert kf.noise is not None
+    assert f.noise is not None
 
 
 def test_plate_command_input_applies_the_command_in_force_a_delay_earlier():
@@ -315,8 +316,8 @@ def test_after_a_push_the_velocity_is_the_constant_velocity_filters_for_the_hold
 
     held, v_held = run(1.0)
     plain, v_plain = run(0.0)
-    assert plain.fast is None and held.fast is not None
-    assert 1.0 < held._hold_until < 1.0 + 0.2 + 1.0                 # detected within a few frames
+    assert plain.filter.fast is None and held.filter.fast is not None
+    assert 1.0 < held.filter.hold_until[0] < 1.0 + 0.2 + 1.0                 # detected within a few frames
     after = range(33, 36)                                            # 2-4 frames after the push
     assert np.mean([abs(v_held[k] - 0.15) for k in after]) < 0.7 * np.mean([abs(v_plain[k] - 0.15) for k in after])
     assert v_held[89] == pytest.approx(v_plain[89], abs=0.02)       # both settled after the hold
@@ -420,7 +421,7 @@ def test_without_the_disturbance_state_the_filter_is_unchanged():
     off = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=0.0))
     assert not off.disturbance_state and off.dim == 5 and off.disturbance_m_s2 == (0.0, 0.0)
     on = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=1.0))
-    assert on.dim == 7 and on.fast is not None and not on.fast.disturbance_state
+    assert on.dim == 7 and on.filter.fast is not None and not on.filter.fast.disturbance_state
 
 
 def test_a_quiet_disturbance_state_finds_a_step_within_a_second_and_no_change_on_a_clean_plant():
