@@ -5,9 +5,12 @@ moment a new command reaches the plate, the plate keeps the tilts that were comm
 earlier; `TiltHistory` remembers them, and `predict` integrates the plant
 x'' = -k g u(t - actuation_delay) + d exactly over piecewise-constant tilt segments (k g and
 the constant disturbance d: nominal, or the online estimate of control/estimation.py).
+`predict_batch` is that law for a batch of plates (the training plant's, policy/env.py);
+`predict` is a batch of one.
 """
 from __future__ import annotations
 
+import math
 from bisect import bisect_left, bisect_right
 from collections import deque
 from typing import Callable, Deque, Tuple
@@ -41,35 +44,54 @@ class TiltHistory:
         i = bisect_right(self._times, t_s)
         return self._tilts[i - 1] if i else (0.0, 0.0)
 
-    def breakpoints(self, t0_s: float, t1_s: float):
-        """Times of command changes strictly inside (t0_s, t1_s)."""
+    def acting(self, t0_s: float, t1_s: float) -> Tuple[np.ndarray, np.ndarray]:
+        """The commands in force over (t0_s, t1_s): their issue times (n,) and tilts (n, 2),
+        the one in force at t0_s first (issued at -inf with tilt 0 before any), then those
+        issued strictly inside."""
         first, end = bisect_right(self._times, t0_s), bisect_left(self._times, t1_s)
-        return [self._times[i] for i in range(first, end)]
+        start = max(first - 1, 0)
+        times = [self._times[i] for i in range(start, end)]
+        tilts = [self._tilts[i] for i in range(start, end)]
+        if first == 0:
+            times.insert(0, -math.inf)
+            tilts.insert(0, (0.0, 0.0))
+        return np.array(times), np.array(tilts, dtype=float).reshape(-1, 2)
+
+
+def predict_batch(pos_m: np.ndarray, vel_m_s: np.ndarray, t_from_s, t_to_s, issued_s: np.ndarray,
+                  tilts_rad: np.ndarray, k_g, actuation_delay_s, accel_offset_m_s2):
+    """States (pos, vel) (b, 2) [m, m/s] of a batch of plates propagated from t_from_s to
+    t_to_s (b,) over the commands issued at issued_s (n,) [s, increasing], tilts_rad (b, n, 2):
+    the tilt in force at t is the command issued at or before t - actuation_delay_s (b,), the
+    first command from t_from_s on, the last up to t_to_s; each segment under the constant
+    acceleration a = -k_g u + d (k_g (b,), d = accel_offset_m_s2 (b, 2)). A plate whose t_to_s
+    is not after its t_from_s keeps its state."""
+    p, v = np.array(pos_m, dtype=float), np.array(vel_m_s, dtype=float)
+    n = len(issued_s)
+    for j in range(n):
+        t0 = np.maximum(issued_s[j] + actuation_delay_s, t_from_s) if j else t_from_s
+        t1 = t_to_s if j == n - 1 else np.minimum(issued_s[j + 1] + actuation_delay_s, t_to_s)
+        h = np.clip(t1 - t0, 0.0, None)[:, None]
+        a = -np.asarray(k_g)[:, None] * tilts_rad[:, j] + accel_offset_m_s2
+        p += v * h + 0.5 * a * h * h
+        v += a * h
+    return p, v
 
 
 def predict(pos_m: np.ndarray, vel_m_s: np.ndarray, t_from_s: float, t_to_s: float,
             history: TiltHistory, k_g: float, actuation_delay_s: float = 0.0, accel_offset_m_s2=None):
-    """State (pos, vel) [m, m/s], shape (2,), propagated from t_from_s to t_to_s.
-
-    The plate tilt acting at time t is the command issued at t - actuation_delay_s.
-    Returns new arrays; when t_to_s <= t_from_s the state is returned unchanged.
-    """
+    """State (pos, vel) [m, m/s], shape (2,), propagated from t_from_s to t_to_s (predict_batch
+    over the commands of `history` that act in between; the tilt is 0 before the first).
+    Returns new arrays; when t_to_s <= t_from_s the state is returned unchanged."""
     p = np.array(pos_m, dtype=float)
     v = np.array(vel_m_s, dtype=float)
     if not t_to_s > t_from_s:
         return p, v
-    # Segment boundaries: command changes shifted by the actuation delay.
-    cuts = [t + actuation_delay_s for t in history.breakpoints(t_from_s - actuation_delay_s,
-                                                                 t_to_s - actuation_delay_s)]
-    times = [t_from_s, *cuts, t_to_s]
-    offset = 0.0 if accel_offset_m_s2 is None else np.asarray(accel_offset_m_s2, dtype=float)
-    for t0, t1 in zip(times[:-1], times[1:], strict=False):
-        h = t1 - t0
-        # a = -k g u + d, constant over the segment
-        a = -k_g * np.asarray(history.at(t0 - actuation_delay_s + 1e-12)) + offset
-        p += v * h + 0.5 * a * h * h
-        v += a * h
-    return p, v
+    issued, tilts = history.acting(t_from_s - actuation_delay_s, t_to_s - actuation_delay_s)
+    offset = np.zeros(2) if accel_offset_m_s2 is None else np.asarray(accel_offset_m_s2, dtype=float)
+    p, v = predict_batch(p[None], v[None], np.array([t_from_s]), np.array([t_to_s]), issued, tilts[None],
+                         np.array([k_g]), np.array([actuation_delay_s]), offset[None])
+    return p[0], v[0]
 
 
 class _DelayAlignment:

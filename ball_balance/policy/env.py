@@ -35,6 +35,7 @@ from ball_balance.config_values import controller_values, tracker_values
 from ball_balance.control import config as control_config
 from ball_balance.control.estimation import BatchPlantEstimator
 from ball_balance.control.pid import Pid
+from ball_balance.control.prediction import predict_batch
 from ball_balance.plate_geometry import GRAVITY_M_S2, PLATE_SIDE_M, ROLLING_FACTOR_SHELL, ROLLING_FACTOR_SOLID
 from ball_balance.policy.observation import ObservationBuilder, correction_weight, low_gain_share
 from ball_balance.sim.config import CAMERA_RATE_HZ, FAST_NOISE_FLOOR_M, VISION_DELAY_S
@@ -353,17 +354,13 @@ class PlateBatch:
         stamp = np.where(have, self.obs_stamp, t)
         age = np.clip(t - stamp, 0.0, None)
         horizon = np.minimum(t + delay, stamp + self.nom.max_prediction_s)
-        x, v = self.obs_x.copy(), self.obs_v.copy()
         n_back = int(np.ceil((self.nom.max_prediction_s + self.max_delay_s) / CONTROL_DT_S)) + 2
-        for j in range(self.tick - n_back, self.tick):
-            if j < 0:
-                continue
-            seg0 = np.maximum(j * CONTROL_DT_S + delay, stamp)
-            seg1 = horizon if j == self.tick - 1 else np.minimum((j + 1) * CONTROL_DT_S + delay, horizon)
-            h = np.clip(seg1 - seg0, 0.0, None)[:, None]
-            a = -self.estimator.k_g[:, None] * self.cmd_hist[:, :, j % self.hist_len] + self.estimator.offset
-            x = x + v * h + 0.5 * a * h * h
-            v = v + a * h
+        ticks = np.arange(max(self.tick - n_back, 0), self.tick)
+        issued, tilts = ticks * CONTROL_DT_S, self.cmd_hist[:, :, ticks % self.hist_len].transpose(0, 2, 1)
+        if self.tick < n_back:   # the plate is level before the first command
+            issued, tilts = np.concatenate([[-np.inf], issued]), np.concatenate([np.zeros((self.b, 1, 2)), tilts], 1)
+        x, v = predict_batch(self.obs_x, self.obs_v, stamp, horizon, issued, tilts, self.estimator.k_g, delay,
+                             self.estimator.offset)
         return x, v, age
 
     def _observe(self) -> np.ndarray:

@@ -72,7 +72,10 @@ def test_tilt_history_lookups_are_the_scan_they_replace():
     for t in np.concatenate([times, times + 0.005, times - 0.005, [-1.0, 99.0]]):
         assert history.at(float(t)) == scan_at(float(t))
         t1 = float(t) + 0.05
-        assert history.breakpoints(float(t), t1) == [t_i for t_i, _, _ in entries if float(t) < t_i < t1]
+        issued, tilts = history.acting(float(t), t1)
+        inside = [e for e in entries if float(t) < e[0] < t1]
+        assert list(issued[1:]) == [t_i for t_i, _, _ in inside]
+        assert tuple(tilts[0]) == scan_at(float(t)) and [tuple(u) for u in tilts[1:]] == [e[1:] for e in inside]
 
 
 def test_tilt_history_starts_again_when_the_clock_goes_back():
