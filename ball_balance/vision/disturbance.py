@@ -19,8 +19,8 @@ import numpy as np
 # the running innovation consistency (1 when the model is right) at most this: the model agreed
 # with the detections. Only then is a detection beyond maneuver_sigma a push, or a bias of the
 # innovations a change of d: a model that has disagreed for a while (a delay or a gain still
-# being learned) is seeing its own error; the constant-velocity filter's velocity cost 1 mm in
-# extreme_dr when it took over there too, and d taken for such an error shook the ball
+# being learned) is seeing its own error, and the constant-velocity filter's velocity, or d
+# fitted to that error, would pass it on to the controller
 MODEL_AGREED_NIS = 1.0
 # the running consistency starts at 1 with a track; after this many of its time constants its
 # start weighs 5 % and it describes the detections

@@ -32,20 +32,21 @@ x'' = -k g sin(u) + c u'' with c = r + k d (r the ball radius, d the depth of th
 below the plate's surface; the ball's centre is r + d above the axis and its spin follows the
 plate), so x = xi + c u with xi'' = -k g sin(u). With `lever` (c u of the commanded tilt, from
 PlateCommandInput.lever_offset) the filter tracks xi, the detections less c u, and reports
-xi + c u: c u is up to 3 mm at 0.15 rad, and without it the rolling model took c u' (about
-20 mm/s while braking a push) for a velocity error.
+xi + c u: c u is up to 3 mm at 0.15 rad, and without it the rolling model would take c u'
+(about 20 mm/s while braking a push) for a velocity error.
 
 A push: a detection beyond `maneuver_sigma` re-predicts its frame with `accel_noise_m_s2`.
-With the small process noise the filter still takes a push up over several frames (in the
-benchmark 111 mm/s short of a 0.15 m/s push one frame after it, 36 two frames after, against
-69 and 8 for a constant-velocity filter with 1 m/s^2), and that lag, not the filter's accuracy
-later, slowed the controllers' recovery. So `fast`, a plain constant-velocity filter with
+With the small process noise the filter still takes a push up over several frames (one frame
+after a 0.15 m/s push its velocity is about 0.1 m/s short, a constant-velocity filter's with
+1 m/s^2 about 0.07), and that lag, not the filter's accuracy later, sets how fast a
+controller recovers. So `fast`, a plain constant-velocity filter with
 `accel_noise_m_s2` and the same measurement noise, runs alongside, and for `maneuver_hold_s`
 after such a detection its velocity is the one reported, unless the model had disagreed with
 the detections before it (MODEL_AGREED_NIS: a long delay or a wrong gain, not a push). The
 position stays the model's; during the hold it predicts with at least
 `maneuver_accel_noise_m_s2` of process noise, so that position follows the pushed ball within
-frames (with only the small noise it lagged the returning ball by 3-5 mm for most of the hold).
+frames (with only the small noise it would lag the returning ball by millimetres for most of
+the hold).
 Its velocity is not reported then: its error after a push is a slow bias that the controllers
 follow, where the constant-velocity filter's is noise that they average. With
 `maneuver_confirm_frames` N > 1 a push needs a detection beyond `maneuver_sigma` followed by
