@@ -5,12 +5,11 @@ the training plant's filter a batch of balls.
 A change of d (a force that starts, turns or ends) shows as innovations that keep one sign.
 `ChangeTest` keeps each filter's last DISTURBANCE_CHANGE_WINDOW_S of frames and tests their
 whitened sum; on a change, `estimate_change` sizes it from the window (a generalised
-likelihood ratio over the onsets, `Jump`) and `open_disturbance` widens the covariance by a
+likelihood ratio over the onsets, `Jumps`) and `open_disturbance` widens the covariance by a
 change of unknown size. After a push's detection `JumpTest` tells a push from a force.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Optional
 
@@ -90,80 +89,95 @@ def estimate_change(frames, d_index: int) -> Optional[np.ndarray]:
     """The state correction for the change of d that a change test's window shows, or None.
     `frames` are the window's ChangeFrame in order, the current frame last (its innovation is
     not used; its transition takes the correction to its prediction). For each frame the
-    change may have happened in the prediction into, a Jump of d is fitted to the
-    innovations since; the onset of the largest evidence under the change's prior
+    change may have happened in the prediction into, a jump of d is fitted to the
+    innovations since (Jumps); the onset of the largest evidence under the change's prior
     N(0, DISTURBANCE_STD_M_S2^2 I) is taken (generalised likelihood ratio, Willsky and Jones),
     and the correction is that jump's posterior mean. The caller opens the covariance as for a
     change of unknown size (open_disturbance), so the frames that follow still move d."""
-    columns = state_pair(frames[0].transition.shape[0], d_index)
-    transitions = [frame.transition for frame in frames]
-    seen = frames[:-1]
-    jumps = [Jump.since(i, seen, transitions, columns) for i in range(len(seen))]
-    if not jumps:
+    if len(frames) < 2:
         return None
-    best = max(jumps, key=lambda jump: jump.evidence(DISTURBANCE_STD_M_S2))
-    return best.posterior(DISTURBANCE_STD_M_S2)[0]
+    jumps = Jumps.fitted(frames[:-1], [frame.transition for frame in frames],
+                         state_pair(frames[0].transition.shape[0], d_index))
+    best = int(np.argmax(jumps.evidence(DISTURBANCE_STD_M_S2)))
+    return jumps.posterior(best, DISTURBANCE_STD_M_S2)[0]
 
 
-class Jump:
-    """One explanation of a push's detections for JumpTest: a jump of the states that
-    `columns` (n, 2) picks, in the prediction into a frame at onset_s, with the terms of its
-    generalised likelihood ratio over the frames since (estimate_change, kept up frame by
-    frame): B and A as there, the information and the score."""
+class Jumps:
+    """Explanations of a filter's innovations by a jump of the states that `columns` (n, 2)
+    picks, one per onset: a jump in the prediction into the frame at each onset, fitted to the
+    innovations since (a generalised likelihood ratio, kept up frame by frame). Per onset, with
+    G = H (B - A) the jump's signature in the innovation, B its effect on the state had the
+    filter not reacted and A what the filter's updates took up of it:
+    information = sum G^T S^-1 G and score = sum G^T S^-1 y over the frames since."""
 
-    def __init__(self, onset_s: float, B: np.ndarray):
-        self.onset_s, self.B = onset_s, B
-        self.A = np.zeros_like(B)
-        self.information = np.zeros((2, 2))
-        self.score = np.zeros(2)
-        self._signature = None
+    def __init__(self, columns: np.ndarray):
+        self.columns = columns
+        n = columns.shape[0]
+        self.onset_s = np.zeros(0)
+        self.B, self.A = np.zeros((0, n, 2)), np.zeros((0, n, 2))
+        self.information, self.score = np.zeros((0, 2, 2)), np.zeros((0, 2))
+        self._signature = np.zeros((0, 2, 2))
 
     @classmethod
-    def since(cls, i: int, frames, transitions, columns: np.ndarray) -> Jump:
-        """The jump of `columns` in the prediction into frames[i], fitted to frames[i:] (each
-        with its update's gain); transitions[j] is the prediction into frame j, one more than
-        the frames: the last takes the jump to the frame after them."""
-        jump = cls(frames[i].t, transitions[i] @ columns)
-        for j in range(i, len(frames)):
-            jump.add(frames[j].innovation, frames[j].S)
-            jump.take_up(frames[j].K)
-            jump.predict(transitions[j + 1])
-        return jump
+    def fitted(cls, frames, transitions, columns: np.ndarray) -> Jumps:
+        """The jumps at each of `frames` (ChangeFrame, each with its update's gain), fitted to
+        the frames since; transitions[j] is the prediction into frame j, one more than the
+        frames: the last takes the jumps to the frame after them."""
+        jumps = cls(columns)
+        for j, frame in enumerate(frames):
+            jumps.add_onset(frame.t, transitions[j])
+            jumps.add(frame.innovation, frame.S)
+            jumps.take_up(frame.K)
+            jumps.predict(transitions[j + 1])
+        return jumps
+
+    def add_onset(self, t: float, transition: np.ndarray) -> None:
+        """A jump in the prediction into the frame at t, whose transition that is."""
+        self.onset_s = np.append(self.onset_s, t)
+        self.B = np.concatenate([self.B, (transition @ self.columns)[None]])
+        self.A = np.concatenate([self.A, np.zeros((1,) + self.A.shape[1:])])
+        self.information = np.concatenate([self.information, np.zeros((1, 2, 2))])
+        self.score = np.concatenate([self.score, np.zeros((1, 2))])
 
     def predict(self, F: np.ndarray) -> None:
         self.B, self.A = F @ self.B, F @ self.A
 
     def add(self, innovation: np.ndarray, S: np.ndarray) -> None:
         """A frame's innovation and its covariance, before the update."""
-        G = (self.B - self.A)[:2]
+        G = (self.B - self.A)[:, :2]
         S_inv_G = np.linalg.solve(S, G)
-        self.score += S_inv_G.T @ innovation
-        self.information += G.T @ S_inv_G
+        self.score += np.einsum("mij,i->mj", S_inv_G, innovation)
+        self.information += np.einsum("mki,mkj->mij", G, S_inv_G)
         self._signature = G
 
     def take_up(self, K: np.ndarray) -> None:
-        """The update's gain: how much of the jump the filter took up."""
+        """The update's gain K (n, 2): how much of each jump the filter took up."""
         self.A = self.A + K @ self._signature
 
-    def statistic(self) -> float:
-        """Twice the log-likelihood gained by the jump of the best size: score^T I^-1 score."""
-        if np.linalg.det(self.information) <= 0.0:
-            return 0.0
-        return float(self.score @ np.linalg.solve(self.information, self.score))
+    def statistics(self) -> np.ndarray:
+        """Per onset, twice the log-likelihood gained by the jump of the best size:
+        score^T information^-1 score (0 while the frames cannot size it)."""
+        out = np.zeros(len(self.onset_s))
+        sized = np.linalg.det(self.information) > 0.0
+        if sized.any():
+            score = self.score[sized]
+            solved = np.linalg.solve(self.information[sized], score[..., None])[..., 0]
+            out[sized] = np.einsum("mi,mi->m", score, solved)
+        return out
 
-    def evidence(self, prior_std: float) -> float:
-        """Log evidence of the jump against none under its prior N(0, prior_std^2 I), up to a
-        constant."""
+    def evidence(self, prior_std: float) -> np.ndarray:
+        """Per onset, the log evidence of the jump against none under its prior
+        N(0, prior_std^2 I), up to a constant."""
         information = self.information + np.eye(2) / prior_std ** 2
-        return float(self.score @ np.linalg.solve(information, self.score)) \
-            - math.log(np.linalg.det(information) * prior_std ** 4)
+        fit = np.einsum("mi,mi->m", self.score, np.linalg.solve(information, self.score[..., None])[..., 0])
+        return fit - np.log(np.linalg.det(information) * prior_std ** 4)
 
-    def posterior(self, prior_std: float):
-        """The jump's effect on the state now, given the frames since its onset and its prior
-        N(0, prior_std^2 I): the mean and the covariance to add to the reference filter's."""
-        covariance = np.linalg.inv(self.information + np.eye(2) / prior_std ** 2)
-        effect = self.B - self.A
-        return effect @ (covariance @ self.score), effect @ covariance @ effect.T
+    def posterior(self, k: int, prior_std: float):
+        """Jump k's effect on the state now, given the frames since its onset and its prior
+        N(0, prior_std^2 I): the mean and the covariance to add to the filter's."""
+        covariance = np.linalg.inv(self.information[k] + np.eye(2) / prior_std ** 2)
+        effect = self.B[k] - self.A[k]
+        return effect @ (covariance @ self.score[k]), effect @ covariance @ effect.T
 
 
 class ChangeTest:
@@ -297,41 +311,41 @@ class JumpTest:
                  d_index: int):
         self.x, self.P, self.r = x.copy(), P.copy(), r
         n = x.shape[0]
-        self.force_columns, self.push_columns = state_pair(n, d_index), state_pair(n, 2)   # d, (vx, vy)
         transitions = [frame.transition for frame in window] + [transition]
-        self.forces = [Jump.since(i, window, transitions, self.force_columns) for i in range(len(window))]
-        self.pushes = [Jump.since(i, window, transitions, self.push_columns) for i in range(len(window))]
+        self.forces = Jumps.fitted(window, transitions, state_pair(n, d_index))   # of d
+        self.pushes = Jumps.fitted(window, transitions, state_pair(n, 2))         # of (vx, vy)
         self._add_onset(t, transition)
 
     def _add_onset(self, t: float, transition: np.ndarray) -> None:
         """Both jumps in the prediction into the frame at t, whose transition that is."""
-        self.forces.append(Jump(t, transition @ self.force_columns))
-        self.pushes.append(Jump(t, transition @ self.push_columns))
+        self.forces.add_onset(t, transition)
+        self.pushes.add_onset(t, transition)
 
     def predict(self, t: float, F: np.ndarray) -> None:
         """After the reference filter's prediction F into the frame at t: the jumps so far move
         on, and either may happen in this prediction too."""
-        for jump in self.forces + self.pushes:
-            jump.predict(F)
+        self.forces.predict(F)
+        self.pushes.predict(F)
         self._add_onset(t, F)
 
     def add(self, innovation: np.ndarray, S: np.ndarray) -> None:
         """The reference filter's innovation of a detection and its covariance, before its update."""
-        for jump in self.forces + self.pushes:
-            jump.add(innovation, S)
+        self.forces.add(innovation, S)
+        self.pushes.add(innovation, S)
 
     def take_up(self, K: np.ndarray) -> Optional[str]:
         """The reference filter's update gain K for the detection just added: "force" or "push"
         once decided, else None."""
-        for jump in self.forces + self.pushes:
-            jump.take_up(K)
-        force = max(jump.statistic() for jump in self.forces)
-        push = max(jump.statistic() for jump in self.pushes)
+        self.forces.take_up(K)
+        self.pushes.take_up(K)
+        force, push = self.forces.statistics().max(), self.pushes.statistics().max()
         if force - push > DISTURBANCE_CHANGE_CHI2:
             return "force"
         if push - force > DISTURBANCE_CHANGE_CHI2:
             return "push"
         return None
 
-    def best_force(self) -> Jump:
-        return max(self.forces, key=Jump.statistic)
+    def force_posterior(self, prior_std: float):
+        """The best-fitting change of d's effect on the reference filter's state: the mean and
+        the covariance to add (Jumps.posterior)."""
+        return self.forces.posterior(int(np.argmax(self.forces.statistics())), prior_std)

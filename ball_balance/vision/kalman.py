@@ -710,7 +710,7 @@ class BatchBallKalman:
             del self.jump_tests[i]
             if decision == "push":
                 continue
-            mean, covariance = test.best_force().posterior(DISTURBANCE_STD_M_S2)
+            mean, covariance = test.force_posterior(DISTURBANCE_STD_M_S2)
             self.x[i], self.p[i], self.r[i] = test.x + mean, test.P + covariance, test.r
             if self.gain_state:
                 low, high = self.cfg.input_gain_bounds
