@@ -563,7 +563,7 @@ def main(argv=None) -> int:
 
     # one executor for the whole run: rclpy.spin_once(node) adds the node and removes it again
     # on every call, rebuilding the wait set per sample; at ~400 samples/s on a loaded machine
-    # the monitor then fell seconds behind its topics
+    # the monitor would fall seconds behind its topics
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     next_progress_s = None

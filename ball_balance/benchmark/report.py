@@ -181,7 +181,7 @@ SET_TITLES = {"tuning": "tuning set: the defaults are chosen on these domains",
 
 def row_set(row) -> str:
     """The row's domain set ('tuning', 'held_out'; '' for a domain of neither), from the row
-    or, for a CSV written before the column, from the domain."""
+    or, for a CSV without the column, from the domain."""
     return row.get("set") or domain_set(row["domain"])
 
 
@@ -280,7 +280,7 @@ def push_counts(metrics) -> Dict[str, float]:
 
 
 def late_pushes(row) -> str:
-    """'late/all' pushes of a row ('-' without pushes, or from a CSV written before the count)."""
+    """'late/all' pushes of a row ('-' without pushes, or from a CSV without the count)."""
     pushes = row.get("pushes", math.nan)
     if not pushes or not math.isfinite(pushes):
         return "-"

@@ -75,8 +75,8 @@ class CameraToCommand:
     def latencies_s(self, since_s: float = -math.inf, until_s: float = math.inf) -> np.ndarray:
         """Wall clock: capture -> first command written after the frame's /ball_state, s, per state."""
         # no extrapolation past the last /clock sample read: slower than real time, the offset
-        # grows by (1 - real-time factor) per simulated second, and a monitor that read its
-        # states ahead of its clock put seconds of that into the latency
+        # grows by (1 - real-time factor) per simulated second, and a monitor that reads its
+        # states ahead of its clock would put seconds of that into the latency
         last_clock_s = self._clock_sim_s[-1] if self._clock_sim_s else math.inf
         return np.array([written_s - self.capture_wall_s(stamp_s)
                          for stamp_s, _, written_s, _ in self._answered(since_s, min(until_s, last_clock_s))],

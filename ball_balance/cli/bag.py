@@ -47,20 +47,19 @@ from controller_manager_py.realtime import reuse_freed_memory
 
 # Keep-last depth of the recording subscriptions: how long the taker may stall before a
 # topic loses messages (300: 5 s of a 60 Hz camera). Beside one busy process on 2 cores the
-# taker still stalled for seconds now and then: at 100 (1.7 s), frames it took 1.8-3.3 s
-# after publication had waited in these queues, and 12-47 of about 1500 were lost in 3 of 4
-# runs. Memory is used only while the taker is behind (up to 300 frames: 276 MB at 640x480).
+# taker still stalls for seconds now and then, longer than a depth of 100 (1.7 s) covers
+# (docs/transport.md). Memory is used only while the taker is behind (up to 300 frames: 276 MB
+# at 640x480).
 DEPTH = 300
 POLL_S = 0.5  # how often the graph is re-read for new topics and changed publishers
 TAKE_PERIOD_S = 0.005  # how often the subscriptions are emptied (500 Hz topics: 2-3 messages each time)
 # At most this many messages of one topic per round: a topic whose messages arrive as fast as a
 # starved taker takes them (camera frames on a loaded machine) must not keep the others waiting
-# until their keep-last queues overflow (camera_info was lost that way while frames were kept).
+# until their keep-last queues overflow (camera_info would be lost that way while frames are kept).
 TAKE_BURST = 10
 # The taker, the writer and the main thread share the interpreter lock. With the default 5 ms
-# switch interval the taker waited whole seconds for it on a loaded machine: messages were
-# taken 1.9-3 s after publication (99th percentile), past the queues' 100 then, at 60 Hz. At
-# 0.5 ms: 9-40 ms median, 0.1-2.4 s 99th percentile (docs/transport.md).
+# switch interval the taker waits whole seconds for it on a loaded machine; at 0.5 ms it takes
+# messages tens of milliseconds after publication at the median (docs/transport.md).
 SWITCH_INTERVAL_S = 0.0005
 
 
@@ -163,7 +162,7 @@ class Recorder:
         self._stream = open(os.path.join(folder, self.file_name), "wb")
         # The MCAP writer (mcap_write.py: no copies of the messages' bytes), its schemas and
         # channels belong to the writer thread; the main thread touches them only after that
-        # thread has ended. A lock shared with the per-message writes kept the main thread's
+        # thread has ended. A lock shared with the per-message writes would keep the main thread's
         # graph polling, and so --duration, waiting for whole seconds under load.
         self.writer = McapWriter(self._stream)
         self.writer.start(profile="ros2", library="ros2py bag record (ball_balance)")
@@ -253,10 +252,10 @@ class Recorder:
         """Taker thread: every TAKE_PERIOD_S, take the waiting messages of every topic in turn.
 
         rclpy's executor costs tens of microseconds per wake-up and callback; at the simulated
-        graph's ~1500 messages/s that kept the recorder's DDS receive thread from the CPU on a
-        loaded machine, and camera frames were lost (244 of 249 kept where a plain subscriber
-        of the camera alone kept 292 of 292). Polling the subscriptions costs a C call per
-        message; the keep-last DEPTH queues absorb the period."""
+        graph's ~1500 messages/s that keeps the recorder's DDS receive thread from the CPU on a
+        loaded machine, and camera frames are lost where a plain subscriber of the camera alone
+        keeps them all. Polling the subscriptions costs a C call per message; the keep-last DEPTH
+        queues absorb the period."""
         offer = self.cache.offer
         while not self._stop.is_set():
             started = time.monotonic()
@@ -380,7 +379,7 @@ def cmd_record(args) -> int:
     tty = sys.stderr.isatty()
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     # a frame's bytes per take, freed once written: from reused heap pages instead of a fresh
-    # mapping per frame (a 640x480 frame's take 130-180 -> 100-145 us of CPU)
+    # mapping per frame (about 30 us less CPU per 640x480 frame's take)
     reuse_freed_memory()
     with Session(args.spin_time) as session:
         recorder = Recorder(session, folder, args.topics, args.all, args.include_unpublished_topics,

@@ -26,13 +26,13 @@ PROG = "ros2py"
 QOS_RELIABILITY = ["reliable", "best_effort", "system_default"]
 QOS_DURABILITY = ["volatile", "transient_local", "system_default"]
 # listing waits until the graph is unchanged for 2 s (session.SETTLE_S); on a busy machine
-# the last node was seen 3.1 s after start, so the bound is above 3.1 + 2 s
+# the last node can appear about 3 s after start, so the bound is above 3 + 2 s
 LIST_SPIN_TIME_S = 6.0
 WAIT_FOR_NODE_S = 5.0  # discovering a node or topic can take 2-3 s on a loaded machine
 MAX_CACHE_BYTES = 100 * 1024 * 1024  # bag record: rosbag2's default --max-cache-size (about 110 VGA frames)
-# rclpy's teardown (executor, node, context, DDS participant) takes 10-30 ms here; with rclpy
-# 7.1.6 one `topic info` hung in Node.destroy_node for over ten minutes. Past this, the process
-# ends with the command's exit code.
+# rclpy's teardown (executor, node, context, DDS participant) takes 10-30 ms here; rclpy 7.1.6
+# can hang in Node.destroy_node for many minutes. Past this, the process ends with the command's
+# exit code.
 TEARDOWN_DEADLINE_S = 2.0
 CLOCK_MONOTONIC = 1  # <time.h>
 SIGEV_THREAD = 2  # <signal.h>: on expiry, call a function in a new thread

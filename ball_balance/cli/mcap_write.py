@@ -7,11 +7,11 @@ rosbags, Foxglove, PlotJuggler and the `mcap` Python reader.
 
 Why not the `mcap` package's writer (still used for reading): it builds every chunk in memory
 buffers that grow as messages arrive and copies it twice more before the file, and checksums it.
-For a 640x480 camera frame that cost 2.4-3.2 ms beside one busy process and 105 ms when the
-simulated graph loaded the machine, where the recorder then dropped a third of the frames. Here
-a message's bytes are handed to the file object as they are (a large write bypasses its
-buffer): 0.7-0.9 ms, 3.5 ms loaded. Chunks carry no checksum (the format's 0: "not computed"),
-as rosbag2 writes none by default either; the summary's is computed (it is small).
+For a 640x480 camera frame that costs milliseconds, and on a machine the simulated graph
+loads it costs enough that the recorder drops frames. Here a message's bytes are handed to the
+file object as they are (a large write bypasses its buffer), at a fraction of that cost. Chunks
+carry no checksum (the format's 0: "not computed"), as rosbag2 writes none by default either;
+the summary's is computed (it is small).
 
 Record layouts: the MCAP specification (mcap.dev/spec), version 0.
 """

@@ -14,12 +14,11 @@ from typing import Callable, Dict, Iterator, List, Optional, Tuple
 
 from ball_balance.cli.errors import CliError
 
-# Fast DDS sends 5 participant announcements at start, then one every 3 s. In about half
-# of the runs measured here, a new participant learnt of the others only from their next
-# periodic announcement (0-3 s later). With 20 initial announcements: 18 of 20 probe runs
-# discovered in about 0.15 s, and benchmarks/cli_bench.py saw 8 of 24 slow `topic echo`
-# runs instead of 12 of 24. Used only for our own short-lived participant, and only when
-# the user has not chosen a Fast DDS profile.
+# Fast DDS sends 5 participant announcements at start, then one every 3 s, so a new
+# participant often learns of the others only from their next periodic announcement (0-3 s
+# later). With 20 initial announcements it mostly discovers them in about 0.15 s, and fewer
+# `topic echo` runs are slow (benchmarks/cli_bench.py). Used only for our own short-lived
+# participant, and only when the user has not chosen a Fast DDS profile.
 FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
 <profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
   <participant profile_name="ros2py" is_default_profile="true">
@@ -50,22 +49,20 @@ def use_fast_discovery_profile() -> None:
 
 DEFAULT_SPIN_TIME_S = 3.0  # upper bound on discovery waits (no daemon keeps the graph for us)
 # On the simulated graph under load, a busy participant (the controller manager with MuJoCo)
-# answered our announcements up to 1.2 s after the previous change to the graph: a 1.0 s
-# settle time listed 5 of 9 nodes in 2 of 5 calls. With 1.5 s, 1 of 20 calls at load 11-13
-# missed the camera process's node, and nodes were seen first up to 1.7 s after the previous
-# new one (12 probes at load 6-9). Listing verbs wait this long unchanged.
+# answers our announcements up to about 1.7 s after the previous change to the graph, so a
+# settle time of 1.0 or 1.5 s can list an incomplete graph. Listing verbs wait this long
+# unchanged.
 SETTLE_S = 2.0
 # Our participant announces itself 20 times in its first 2 s (FASTDDS_PROFILE, and the
 # project's config/dds/fastdds.xml, which replaces it under env.sh). A busy participant may
-# answer only the last of them: at load 15, `node list` settled on the test's own node 1.5 s
-# after seeing it and missed the publisher beside it in 2 of 5 calls. Listing verbs do not
-# call the graph settled before this phase is over.
+# answer only the last of them, so a graph that looks settled earlier can still lack nodes
+# and endpoints. Listing verbs do not call the graph settled before this phase is over.
 ANNOUNCE_PHASE_S = 2.0
 
 
 # While the CLI's entry point runs a verb (teardowns_deferred), Session.close() leaves rclpy's
 # teardown here, for the entry point to run once the verb's output is out, under a deadline:
-# rclpy 7.1.6 once spent over ten minutes in Node.destroy_node (destroy_when_not_in_use). None:
+# rclpy 7.1.6 can hang in Node.destroy_node (destroy_when_not_in_use) for many minutes. None:
 # close() tears down at once.
 _deferred_teardowns: Optional[List[Callable[[], None]]] = None
 

@@ -14,8 +14,8 @@ part of the integral that pushes into the limit bleeds off at (u_raw - u_sat) / 
 toward zero and no further, never charging it against the error) and a clamp
 |ki I| <= i_limit. The D term's velocity error passes a first-order low-pass
 (`derivative_filter_s`): the tracker's Kalman velocity is noisy enough that, unfiltered, it
-shook the plate (tilt-rate RMS 3x the MPC's), pulled the online plant estimate off through
-the loop and cost 1-2 mm on the circle and 0.3-0.7 s of push recovery (docs/control.md).
+shakes the plate, pulls the online plant estimate off through the loop and costs tracking
+accuracy and push recovery (docs/control.md).
 
 The law is written once, over arrays (`Pid`): every element is an independent axis, a
 plate's two at run time (`PlatePid`), a batch of plates' in the training plant

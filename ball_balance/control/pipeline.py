@@ -90,7 +90,7 @@ def adapted_pid_step(pid: PlatePid, k_g_tuned: float, scale_feedback: bool, pos_
     ref = RefSample(ref.p, ref.v, np.asarray(ref.a) * (k_g_tuned / k_g))
     # the feedback keeps its tuned tilt per metre on a weaker plant (scaled up, it moves the
     # loop toward the plant's non-minimum-phase zero sqrt(g / h), which falls with g, and the
-    # plate shook hard enough to make the ball hop at half gravity); on a stronger plant
+    # plate shakes hard enough to make the ball hop at half gravity); on a stronger plant
     # (adapt_pid_feedback) it is scaled down to the acceleration per metre it was tuned for
     scale = min(1.0, k_g_tuned / k_g) if scale_feedback else 1.0
     return pid.step(pos_m, vel_m_s, ref, dt_s, gain_scale=scale, u_bias_rad=np.asarray(accel_offset_m_s2) / k_g)
@@ -314,9 +314,9 @@ class ControlPipeline:
     def _lead_in(self, obs: BallObservation) -> Reference:
         """The reference led in from the ball's position: a smoothstep from there into the
         reference (references.Delayed), long enough that its acceleration, 6 d / T^2 at the start
-        for a distance d, stays within engage_accel_m_s2. Started where the reference is, a ball
-        far from it got full tilt at once, before the delay and plant estimates had any data:
-        a strong plant with a long unknown delay then threw it off the plate."""
+        for a distance d, stays within engage_accel_m_s2. Without the lead-in, a ball far from
+        the reference would get full tilt at once, before the delay and plant estimates have any
+        data, and a strong plant with a long unknown delay would throw it off the plate."""
         ball = np.array([obs.x, obs.y])
         distance_m = float(np.linalg.norm(self.reference.sample(0.0).p - ball))
         lead_s = math.sqrt(6.0 * distance_m / self.cfg.engage_accel_m_s2)

@@ -22,13 +22,12 @@ here), plus `async_step`. Two rates:
     limits for that update's period (manager/joint_limits.JointLimiter). With `command_ramp`
     (default) the written command runs from the last one to the target in a straight line
     over one control period (controller_manager_py.controllers.command_ramp.CommandRamp): a target jumping once per step
-    shook the plate at the control rate and threw the ball off it after a push. Why every update: the
+    shakes the plate at the control rate and can throw the ball off it after a push. Why every update: the
     manager's limits stage writes the saturated value back into the command interface (as
-    ros2_control's does), so a target written only once per step was cut to one manager
+    ros2_control's does), so a target written only once per step would be cut to one manager
     cycle's worth of joint motion (3.14 rad/s x 2 ms = 6.3 mrad of a step of up to 20 mrad)
-    and the rest was lost; the plate lagged the pipeline's commands and the ball swung
-    (tilt-rate RMS 5.2 rad/s against 0.5 for the same loop written every cycle, lock-stepped).
-    The nodes never met it: forward_position_controller writes its held target every cycle.
+    and the rest lost: the plate would lag the pipeline's commands and the ball swing.
+    The nodes need no such care: forward_position_controller writes its held target every cycle.
 With `async_step` (default) each step runs in a worker thread (manager/async_handler): update()
 hands over the measured joints and the newest ball state and never waits for the policy's
 inference or the MPC's solve; the step's target is written from the first update after it is
@@ -109,8 +108,7 @@ NODE_ONLY = {"control_trigger", "joint_states_timeout_s"}
 GATE_KINDS = ("non_finite", "future", "stale", "old", "off_plate", "too_fast", "jump")
 # The worker holds Python's interpreter lock while it steps (1-3 ms of Python): preempted there by
 # another process, it would keep the manager's loop (SCHED_FIFO 50) waiting for that lock for as
-# long (measured at 500 Hz with one busy process: 100 periods over 2x nominal in 8 s at normal
-# priority). Below the loop, above the manager's executor thread (40).
+# long. Below the loop, above the manager's executor thread (40).
 STEP_THREAD_PRIORITY = 45
 VELOCITY_MARGIN = 1e-6   # relative: the joint targets move this much slower than the URDF allows
 MODE_CODE = {Mode.HOMING: 0.0, Mode.READY: 1.0, Mode.ENGAGED: 2.0, Mode.HOLDING: 3.0, Mode.RETURNING: 4.0}

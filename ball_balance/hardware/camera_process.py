@@ -14,7 +14,7 @@ touches the manager's interpreter; the kernel schedules rendering like any other
   late while a newer one waits. `frames_rendered`, `frames_skipped`, `last_render_s` and
   `render_cpu_s` (the child's CPU time for all frames) are read from shared memory.
 - The child runs normally scheduled: software rendering is the heaviest work of the graph,
-  and at a real-time priority it starved everything else on a small machine. Lock-step
+  and at a real-time priority it would starve everything else on a small machine. Lock-step
   pacing (ball_balance/sim/lockstep.py) makes a slow frame cost wall time, not control.
 - `extra_render_s` > 0: each frame takes that much longer (a slower renderer, for tests and
   benchmarks; camera_extra_render_s).

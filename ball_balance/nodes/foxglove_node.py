@@ -104,8 +104,8 @@ class _Taker:
 
     Why not subscription callbacks: rclpy's executor costs a wait-set rebuild and a Python
     round trip per message. With 100 Hz /joint_states and /tf watched (200 small messages a
-    second) the node took 21 % of a core through callbacks and 7.6 % taken this way (2 CPUs,
-    load average 13); `ros2py bag record` takes its messages the same way for the same reason.
+    second), callbacks cost the node about three times the CPU that taking the messages this way
+    does; `ros2py bag record` takes its messages the same way for the same reason.
     """
 
     def __init__(self):

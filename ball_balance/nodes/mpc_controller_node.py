@@ -34,7 +34,7 @@ class MpcControllerNode(BalanceControllerNode):
         self.command_pub = self.create_publisher(
             JointTrajectory, "/scaled_joint_trajectory_controller/joint_trajectory", 10)
         # a point further out than the next step is never reached: each new one replaces it,
-        # and the plate lags the command (0.04 s: 6 of 12 live pushes over 1 s, one period: 1)
+        # and the plate lags the command
         t = self.params["trajectory_point_time_s"] or 1.0 / self.params["control_rate_hz"]
         self._time_from_start = Duration(sec=int(t), nanosec=int(round((t % 1.0) * 1e9)))
         self._tick_times_s = []

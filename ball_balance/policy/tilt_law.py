@@ -42,7 +42,7 @@ class PolicyTiltLaw:
     def __init__(self, runner: PolicyRunner, gains: PidGains, k_g: float, blend_s: float = 1.0,
                  scale_feedback: bool = False, use_estimate: bool = True, max_delay_s: float = 0.0):
         self.runner, self.k_g, self.blend_s, self.max_delay_s = runner, k_g, blend_s, max_delay_s
-        # as the model was trained (a model from before the fade has none)
+        # as the model was trained (a model whose metadata lacks one: none)
         self.correction_fade_m = float(runner.metadata.training.get("correction_fade_error_m", 0.0))
         self.correction_onset_m = float(runner.metadata.training.get("correction_onset_error_m", 0.0))
         self.low_gain_onset = float(runner.metadata.training.get("correction_low_gain_onset", 0.0))
@@ -127,7 +127,7 @@ def load_tilt_law(values: Mapping) -> PolicyTiltLaw:
     if mismatch:
         raise PolicyModelError(f"policy model {runner.where}: trained on a different PID ({mismatch})")
     # a model trained on a PID that took the plant estimate records the estimate's parameters
-    # (ball_balance/policy/env.py BASE_PID_KEYS); one trained before that runs on the PID without it
+    # (ball_balance/policy/env.py BASE_PID_KEYS); a model that records none runs on the PID without it
     base_pid = runner.metadata.training.get("base_pid") or {}
     use_estimate = "adapt_plant_gain" in base_pid
     gains = control_config.pid_gains(values)

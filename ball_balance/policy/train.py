@@ -15,9 +15,8 @@ the PID. On a weak plant (the plant estimate's gain below --low-gain-onset of th
 the MPC's label and the correction apply near the reference too: there the PID, which never
 scales its feedback up, is slow everywhere. Other teachers (--teacher): the PID itself on the
 true state predicted exactly over the episode's latency with the true gain and bias (pid: the
-correction is zero where the running PID's estimates are right; the previous models), a
-stiffer PD law or the MPC on the true state, and the PID on the truth near plus the MPC far
-(pid_mpc).
+correction is zero where the running PID's estimates are right), a stiffer PD law or the MPC
+on the true state, and the PID on the truth near plus the MPC far (pid_mpc).
 
 The student sees only what the running controller sees (the observation of
 ball_balance/policy/observation.py, with the plant estimate's gain, which the MPC's tilt
@@ -172,8 +171,8 @@ def main(argv=None) -> int:
     parser.add_argument("--batch", type=int, default=384, help="episodes rolled out per iteration")
     parser.add_argument("--epochs", type=int, default=6, help="passes over the aggregated data per iteration")
     parser.add_argument("--hidden", type=int, default=128,
-                        help="width of the two hidden layers (128: the MPC's far-off correction, which 64 with 3 "
-                        "epochs fitted to a far-label RMS error of 0.027 against 0.018)")
+                        help="width of the two hidden layers (128: 64 fits the MPC's far-off correction markedly "
+                        "worse)")
     parser.add_argument("--action-scale", type=float, default=0.1, help="largest correction [rad]")
     parser.add_argument("--eval-batch", type=int, default=256)
     parser.add_argument("--max-rows", type=int, default=3_000_000, help="keep at most this many samples")
@@ -198,8 +197,8 @@ def main(argv=None) -> int:
                         help="weight of the mean absolute action (in [-1, 1] units) added to the loss: a "
                         "correction whose expected label is below half of it is learned as zero. For the pid "
                         "teacher 0.05 (corrections only where they pay); with mpc_far and its onset none: the "
-                        "onset already keeps the correction out of where the PID is good, and 0.05 shrank the "
-                        "far-off labels (RMS 0.036) toward zero (held-out pushes 0.99 of the PID against 0.97)")
+                        "onset already keeps the correction out of where the PID is good, and 0.05 shrinks the "
+                        "far-off labels toward zero")
     parser.add_argument("--push-prob-per-s", type=float, default=None,
                         help="random pushes per second in the training episodes (default: DomainRanges')")
     parser.add_argument("--push-label-frames", type=int, default=2,
@@ -217,7 +216,7 @@ def main(argv=None) -> int:
                         help="the RMS label below which episodes weigh no more [rad]")
     parser.add_argument("--bucket-batch", type=int, default=64,
                         help="held-out episodes per evaluation bucket (buckets(); 0: select on --eval-batch "
-                        "wide-range episodes by mean RMSE, as before)")
+                        "wide-range episodes by mean RMSE)")
     parser.add_argument("--output-gains", default="1,0.7,0.5,0.35,0.25,0.15,0.1,0.05",
                         help="comma-separated gains on the chosen iteration's correction, each evaluated on the "
                         "buckets beside the PID; the best is exported (as the action scale times it): the "
@@ -226,10 +225,8 @@ def main(argv=None) -> int:
                         help="the correction applies in full within this distance of the reference and fades out "
                         "to none at twice it (observation.correction_weight; recorded in the model, the runtime "
                         "applies the same; 0: everywhere). Far off, the ball is coming back from a push, where "
-                        "the held-out pushes episodes showed the correction costing at every output gain. Off by "
-                        "default: at 5 mm the training chose gain 0.15, worse than the shipped model in the MuJoCo "
-                        "benchmark (summed RMSE after 5 s 24.56 against 24.47 mm), and at gain 0.05 it ties it "
-                        "(24.46) with a worst push recovery of 1.65 s against 1.12 (measured on an earlier model)")
+                        "the held-out pushes episodes show the correction costing at every output gain. Off by "
+                        "default: in the MuJoCo benchmark a fade does not beat the unfaded model")
     parser.add_argument("--correction-onset-mm", type=float, default=8.0,
                         help="no correction within this distance of the reference, all of it beyond twice it "
                         "(observation.correction_weight; recorded in the model, the runtime applies the same; 0: "

@@ -174,12 +174,11 @@ def _add_plate_texture(spec: mujoco.MjSpec) -> None:
 
     Why not one texture over the whole face: the camera is rendered on the CPU (llvmpipe),
     where sampling a large texture costs several times a plain pixel; the face covers about
-    40 % of the image, the markers' quads about 2 % (CPU per frame measured side by side:
-    960x540 8.5 -> 6.1 ms, 640x480 5.9 -> 4.4 ms). The face is textured too, with one
-    texel, so that it is lit exactly as the markers' surround (a texture modulates the
-    clamped lighting, a plain colour does not), and it is a grid whose cells include the
-    markers' quads: lighting is computed per vertex, so quads sharing their corners show no
-    seam under any light."""
+    40 % of the image, the markers' quads about 2 % (about a quarter less CPU per frame). The
+    face is textured too, with one texel, so that it is lit exactly as the markers' surround (a
+    texture modulates the clamped lighting, a plain colour does not), and it is a grid whose
+    cells include the markers' quads: lighting is computed per vertex, so quads sharing their
+    corners show no seam under any light."""
     image = plate_texture_rgb()
     px_per_m = image.shape[0] / PLATE_SIDE_M
     half = PLATE_SIDE_M / 2.0

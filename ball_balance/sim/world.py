@@ -301,7 +301,7 @@ class SimWorld:
         2. The servo (kp, kv with kp / kv = 1 / servo_lag) settles at velocity = error / lag, so
            clamping the error it sees to lag x (that same velocity bound) means it never
            drives the joint faster than the limit or into a position limit, even after torque
-           saturation or when the other joints push it (the cause of the overshoots before).
+           saturation or when the other joints push it (what would otherwise make it overshoot).
         Both stop LIMIT_MARGIN_RAD inside the position limits; the servo asks for at most
         VELOCITY_SHARE of the velocity limit (coupling adds a few per cent).
         """

@@ -19,8 +19,8 @@ benchmarks/controller_manager_bench.py):
     a waiting thread's timeout is the interval in force when it began to wait. The executor
     thread, pushed off the lock when the loop wakes, asks for it again at once with the short
     interval: one interval later it takes the lock from the spinning or cycling loop and keeps it
-    until it blocks (measured at 1 kHz: cycles starting 300-900 us late although the loop had
-    woken on time). With `hold_interpreter` the loop raises the switch interval from its
+    until it blocks (cycles then start hundreds of microseconds late at 1 kHz although the loop
+    wakes on time). With `hold_interpreter` the loop raises the switch interval from its
     wake-up until it sleeps, which delays waits that begin meanwhile but not one already
     begun. What stops it is the executor not running while the loop is awake: the node pins
     the executor thread to the loop thread's CPU at a lower SCHED_FIFO priority
@@ -33,9 +33,9 @@ benchmarks/controller_manager_bench.py):
     interval, asks the holder to drop the lock, and sleeps the interval again until it is
     free. A holder on the loop's own CPU at a lower priority runs only inside those sleeps,
     and in a virtual machine a 20 us sleep costs about as much CPU as it lasts, so the holder
-    crawls and the loop waited milliseconds (2-22 ms, with the policy controller's worker
-    stepping on the loop's CPU) for a lock given up after microseconds of the holder's own
-    time. The node's interval is long enough for the holder to run (100 us), and the loop
+    crawls and the loop waits milliseconds (with the policy controller's worker stepping on
+    the loop's CPU) for a lock given up after microseconds of the holder's own time. The
+    node's interval is long enough for the holder to run (100 us), and the loop
     takes the lock back before the deadline: the tails below are spent holding it.
   - The kernel's wake-up latency (tens of us, hundreds in a loaded virtual machine).
     `spin_tail` (s): the last part of the wait is a busy loop on the clock (one core busy for
@@ -63,7 +63,7 @@ start and end, and when the wait before it came back from its lock-releasing sle
 (`woke`, the lock re-acquired) and from its lock-holding sleep (`ready`), all
 time.monotonic() s, and the loop thread's voluntary context switches during the
 lock-releasing sleep (`switches`: 1 when it slept and took the lock straight back, more when
-it then had to wait for the lock, so a late `woke` with 1 was the kernel's or the machine's),
+it then had to wait for the lock, so a late `woke` with 1 is the kernel's or the machine's),
 are kept in preallocated arrays and written to that .npz file when the loop stops (with
 `wake_tail` and `spin_tail`), for timing analysis: the benchmark reads it.
 """
@@ -88,9 +88,9 @@ MIN_PERIOD_FRACTION = 0.98
 wake-up moves the schedule instead of being followed by a short period."""
 WAKE_TAIL_MAX_FRACTION = 0.2
 """The held sleep takes at most this share of a period: the executor gets the interpreter only
-outside the cycle and the tails, and at 1 kHz a 300 us held sleep (with the 100 us spin) left
-it too little: it fell behind and held the lock at the loop's wake-ups (54 late cycles of the
-manager's own in five 8 s runs, against 6 with 200 us)."""
+outside the cycle and the tails, and at 1 kHz a 300 us held sleep (with the 100 us spin) leaves
+it too little: it falls behind and holds the lock at the loop's wake-ups, and many more cycles
+start late than with 200 us."""
 IDLE_GC_FRACTION = 0.3
 GC_OVERDUE = 50  # times the first generation's threshold: collected even without slack
 setswitchinterval = sys.setswitchinterval

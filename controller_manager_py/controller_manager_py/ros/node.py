@@ -279,8 +279,8 @@ class ControllerManagerNode(Node):
         if self.params["loop.executor_thread_priority"] > 0:
             # this callback runs in the executor thread; the middleware's threads, started with
             # the node, receive what the executor runs (command topics, services) and answer
-            # discovery: normally scheduled beside a SCHED_FIFO camera chain that filled both
-            # cores of a slow machine, they left the joint commands seconds late and a new
+            # discovery: normally scheduled beside a SCHED_FIFO camera chain that fills both
+            # cores of a slow machine, they leave the joint commands seconds late and a new
             # subscriber (a bag recorder) unmatched for its whole recording. The loop thread,
             # started below, sets its own priority.
             set_process_realtime_priority(self.params["loop.executor_thread_priority"])
