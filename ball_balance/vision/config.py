@@ -127,11 +127,8 @@ TRACKER_SCHEMA = (
     Param("maneuver_hold_s", 1.0,
           "after such a detection (while the model had agreed with the detections), report for this long "
           "the velocity of a constant-velocity filter with accel_noise_m_s2 run alongside, which takes up "
-          "a push within a frame or two; 0 = off", "s", 0.0, 10.0),
-    Param("maneuver_accel_noise_m_s2", 1.0,
-          "while that hold lasts, the model's own process noise is at least this white-noise acceleration, so "
-          "its position follows the pushed ball within frames instead of lagging it by millimetres for the "
-          "whole hold; 0 = unchanged", "m/s^2", 0.0, 1000.0),
+          "a push within a frame or two, and predict with at least accel_noise_m_s2 (the push is motion the "
+          "commanded tilt does not explain), so the position follows the pushed ball; 0 = off", "s", 0.0, 10.0),
     Param("maneuver_confirm_frames", 2,
           "detections that make a push: one beyond maneuver_sigma, then the rest pointing the same way beyond "
           "maneuver_confirm_sigma (one beyond gate_sigma always does); 1 = every detection beyond maneuver_sigma, "
@@ -198,7 +195,6 @@ class TrackerConfig:
     model_mismatch_time_constant_s: float
     maneuver_sigma: float
     maneuver_hold_s: float
-    maneuver_accel_noise_m_s2: float
     maneuver_confirm_frames: int
     maneuver_confirm_sigma: float
     maneuver_confirm_noise_m: float

@@ -43,10 +43,10 @@ controller recovers. So `fast`, a plain constant-velocity filter with
 `accel_noise_m_s2` and the same measurement noise, runs alongside, and for `maneuver_hold_s`
 after such a detection its velocity is the one reported, unless the model had disagreed with
 the detections before it (MODEL_AGREED_NIS: a long delay or a wrong gain, not a push). The
-position stays the model's; during the hold it predicts with at least
-`maneuver_accel_noise_m_s2` of process noise, so that position follows the pushed ball within
-frames (with only the small noise it would lag the returning ball by millimetres for most of
-the hold).
+position stays the model's; during the hold it predicts with `accel_noise_m_s2`, the process
+noise of motion the known acceleration does not explain, so that position follows the pushed
+ball within frames (with only the small noise it would lag the returning ball by millimetres
+for most of the hold).
 Its velocity is not reported then: its error after a push is a slow bias that the controllers
 follow, where the constant-velocity filter's is noise that they average. With
 `maneuver_confirm_frames` N > 1 a push needs a detection beyond `maneuver_sigma` followed by
@@ -121,8 +121,8 @@ def process_noise(nis, known_accel: bool, holding, cfg: KalmanConfig) -> np.ndar
     whose running innovation consistency is nis: sigma_a^2 (`accel_noise_m_s2`) without a known
     acceleration; with one sigma_a_cmd^2 (`cmd_accel_noise_m_s2`), raised by the consistency
     (up to sigma_a^2) while the detections disagree with the model more than its covariance
-    says (a wrong delay or gain). During a maneuver hold (`holding`) at least
-    `maneuver_accel_noise_m_s2` squared."""
+    says (a wrong delay or gain). During a push's hold (`holding`) sigma_a^2: the push is
+    motion the known acceleration does not explain."""
     nis = np.asarray(nis, dtype=float)
     sigma_a, sigma_cmd = cfg.accel_noise_m_s2, cfg.cmd_accel_noise_m_s2
     if not known_accel:
@@ -131,7 +131,7 @@ def process_noise(nis, known_accel: bool, holding, cfg: KalmanConfig) -> np.ndar
         q = np.minimum(np.maximum(nis, 1.0), max(1.0, (sigma_a / sigma_cmd) ** 2)) * sigma_cmd ** 2
     else:
         q = np.full(nis.shape, sigma_cmd ** 2)
-    return np.where(holding, np.maximum(q, cfg.maneuver_accel_noise_m_s2 ** 2), q)
+    return np.where(holding, sigma_a ** 2, q)
 
 
 def prediction(dt, q, accel, dim: int, gain_index: Optional[int] = None, gain_rate_per_s: float = 0.0,
@@ -389,7 +389,6 @@ class KalmanConfig:
     model_mismatch_time_constant_s: float = _TRACKER_DEFAULTS["model_mismatch_time_constant_s"]
     maneuver_sigma: float = _TRACKER_DEFAULTS["maneuver_sigma"]
     maneuver_hold_s: float = _TRACKER_DEFAULTS["maneuver_hold_s"]
-    maneuver_accel_noise_m_s2: float = _TRACKER_DEFAULTS["maneuver_accel_noise_m_s2"]
     maneuver_confirm_frames: int = _TRACKER_DEFAULTS["maneuver_confirm_frames"]
     maneuver_confirm_sigma: float = _TRACKER_DEFAULTS["maneuver_confirm_sigma"]
     maneuver_confirm_noise_m: float = _TRACKER_DEFAULTS["maneuver_confirm_noise_m"]
@@ -456,8 +455,7 @@ class BatchBallKalman:
     (maneuver_*), their constant-velocity filter `fast`, the change test of d and, after a
     push's detection, the jump test (vision/disturbance.py)."""
 
-    def __init__(self, batch: int, cfg: KalmanConfig, fixed_meas_noise_m=None, noise_window_max_span_s: float = 0.25,
-                 noise_min_samples: int = 10):
+    def __init__(self, batch: int, cfg: KalmanConfig, fixed_meas_noise_m=None):
         self.b, self.cfg = batch, cfg
         self.sigma_a = cfg.accel_noise_m_s2
         self.gain_state = bool(cfg.estimate_input_gain)
@@ -465,8 +463,8 @@ class BatchBallKalman:
         self.dim = D_INDEX + 2 if self.disturbance_state else D_INDEX
         self.noise_min = cfg.meas_noise_m
         self.noise_max = max(cfg.meas_noise_max_m, cfg.meas_noise_m)
-        self.noise = DetectionNoiseEstimator(cfg.meas_noise_window_frames, noise_min_samples, noise_window_max_span_s,
-                                             batch) if cfg.adaptive_meas_noise else None
+        self.noise = DetectionNoiseEstimator(cfg.meas_noise_window_frames, batch=batch) \
+            if cfg.adaptive_meas_noise else None
         low, high = cfg.input_gain_bounds
         self.gain_var_max = ((high - low) / 4.0) ** 2   # s's variance after long without a command
         # R per ball: the configured noise, or with a fixed noise the larger of it and the ball's
@@ -494,7 +492,7 @@ class BatchBallKalman:
         self.last_dt = np.zeros(batch)         # the last prediction's dt, q and Q
         self.last_q = np.zeros(batch)
         self.last_Q = np.zeros((batch, self.dim, self.dim))
-        # pushes: the hold (process noise at least maneuver_accel_noise_m_s2, the velocity of a
+        # pushes: the hold (process noise accel_noise_m_s2, the velocity of a
         # constant-velocity filter), and with maneuver_confirm_frames > 1 the detections in
         # the current run that may be a push, the last one's innovation, the consistency
         # before the run began

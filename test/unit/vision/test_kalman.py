@@ -9,7 +9,7 @@ from ball_balance.vision.kalman import BallKalman, DetectionNoiseEstimator, Kalm
 # the filter these tests start from: every adaptation and the push detection off (a test switches
 # on what it is about), the input gain within [0.3, 2.5]
 PLAIN = KalmanConfig(estimate_input_gain=False, input_gain_bounds=(0.3, 2.5), model_mismatch_time_constant_s=0.0,
-                     maneuver_sigma=0.0, maneuver_hold_s=0.0, maneuver_accel_noise_m_s2=0.0,
+                     maneuver_sigma=0.0, maneuver_hold_s=0.0,
                      maneuver_confirm_frames=1, maneuver_confirm_sigma=0.0, maneuver_confirm_noise_m=0.0,
                      adaptive_meas_noise=False, disturbance_time_constant_s=0.0)
 
@@ -323,17 +323,16 @@ def test_after_a_push_the_velocity_is_the_constant_velocity_filters_for_the_hold
     assert v_held[89] == pytest.approx(v_plain[89], abs=0.02)       # both settled after the hold
 
 
-def test_during_the_hold_the_models_position_follows_the_push_with_the_maneuver_process_noise():
+def test_during_the_hold_the_models_position_follows_the_push_with_the_unexplained_motions_noise():
     """Only the velocity is the constant-velocity filter's during the hold; the position stays
-    the model's, whose small process noise took the push up over a second. With
-    maneuver_accel_noise_m_s2 the model predicts with that much noise while the hold lasts, and its
-    position is back on the ball within a few frames; after the hold the small noise returns.
-    (The braking is not in the known acceleration here: after a push the model does not
-    explain the ball's motion exactly either, the closed loop's estimate lagged 3-5 mm.)"""
-    def run(maneuver_accel):
+    the model's, whose small process noise takes a push up over a second. While the hold lasts
+    the model predicts with accel_noise_m_s2, and its position is back on the ball within a
+    few frames; after the hold the small noise returns. (The braking is not in the known
+    acceleration here: after a push the model does not explain the ball's motion exactly
+    either.)"""
+    def run(hold_s):
         kf = filter_with(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.05,
-                         model_mismatch_time_constant_s=0.3, maneuver_sigma=3.5, maneuver_hold_s=1.0,
-                         maneuver_accel_noise_m_s2=maneuver_accel)
+                         model_mismatch_time_constant_s=0.3, maneuver_sigma=3.5, maneuver_hold_s=hold_s)
         rng, error = np.random.default_rng(5), {}
         for k in range(90):
             t = k / 30
