@@ -70,8 +70,11 @@ def disturbance_jerk(q_d, dt) -> np.ndarray:
     """The process noise (..., 3, 3) that a random walk of d with jerk density q_d adds over dt
     to (x, vx, d_x) (likewise y); q_d and dt scalars, or one value per filter of a batch."""
     q_d, dt = np.asarray(q_d, dtype=float)[..., None, None], np.asarray(dt, dtype=float)[..., None, None]
-    return q_d * np.array([[1 / 20, 1 / 8, 1 / 6], [1 / 8, 1 / 3, 1 / 2], [1 / 6, 1 / 2, 1.0]]) \
-        * dt ** np.array([[5, 4, 3], [4, 3, 2], [3, 2, 1]])
+    return q_d * _JERK_COEFFICIENTS * dt ** _JERK_POWERS
+
+
+_JERK_COEFFICIENTS = np.array([[1 / 20, 1 / 8, 1 / 6], [1 / 8, 1 / 3, 1 / 2], [1 / 6, 1 / 2, 1.0]])
+_JERK_POWERS = np.array([[5, 4, 3], [4, 3, 2], [3, 2, 1]])
 
 
 def open_disturbance(P: np.ndarray, T, d_index: int) -> None:
