@@ -416,6 +416,12 @@ GAIN_INDEX = 4    # the state's index of s, the input gain (held at 1 without it
 D_INDEX = 5       # ... of d_x (d_y next), with the disturbance state
 
 
+def innovation_covariance(P: np.ndarray, r) -> np.ndarray:
+    """S = H P H^T + r I (..., 2, 2) of filters with covariances P (..., n, n) and measurement
+    variances r (one per filter, or a scalar for one), H = [I 0]."""
+    return P[..., :2, :2] + np.asarray(r)[..., None, None] * np.eye(2)
+
+
 def innovation_inverse(P: np.ndarray, r: np.ndarray, y: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """S^-1 (b, 2, 2) of the innovations y (b, 2) of a batch of filters with covariances
     P (b, n, n) and measurement variances r (b,) (S = H P H^T + r I, H = [I 0]), and their
@@ -648,9 +654,7 @@ class BatchBallKalman:
             return
         i = np.flatnonzero(ok)
         x_new, p_new, k = kalman_update(self.x[i], self.p[i], self.r[i], y[i], inv[i])
-        low, high = self.cfg.input_gain_bounds
-        x_new[:, GAIN_INDEX] = np.clip(x_new[:, GAIN_INDEX], low, high) if self.gain_state else 1.0
-        self.x[i], self.p[i] = x_new, p_new
+        self.x[i], self.p[i] = self._clamp_gain(x_new), p_new
         self.coasted[i] = 0
         if self.disturbance_state:
             self.change.set_last_gain(appended, k[appended[i]])
@@ -672,8 +676,8 @@ class BatchBallKalman:
         add = ok & ~pushed
         if not add.any():
             return add, False
-        S = self.p[:, :2, :2] + self.r[:, None, None] * np.eye(2)
-        changed = w.test(t, add, y, S, self.nis, self.transition, self.track_start)
+        changed = w.test(t, add, y, innovation_covariance(self.p, self.r), self.nis, self.transition,
+                         self.track_start)
         for i in np.flatnonzero(changed):
             w.correct(i, t, self.x[i], self.p[i])
         self.disturbance_changes += changed
@@ -699,7 +703,7 @@ class BatchBallKalman:
             x, P, r = test.x[None], test.P[None], np.array([test.r])
             y = z[i][None] - x[:, :2]
             inv, _ = innovation_inverse(P, r, y)
-            test.add(y[0], P[0, :2, :2] + test.r * np.eye(2))
+            test.add(y[0], innovation_covariance(P[0], test.r))
             x, P, K = kalman_update(x, P, r, y, inv)
             test.x, test.P = x[0], P[0]
             decision = test.take_up(K[0])
@@ -709,10 +713,7 @@ class BatchBallKalman:
             if decision == "push":
                 continue
             mean, covariance = test.force_posterior(DISTURBANCE_STD_M_S2)
-            self.x[i], self.p[i], self.r[i] = test.x + mean, test.P + covariance, test.r
-            if self.gain_state:
-                low, high = self.cfg.input_gain_bounds
-                self.x[i, GAIN_INDEX] = min(max(self.x[i, GAIN_INDEX], low), high)
+            self.x[i], self.p[i], self.r[i] = self._clamp_gain((test.x + mean)[None])[0], test.P + covariance, test.r
             self.hold_until[i] = -np.inf
             self.change.clear(i)
             self.transition[i] = np.eye(self.dim)
@@ -794,6 +795,12 @@ class BatchBallKalman:
             test.x = F[0] @ test.x
             test.P = self._clamp_gain_variance(F @ test.P[None] @ F.transpose(0, 2, 1) + Q)[0]
             test.predict(t, F[0])
+
+    def _clamp_gain(self, x: np.ndarray) -> np.ndarray:
+        """States x (m, n) with s within input_gain_bounds (held at 1 without its estimate)."""
+        low, high = self.cfg.input_gain_bounds
+        x[:, GAIN_INDEX] = np.clip(x[:, GAIN_INDEX], low, high) if self.gain_state else 1.0
+        return x
 
     def _clamp_gain_variance(self, P: np.ndarray) -> np.ndarray:
         if self.gain_state:
