@@ -21,8 +21,8 @@ import numpy as np
 class TiltHistory:
     """Commanded tilts (u_x, u_y) [rad] with the controller time [s] they were issued at.
 
-    Looked up by bisection (a prediction asks for several instants every tick, and a scan
-    of a few hundred entries each was most of its cost). The times only go forward: a time
+    Looked up by bisection (a prediction asks for a window of it every tick; a scan of a few
+    hundred entries would be most of its cost). The times only go forward: a time
     before the last one (a clock reset) starts the history again."""
 
     def __init__(self, max_len: int = 256):
@@ -38,11 +38,6 @@ class TiltHistory:
             self.clear()
         self._times.append(t_s)
         self._tilts.append((u_x, u_y))
-
-    def at(self, t_s: float) -> Tuple[float, float]:
-        """The tilt in force at time t_s (latest command issued at or before t_s; 0 before any)."""
-        i = bisect_right(self._times, t_s)
-        return self._tilts[i - 1] if i else (0.0, 0.0)
 
     def acting(self, t0_s: float, t1_s: float) -> Tuple[np.ndarray, np.ndarray]:
         """The commands in force over (t0_s, t1_s): their issue times (n,) and tilts (n, 2),
