@@ -84,7 +84,8 @@ TRACKER_SCHEMA = (
     Param("accel_noise_m_s2", 1.0, "white-noise acceleration (1 sigma) of the process model", "m/s^2",
           1e-4, 1000.0),
     Param("init_vel_std_m_s", 0.5, "velocity uncertainty (1 sigma) at track start", "m/s", 1e-4, 100.0),
-    Param("gate_sigma", 6.0, "reject detections farther than this Mahalanobis distance", "", 1.0, 1000.0),
+    Param("gate_sigma", 6.0, "reject detections farther than this Mahalanobis distance (during a push's hold, "
+          "unless the constant-velocity filter takes them)", "", 1.0, 1000.0),
     Param("max_coast_frames", 5, "frames predicted without a detection before the track is reset",
           "frames", 0, 1000),
     Param("max_dt_s", 0.5, "a gap between frames longer than this resets the track", "s", 0.001, 60.0),

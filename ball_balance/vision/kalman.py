@@ -69,7 +69,9 @@ lever use the command in force `delay_s` before the frame. With `estimate_plate_
 with the command history over candidate delays (control/prediction.py StampedDelayEstimator).
 
 A detection whose Mahalanobis distance sqrt(y^T S^-1 y) exceeds `gate_sigma` is ignored
-(an outlier). Without a usable detection the filter coasts (predicts) for up to
+(an outlier), unless it comes during a push's hold and the constant-velocity filter takes
+it: a push faster than the model's gate allows, whose position and velocity the model then
+takes from that filter. Without a usable detection the filter coasts (predicts) for up to
 `max_coast_frames` frames, still valid; then the track is dropped and the next detection
 starts a new one. A gap longer than `max_dt_s` also drops the track. The noise and gain
 estimates describe the camera and the plant, not the track: they survive a dropped track.
@@ -572,6 +574,10 @@ class BatchBallKalman:
         if self.fast is not None:   # after a push: the constant-velocity filter's velocity
             self.fast.r = self.r.copy()
             _, fast_vel, fast_valid = self.fast.step(t, z, det, stepped=stepped)
+            follow = self.gated & self.init & self.fast.fresh & (t <= self.hold_until)
+            if follow.any():
+                self._follow_push_beyond_gate(follow, lever)
+                pos[follow] = self.x[follow, :2] + (0.0 if lever is None else lever[follow])
             use = valid & fast_valid & (t <= self.hold_until)
             vel[use] = fast_vel[use]
         return pos, vel, valid
@@ -599,6 +605,26 @@ class BatchBallKalman:
         valid = start | ((run | coast) & ~lost)
         self.reset(lost)
         return self.x[:, :2].copy(), np.where(valid[:, None], self.x[:, 2:4], 0.0), valid
+
+    def _follow_push_beyond_gate(self, mask, lever) -> None:
+        """The balls in mask, whose detection the model gated during a push's hold while the
+        constant-velocity filter took it: a push faster than the gate lets the model follow
+        (about 0.2 m/s at 30 Hz and 1 mm of noise). The ball's position and velocity, and their
+        covariance, become the constant-velocity filter's; s and d stay the model's."""
+        i = np.flatnonzero(mask)
+        p = self.p[i]
+        p[:, :4, :] = 0.0
+        p[:, :, :4] = 0.0
+        p[:, :4, :4] = self.fast.p[i, :4, :4]
+        self.p[i] = p
+        self.x[i, :4] = self.fast.x[i, :4]
+        if lever is not None:
+            self.x[i, :2] -= lever[i]
+        self.fresh[i], self.gated[i] = True, False
+        self.gated_count[i] -= 1
+        self.coasted[i] = 0
+        if self.disturbance_state:
+            self.transition[i] = np.eye(self.dim)
 
     def _start(self, mask, z, t: float) -> None:
         i = np.flatnonzero(mask)

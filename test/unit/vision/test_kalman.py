@@ -349,6 +349,28 @@ def test_during_the_hold_the_models_position_follows_the_push_with_the_unexplain
     assert inflated.process_noise(True) == pytest.approx(0.05 ** 2 * max(1.0, min(inflated.nis, 400.0)))
 
 
+def test_a_push_faster_than_the_gate_lets_the_model_follow_keeps_its_track():
+    """A 0.3 m/s push moves the ball 10 mm a frame at 30 Hz, beyond the model's gate. The
+    constant-velocity filter takes those detections, and the model takes its position and
+    velocity from it: the track is not dropped, and the estimate stays on the ball."""
+    kf = filter_with(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.05,
+                     model_mismatch_time_constant_s=0.3, maneuver_sigma=3.5, maneuver_hold_s=1.0,
+                     estimate_input_gain=True)
+    rng, error, valid = np.random.default_rng(4), [], []
+    for k in range(60):
+        t = k / 30
+        x = 0.3 * max(0.0, t - 1.0)                               # pushed to 0.3 m/s at t = 1 s
+        est = kf.step(t, (x + rng.normal(0.0, 0.001), 0.0), accel=(0.0, 0.0))
+        if k == 0:
+            kf.filter.x[0, 4] = 0.8      # an input gain learned before the push, which it keeps
+        error.append(est.x - x)
+        valid.append(est.valid and est.fresh)
+    assert all(valid) and kf.reset_count == 0 and kf.gated_count == 0
+    assert np.max(np.abs(error[31:])) < 0.006                      # within 6 mm from the first frame on
+    assert np.max(np.abs(error[36:])) < 0.002
+    assert kf.x[4] == pytest.approx(0.8, abs=0.05)
+
+
 def test_with_two_confirming_frames_scattered_noise_is_not_a_push_and_a_push_still_is():
     def run(confirm_frames, pushed, confirm_noise_m=0.0):
         kf = filter_with(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
