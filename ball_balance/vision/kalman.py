@@ -569,17 +569,18 @@ class BatchBallKalman:
         `gated` tell what became of each detection."""
         stepped = det if stepped is None else (stepped | det)
         pos, vel, valid = self._step(t, z if lever is None else z - lever, det, stepped, accel)
-        if lever is not None:
-            pos = pos + lever
-        if self.fast is not None:   # after a push: the constant-velocity filter's velocity
+        if self.fast is not None:   # during a push's hold: the constant-velocity filter's velocity
             self.fast.r = self.r.copy()
             _, fast_vel, fast_valid = self.fast.step(t, z, det, stepped=stepped)
-            follow = self.gated & self.init & self.fast.fresh & (t <= self.hold_until)
+            holding = t <= self.hold_until
+            follow = self.gated & self.init & self.fast.fresh & holding
             if follow.any():
                 self._follow_push_beyond_gate(follow, lever)
-                pos[follow] = self.x[follow, :2] + (0.0 if lever is None else lever[follow])
-            use = valid & fast_valid & (t <= self.hold_until)
+                pos[follow] = self.x[follow, :2]
+            use = valid & fast_valid & holding
             vel[use] = fast_vel[use]
+        if lever is not None:
+            pos = pos + lever
         return pos, vel, valid
 
     def _step(self, t: float, z: np.ndarray, det: np.ndarray, stepped: np.ndarray, accel):
