@@ -568,24 +568,23 @@ class BatchBallKalman:
         frame). Returns (position (b, 2), velocity (b, 2), valid (b,)) after it; `fresh` and
         `gated` tell what became of each detection."""
         stepped = det if stepped is None else (stepped | det)
-        pos, vel, valid = self._step(t, z if lever is None else z - lever, det, stepped, accel)
-        if self.fast is not None:   # during a push's hold: the constant-velocity filter's velocity
+        z_model = z if lever is None else z - lever
+        if self.noise is not None:
+            self._adapt_noise(t, z_model, accel, det)
+        fast_took = None
+        if self.fast is not None:   # the push's hold: its velocity, and its state beyond the gate
             self.fast.r = self.r.copy()
             _, fast_vel, fast_valid = self.fast.step(t, z, det, stepped=stepped)
-            holding = t <= self.hold_until
-            follow = self.gated & self.init & self.fast.fresh & holding
-            if follow.any():
-                self._follow_push_beyond_gate(follow, lever)
-                pos[follow] = self.x[follow, :2]
-            use = valid & fast_valid & holding
+            fast_took = self.fast.fresh
+        pos, vel, valid = self._step(t, z_model, det, stepped, accel, fast_took, lever)
+        if self.fast is not None:
+            use = valid & fast_valid & (t <= self.hold_until)
             vel[use] = fast_vel[use]
         if lever is not None:
             pos = pos + lever
         return pos, vel, valid
 
-    def _step(self, t: float, z: np.ndarray, det: np.ndarray, stepped: np.ndarray, accel):
-        if self.noise is not None:
-            self._adapt_noise(t, z, accel, det)
+    def _step(self, t: float, z: np.ndarray, det: np.ndarray, stepped: np.ndarray, accel, fast_took, lever):
         dt = np.where(self.init, t - self.t_last, 0.0)
         self.reset(stepped & self.init & (dt > self.cfg.max_dt_s))
         pred = stepped & self.init & (dt > 0.0)   # a repeated or out-of-order stamp only updates
@@ -599,7 +598,7 @@ class BatchBallKalman:
         coast = stepped & ~det & self.init
         self.fresh, self.gated = start.copy(), np.zeros(self.b, bool)
         if run.any():
-            self._update(t, z, run, dt, accel)
+            self._update(t, z, run, dt, accel, fast_took, lever)
         missed = coast | self.gated
         self.coasted = np.where(missed, self.coasted + 1, self.coasted)
         lost = missed & (self.coasted > self.cfg.max_coast_frames)
@@ -608,10 +607,10 @@ class BatchBallKalman:
         return self.x[:, :2].copy(), np.where(valid[:, None], self.x[:, 2:4], 0.0), valid
 
     def _follow_push_beyond_gate(self, mask, lever) -> None:
-        """The balls in mask, whose detection the model gated during a push's hold while the
-        constant-velocity filter took it: a push faster than the gate lets the model follow
-        (about 0.2 m/s at 30 Hz and 1 mm of noise). The ball's position and velocity, and their
-        covariance, become the constant-velocity filter's; s and d stay the model's."""
+        """The balls in mask, whose detection lies beyond the model's gate during a push's hold
+        while the constant-velocity filter took it: a push faster than the gate lets the model
+        follow (about 0.2 m/s at 30 Hz and 1 mm of noise). The ball's position and velocity, and
+        their covariance, become the constant-velocity filter's; s and d stay the model's."""
         i = np.flatnonzero(mask)
         p = self.p[i]
         p[:, :4, :] = 0.0
@@ -621,8 +620,6 @@ class BatchBallKalman:
         self.x[i, :4] = self.fast.x[i, :4]
         if lever is not None:
             self.x[i, :2] -= lever[i]
-        self.fresh[i], self.gated[i] = True, False
-        self.gated_count[i] -= 1
         self.coasted[i] = 0
         if self.disturbance_state:
             self.transition[i] = np.eye(self.dim)
@@ -643,9 +640,11 @@ class BatchBallKalman:
         self.track_start[i] = t
         self.init[i], self.coasted[i], self.t_last[i] = True, 0, t
 
-    def _update(self, t: float, z, run, dt, accel) -> None:
+    def _update(self, t: float, z, run, dt, accel, fast_took, lever) -> None:
         """The balls `run` (a track and a detection): the push test, the running consistency,
-        the gate, the change and jump tests of d, the update."""
+        the gate (beyond it, during a push's hold, the model follows the constant-velocity
+        filter where that took the detection: `fast_took`), the change and jump tests of d, the
+        update."""
         y = z - self.x[:, :2]
         inv, distance = innovation_inverse(self.p, self.r, y)
         if self.cfg.maneuver_sigma > 0.0:
@@ -665,8 +664,11 @@ class BatchBallKalman:
             alpha = np.minimum(1.0, dt / self.cfg.model_mismatch_time_constant_s)
             self.nis = np.where(run, self.nis + alpha * (np.minimum(distance, gate) ** 2 / 2.0 - self.nis), self.nis)
         ok = run & (distance <= gate)
-        self.fresh |= ok
-        self.gated = run & ~ok
+        follow = np.zeros(self.b, bool) if fast_took is None else run & ~ok & fast_took & (t <= self.hold_until)
+        if follow.any():
+            self._follow_push_beyond_gate(follow, lever)
+        self.fresh |= ok | follow
+        self.gated = run & ~ok & ~follow
         self.gated_count += self.gated
         if not ok.any():
             return
