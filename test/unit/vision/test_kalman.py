@@ -530,3 +530,26 @@ def test_a_model_that_disagrees_finds_no_change_of_the_disturbance():
     assert kf.nis > 1.0
     assert kf.disturbance_changes == 0
     assert np.all(np.abs(kf.disturbance_m_s2) < 0.05)
+
+
+def test_a_change_is_sized_from_frames_the_test_did_not_select():
+    # the window that passes the test leans the change's way by its noise: sized from it
+    # alone, a 1-degree step read 1.6 times its size on average and up to 2.8 times
+    step = np.array([0.103, 0.0])
+    cfg = dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=20.0, estimate_input_gain=False)
+    ratios = []
+    for seed in range(10):
+        kf = BallKalman(cfg)
+        rng = np.random.default_rng(seed)
+        p, v = np.zeros(2), np.zeros(2)
+        for k in range(int(3.5 * 30)):
+            t = k / 30
+            known = -9.0 * p - 4.0 * v
+            a = known + (step if t >= 2.0 else 0.0)
+            p, v = p + v / 30 + 0.5 * a / 900, v + a / 30
+            kf.step(t, tuple(p + rng.normal(0.0, 0.0005, 2)), tuple(known))
+            if kf.disturbance_changes:
+                ratios.append(kf.disturbance_m_s2[0] / step[0])
+                break
+    assert len(ratios) == 10
+    assert 0.85 < np.mean(ratios) < 1.35 and max(ratios) < 1.6
