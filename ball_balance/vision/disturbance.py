@@ -241,7 +241,7 @@ class ChangeTest:
         if tested.any():
             total = self._sum_whitened()
             passed = tested & (np.einsum("bi,bi->b", total, total) / np.maximum(self.n, 1) > DISTURBANCE_CHANGE_CHI2)
-            # (less a nanosecond: the frame a camera's period later sizes it)
+            # less a nanosecond: a frame stamped the delay later, to rounding, sizes it
             self.sizing_at = np.where(passed, t + DISTURBANCE_CHANGE_SIZING_DELAY_S - 1e-9, self.sizing_at)
         return add & (t >= self.sizing_at)
 
@@ -251,9 +251,10 @@ class ChangeTest:
         return np.asarray(t) - np.asarray(track_start_s) >= self.settle_s
 
     def correct(self, i: int, t: float, x: np.ndarray, P: np.ndarray) -> None:
-        """Filter i's window showed a change at t: correct its state x (n,) in place by the
-        change the window shows (estimate_change) and widen its covariance P (n, n) by that of
-        a change of 1-sigma DISTURBANCE_STD_M_S2 half the window ago (open_disturbance): d by
+        """Filter i's window showed a change DISTURBANCE_CHANGE_SIZING_DELAY_S before t: correct
+        its state x (n,) in place by the change that window and the frames since show
+        (estimate_change) and widen its covariance P (n, n) by that of a change of 1-sigma
+        DISTURBANCE_STD_M_S2 half their span ago (open_disturbance): d by
         it, the velocity by it times T, the position by it times T^2/2, all correlated, so the
         innovations that follow still move d, and not the velocity, by what the change was.
         The window starts again."""
