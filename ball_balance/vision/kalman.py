@@ -692,7 +692,8 @@ class BatchBallKalman:
     def _find_disturbance_change(self, t: float, ok, y, known: bool):
         """Before the update of the balls `ok` (a detection within the gate, innovation y
         (b, 2)): their frame joins the change test's window (disturbance.ChangeTest), and a
-        change the window shows corrects the state and widens the covariance. Without a known
+        change the window showed, once it is sized, corrects the state and widens the
+        covariance. Without a known
         acceleration d is not in the model, and during a push's hold the innovations are the
         push's: the window starts again. Returns the balls whose frame joined their window
         (their update's gain completes it) and whether any ball's state was corrected."""

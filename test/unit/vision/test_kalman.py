@@ -392,10 +392,11 @@ def test_with_two_confirming_frames_scattered_noise_is_not_a_push_and_a_push_sti
     assert run(2, pushed=False, confirm_noise_m=0.0009) == 0
 
 
-def _ball_under_a_loop(kf, disturbance_of_t, duration_s, noise_m=0.0005, push_at_s=None, seed=0):
+def _ball_under_a_loop(kf, disturbance_of_t, duration_s, noise_m=0.0005, push_at_s=None, seed=0, changes=None):
     """A ball held at the centre by a PD loop whose acceleration (-9 p - 4 v, the commanded
     tilt's) is the filter's known acceleration, with the disturbance disturbance_of_t(t) on top;
-    the filter sees it at 30 Hz. Returns the times and the filter's d (n, 2)."""
+    the filter sees it at 30 Hz. Returns the times and the filter's d (n, 2); `changes`, a list
+    if given, gets the filter's count of changes of d after each frame."""
     rng = np.random.default_rng(seed)
     p, v = np.zeros(2), np.zeros(2)
     times, estimates = [], []
@@ -409,6 +410,8 @@ def _ball_under_a_loop(kf, disturbance_of_t, duration_s, noise_m=0.0005, push_at
         kf.step(t, tuple(p + rng.normal(0.0, noise_m, 2)), tuple(known))
         times.append(t)
         estimates.append(kf.disturbance_m_s2)
+        if changes is not None:
+            changes.append(kf.disturbance_changes)
     return np.array(times), np.array(estimates)
 
 
@@ -539,17 +542,11 @@ def test_a_change_is_sized_from_frames_the_test_did_not_select():
     cfg = dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=20.0, estimate_input_gain=False)
     ratios = []
     for seed in range(10):
-        kf = BallKalman(cfg)
-        rng = np.random.default_rng(seed)
-        p, v = np.zeros(2), np.zeros(2)
-        for k in range(int(3.5 * 30)):
-            t = k / 30
-            known = -9.0 * p - 4.0 * v
-            a = known + (step if t >= 2.0 else 0.0)
-            p, v = p + v / 30 + 0.5 * a / 900, v + a / 30
-            kf.step(t, tuple(p + rng.normal(0.0, 0.0005, 2)), tuple(known))
-            if kf.disturbance_changes:
-                ratios.append(kf.disturbance_m_s2[0] / step[0])
-                break
+        changes = []
+        _, d = _ball_under_a_loop(BallKalman(cfg), lambda t: step if t >= 2.0 else np.zeros(2), 3.5, seed=seed,
+                                  changes=changes)
+        found = np.flatnonzero(changes)
+        if len(found):
+            ratios.append(d[found[0], 0] / step[0])   # d as the first change left it
     assert len(ratios) == 10
     assert 0.85 < np.mean(ratios) < 1.35 and max(ratios) < 1.6
