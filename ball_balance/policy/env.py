@@ -69,7 +69,7 @@ TRACKER_FILTER_KEYS = ("meas_noise_m", "accel_noise_m_s2", "init_vel_std_m_s", "
                        "input_gain_rate_per_s", "model_mismatch_time_constant_s", "adaptive_meas_noise",
                        "meas_noise_max_m",
                        "meas_noise_window_frames", "maneuver_sigma", "maneuver_hold_s",
-                       "maneuver_confirm_frames", "maneuver_confirm_sigma", "maneuver_confirm_noise_m", "tilt_lever_m",
+                       "maneuver_confirm_sigma", "maneuver_confirm_noise_m", "tilt_lever_m",
                        "rolling_factor", "disturbance_time_constant_s")
 
 

@@ -130,17 +130,13 @@ TRACKER_SCHEMA = (
           "the velocity of a constant-velocity filter with accel_noise_m_s2 run alongside, which takes up "
           "a push within a frame or two, and predict with at least accel_noise_m_s2 (the push is motion the "
           "commanded tilt does not explain), so the position follows the pushed ball; 0 = off", "s", 0.0, 10.0),
-    Param("maneuver_confirm_frames", 2,
-          "detections that make a push: one beyond maneuver_sigma, then the rest pointing the same way beyond "
-          "maneuver_confirm_sigma (one beyond gate_sigma always does); 1 = every detection beyond maneuver_sigma, "
-          "more ignores scattered noise", "frames", 1, 10),
     Param("maneuver_confirm_sigma", 1.5,
-          "Mahalanobis distance beyond which a detection that points the way of the preceding one confirms a "
-          "push",
+          "while the noise asks for a confirmation, a detection beyond maneuver_sigma makes a push only when the "
+          "next one points the same way beyond this Mahalanobis distance (one beyond gate_sigma always does)",
           "", 0.0, 1000.0),
     Param("maneuver_confirm_noise_m", 0.002,
-          "maneuver_confirm_frames applies only while the measurement noise (1 sigma, estimated) is at least "
-          "this; below it one detection beyond maneuver_sigma makes a push", "m", 0.0, 1.0),
+          "a push needs that confirmation while the measurement noise (1 sigma, estimated) is at least this; "
+          "below it one detection beyond maneuver_sigma makes a push (1 m: never confirm)", "m", 0.0, 1.0),
     Param("adaptive_meas_noise", True,
           "estimate the measurement noise online from the detections' scatter, within "
           "[meas_noise_m, meas_noise_max_m]"),
@@ -196,7 +192,6 @@ class TrackerConfig:
     model_mismatch_time_constant_s: float
     maneuver_sigma: float
     maneuver_hold_s: float
-    maneuver_confirm_frames: int
     maneuver_confirm_sigma: float
     maneuver_confirm_noise_m: float
     adaptive_meas_noise: bool

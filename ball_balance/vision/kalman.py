@@ -48,13 +48,12 @@ noise of motion the known acceleration does not explain, so that position follow
 ball within frames (with only the small noise it would lag the returning ball by millimetres
 for most of the hold).
 Its velocity is not reported then: its error after a push is a slow bias that the controllers
-follow, where the constant-velocity filter's is noise that they average. With
-`maneuver_confirm_frames` N > 1 a push needs a detection beyond `maneuver_sigma` followed by
-N - 1 whose innovations point the same way and lie beyond `maneuver_confirm_sigma` (or one
+follow, where the constant-velocity filter's is noise that they average. While the
+measurement noise is at least `maneuver_confirm_noise_m` a push needs a detection beyond
+`maneuver_sigma` and the next one pointing the same way beyond `maneuver_confirm_sigma` (or one
 beyond `gate_sigma`): a push keeps pushing the detections the same way, noise scatters them.
-Only while the measurement noise is at least `maneuver_confirm_noise_m`: with less, a push
-moves the ball beyond the noise within a frame and one detection tells, so waiting for a
-second only brakes it a frame later. With the disturbance state a large change of d looks
+With less noise a push moves the ball beyond the noise within a frame and one detection
+tells, so waiting for a second only brakes it a frame later. With the disturbance state a large change of d looks
 like a push in its first frames. So from a push's detection on, a reference filter runs with
 the model's own process noise, and the detections it sees are explained both ways, as a jump
 of the ball's velocity and as a jump of d, each at the onset that fits it best
@@ -391,7 +390,6 @@ class KalmanConfig:
     model_mismatch_time_constant_s: float = _TRACKER_DEFAULTS["model_mismatch_time_constant_s"]
     maneuver_sigma: float = _TRACKER_DEFAULTS["maneuver_sigma"]
     maneuver_hold_s: float = _TRACKER_DEFAULTS["maneuver_hold_s"]
-    maneuver_confirm_frames: int = _TRACKER_DEFAULTS["maneuver_confirm_frames"]
     maneuver_confirm_sigma: float = _TRACKER_DEFAULTS["maneuver_confirm_sigma"]
     maneuver_confirm_noise_m: float = _TRACKER_DEFAULTS["maneuver_confirm_noise_m"]
     adaptive_meas_noise: bool = _TRACKER_DEFAULTS["adaptive_meas_noise"]
@@ -501,11 +499,10 @@ class BatchBallKalman:
         self.last_q = np.zeros(batch)
         self.last_Q = np.zeros((batch, self.dim, self.dim))
         # pushes: the hold (process noise accel_noise_m_s2, the velocity of a
-        # constant-velocity filter), and with maneuver_confirm_frames > 1 the detections in
-        # the current run that may be a push, the last one's innovation, the consistency
-        # before the run began
+        # constant-velocity filter), and while the noise asks for a confirmation whether the
+        # last detection may begin a push, its innovation, the consistency before it
         self.hold_until = np.full(batch, -np.inf)
-        self.excess_count = np.zeros(batch, int)
+        self.excess_pending = np.zeros(batch, bool)
         self.excess_y = np.zeros((batch, 2))
         self.excess_nis = np.ones(batch)
         self.fast: Optional[BatchBallKalman] = None
@@ -556,7 +553,7 @@ class BatchBallKalman:
             self.jump_tests.pop(int(i), None)
         self.init &= ~mask
         self.coasted[mask] = 0
-        self.excess_count[mask] = 0
+        self.excess_pending[mask] = False
 
     def step(self, t: float, z: np.ndarray, det: np.ndarray, accel=None, lever=None, stepped=None):
         """Frame at stamp t: detections z (b, 2) [m] where det (b,) is set; accel (b, 2) the
@@ -650,8 +647,7 @@ class BatchBallKalman:
         if self.cfg.maneuver_sigma > 0.0:
             seen = run & (dt > 0.0)
             push, nis = seen & (distance > self.cfg.maneuver_sigma), self.nis
-            if self.cfg.maneuver_confirm_frames > 1:
-                push, nis = self._confirmed_pushes(seen, push, y, distance)
+            push, nis = self._confirmed_pushes(seen, push, y, distance)
             agreed = push & (nis <= MODEL_AGREED_NIS)   # a model that agreed until the push began
             self.hold_until = np.where(agreed, t + self.cfg.maneuver_hold_s, self.hold_until)
             if self.disturbance_state and accel is not None:
@@ -755,21 +751,18 @@ class BatchBallKalman:
     def _confirmed_pushes(self, seen, beyond, y, distance):
         """The balls with a detection `seen` (`beyond` maneuver_sigma) whose detection shows a
         push, and the consistency to judge its hold by. A push keeps pushing the detections the
-        same way, noise scatters them: it needs a detection beyond maneuver_sigma followed by
-        maneuver_confirm_frames - 1 whose innovations point the same way and lie beyond
-        maneuver_confirm_sigma (or one beyond the gate). Only while the measurement noise is
-        at least maneuver_confirm_noise_m: below it a push moves the ball beyond the noise
-        within a frame, and one detection tells."""
+        same way, noise scatters them: while the measurement noise is at least
+        maneuver_confirm_noise_m a push needs a detection beyond maneuver_sigma and the next one
+        pointing the same way beyond maneuver_confirm_sigma (or one beyond the gate). Below that
+        noise a push moves the ball beyond the noise within a frame, and one detection tells."""
         single = self.r < self.cfg.maneuver_confirm_noise_m ** 2
         runs = seen & ~single
-        goes_on = runs & (self.excess_count > 0) & (np.einsum("bi,bi->b", y, self.excess_y) > 0.0) \
+        goes_on = runs & self.excess_pending & (np.einsum("bi,bi->b", y, self.excess_y) > 0.0) \
             & (distance > self.cfg.maneuver_confirm_sigma)
         self.excess_nis = np.where(runs & ~goes_on, self.nis, self.excess_nis)
-        self.excess_count = np.where(goes_on, self.excess_count + 1,
-                                     np.where(runs, beyond.astype(int), self.excess_count))
+        self.excess_pending = np.where(runs, goes_on | beyond, self.excess_pending & ~(seen & single))
         self.excess_y = np.where(runs[:, None], y, self.excess_y)
-        push = runs & ((self.excess_count >= self.cfg.maneuver_confirm_frames) | (distance > self.cfg.gate_sigma))
-        self.excess_count = np.where(seen & single, 0, self.excess_count)   # a run in progress ends
+        push = goes_on | (runs & (distance > self.cfg.gate_sigma))
         return np.where(single, beyond, push), np.where(single, self.nis, self.excess_nis)
 
     def _widen(self, mask) -> bool:

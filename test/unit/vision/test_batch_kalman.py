@@ -15,9 +15,9 @@ from ball_balance.vision.kalman import BallKalman, BatchBallKalman, KalmanConfig
                                        {"estimate_input_gain": False, "adaptive_meas_noise": False,
                                         "disturbance_time_constant_s": 0.0},
                                        {"model_mismatch_time_constant_s": 0.0, "use_plate_cmd": False},
-                                       {"maneuver_sigma": 2.5}, {"maneuver_sigma": 2.5, "maneuver_confirm_frames": 2},
-                                       {"maneuver_sigma": 2.5, "maneuver_confirm_frames": 2,
-                                        "maneuver_confirm_noise_m": 0.0025}])
+                                       {"maneuver_sigma": 2.5, "maneuver_confirm_noise_m": 1.0},
+                                       {"maneuver_sigma": 2.5, "maneuver_confirm_noise_m": 0.0},
+                                       {"maneuver_sigma": 2.5, "maneuver_confirm_noise_m": 0.0025}])
 def test_a_batch_is_its_balls_filters_side_by_side(overrides):
     """A batch of balls follows each ball's own filter (a batch of one, BallKalman) frame by
     frame on the same detections and known accelerations: dropped frames, outliers (gate, coasting, a lost

@@ -10,7 +10,7 @@ from ball_balance.vision.kalman import BallKalman, DetectionNoiseEstimator, Kalm
 # on what it is about), the input gain within [0.3, 2.5]
 PLAIN = KalmanConfig(estimate_input_gain=False, input_gain_bounds=(0.3, 2.5), model_mismatch_time_constant_s=0.0,
                      maneuver_sigma=0.0, maneuver_hold_s=0.0,
-                     maneuver_confirm_frames=1, maneuver_confirm_sigma=0.0, maneuver_confirm_noise_m=0.0,
+                     maneuver_confirm_sigma=0.0, maneuver_confirm_noise_m=1.0,
                      adaptive_meas_noise=False, disturbance_time_constant_s=0.0)
 
 
@@ -371,11 +371,10 @@ def test_a_push_faster_than_the_gate_lets_the_model_follow_keeps_its_track():
     assert kf.x[4] == pytest.approx(0.8, abs=0.05)
 
 
-def test_with_two_confirming_frames_scattered_noise_is_not_a_push_and_a_push_still_is():
-    def run(confirm_frames, pushed, confirm_noise_m=0.0):
+def test_with_a_confirming_frame_scattered_noise_is_not_a_push_and_a_push_still_is():
+    def run(confirm_noise_m, pushed):
         kf = filter_with(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
-                         maneuver_sigma=3.5, maneuver_confirm_frames=confirm_frames,
-                         maneuver_confirm_noise_m=confirm_noise_m)
+                         maneuver_sigma=3.5, maneuver_confirm_sigma=1.5, maneuver_confirm_noise_m=confirm_noise_m)
         rng = np.random.default_rng(3)
         for k in range(90):
             t = k / 60
@@ -384,12 +383,13 @@ def test_with_two_confirming_frames_scattered_noise_is_not_a_push_and_a_push_sti
             kf.step(t, (x + spike + rng.normal(0.0, 0.001), 0.0), accel=(0.0, 0.0))
         return kf.maneuver_count
 
-    assert run(1, pushed=False) >= 3       # every spike re-predicted with the large process noise
-    assert run(2, pushed=False) == 0       # scattered: never two the same way in a row
-    assert run(2, pushed=True) >= 1        # a push keeps pushing the same way
+    never, always = 1.0, 0.0               # confirming from a measurement noise of 1 m, of 0
+    assert run(never, pushed=False) >= 3   # every spike re-predicted with the large process noise
+    assert run(always, pushed=False) == 0  # scattered: never two the same way in a row
+    assert run(always, pushed=True) >= 1   # a push keeps pushing the same way
     # confirming only from a measurement noise of 2 mm: at 1 mm one detection is a push again
-    assert run(2, pushed=False, confirm_noise_m=0.002) == run(1, pushed=False)
-    assert run(2, pushed=False, confirm_noise_m=0.0009) == 0
+    assert run(0.002, pushed=False) == run(never, pushed=False)
+    assert run(0.0009, pushed=False) == 0
 
 
 def _ball_under_a_loop(kf, disturbance_of_t, duration_s, noise_m=0.0005, push_at_s=None, seed=0, changes=None):
