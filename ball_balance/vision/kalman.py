@@ -53,11 +53,11 @@ measurement noise is at least `maneuver_confirm_noise_m` a push needs a detectio
 `maneuver_sigma` and the next one pointing the same way beyond `maneuver_confirm_sigma` (or one
 beyond `gate_sigma`): a push keeps pushing the detections the same way, noise scatters them.
 With less noise a push moves the ball beyond the noise within a frame and one detection
-tells, so waiting for a second only brakes it a frame later. With the disturbance state a large change of d looks
-like a push in its first frames. So from a push's detection on, a reference filter runs with
-the model's own process noise, and the detections it sees are explained both ways, as a jump
-of the ball's velocity and as a jump of d, each at the onset that fits it best
-(vision/disturbance.py JumpTest). As soon as one explanation is better by the change test's
+tells, so waiting for a second only brakes it a frame later. With the disturbance state a
+large change of d looks like a push in its first frames. So from a push's detection on, a
+reference filter runs with the model's own process noise, and the detections it sees are
+explained both ways, as a jump of the ball's velocity and as a jump of d, each at the onset
+that fits it best (vision/disturbance.py JumpTest). As soon as one explanation is better by the change test's
 bound, it stands: a change of d ends the hold and the reference filter, corrected by the
 change, takes over.
 
@@ -689,10 +689,10 @@ class BatchBallKalman:
         """Before the update of the balls `ok` (a detection within the gate, innovation y
         (b, 2)): their frame joins the change test's window (disturbance.ChangeTest), and a
         change the window showed, once it is sized, corrects the state and widens the
-        covariance. Without a known
-        acceleration d is not in the model, and during a push's hold the innovations are the
-        push's: the window starts again. Returns the balls whose frame joined their window
-        (their update's gain completes it) and whether any ball's state was corrected."""
+        covariance. Without a known acceleration d is not in the model, and during a push's
+        hold the innovations are the push's: the window starts again. Returns the balls whose
+        frame joined their window (their update's gain completes it) and whether any ball's
+        state was corrected."""
         w = self.change
         if not known:
             w.clear(ok)

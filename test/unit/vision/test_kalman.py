@@ -374,7 +374,7 @@ def test_a_push_faster_than_the_gate_lets_the_model_follow_keeps_its_track():
 def test_with_a_confirming_frame_scattered_noise_is_not_a_push_and_a_push_still_is():
     def run(confirm_noise_m, pushed):
         kf = filter_with(meas_noise_m=0.001, accel_noise_m_s2=1.0, cmd_accel_noise_m_s2=0.1,
-                         maneuver_sigma=3.5, maneuver_confirm_sigma=1.5, maneuver_confirm_noise_m=confirm_noise_m)
+                         maneuver_sigma=3.5, maneuver_confirm_noise_m=confirm_noise_m)
         rng = np.random.default_rng(3)
         for k in range(90):
             t = k / 60
