@@ -57,9 +57,9 @@ tells, so waiting for a second only brakes it a frame later. With the disturbanc
 large change of d looks like a push in its first frames. So from a push's detection on, a
 reference filter runs with the model's own process noise, and the detections it sees are
 explained both ways, as a jump of the ball's velocity and as a jump of d, each at the onset
-that fits it best (vision/disturbance.py JumpTest). As soon as one explanation is better by the change test's
-bound, it stands: a change of d ends the hold and the reference filter, corrected by the
-change, takes over.
+that fits it best (vision/disturbance.py JumpTest). As soon as one explanation is better by
+the change test's bound, it stands: a change of d ends the hold and the reference filter,
+corrected by the change, takes over.
 
 Delay: the plate reaches a command some time after the tracker receives it (the arm's latency
 and servo lag, 0.03-0.2 s in the benchmark's latency domains); the known acceleration and the
