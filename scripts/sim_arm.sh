@@ -77,7 +77,7 @@ fi
 
 source "$ROOT/scripts/lib/stop_all.sh"
 source "$ROOT/scripts/lib/realtime.sh"
-realtime_for 1   # the controller manager
+realtime_for 2   # the controller manager's loop and executor (a slow machine keeps both busy)
 MANAGER_RT=()
 ((REALTIME)) || MANAGER_RT=(-p thread_priority:=0 -p loop.executor_thread_priority:=0)
 on_stopped() { rm -rf "$WORK"; }

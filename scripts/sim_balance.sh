@@ -134,7 +134,7 @@ LOGS="$(mktemp -d "${TMPDIR:-/tmp}/ball_balance_graph.XXXXXX")"
 source "$ROOT/scripts/lib/stop_all.sh"
 source "$ROOT/scripts/lib/graph.sh"
 source "$ROOT/scripts/lib/realtime.sh"
-realtime_for 3   # the controller manager, the tracker, the controller
+realtime_for 4   # the controller manager's loop and executor, the tracker, the controller
 RT_OFF=()
 ((REALTIME)) || RT_OFF=(-p thread_priority:=0)
 on_stopped() { echo "sim_balance.sh: stopped (logs in $LOGS)" >&2; }

@@ -1,12 +1,12 @@
 # Sourced by the graph scripts: whether the control chain gets SCHED_FIFO on this machine.
 #
 # A real-time thread that has work runs until it is done, ahead of everything normally
-# scheduled. That helps the control chain only while each real-time process can have a CPU of
+# scheduled. That helps the control chain only while each real-time thread can have a CPU of
 # its own and one CPU is left for the rest (the software renderer, the monitor, the scripts'
 # CLI calls): on fewer CPUs the chain starved them. In simulation, lock-step pacing keeps the
 # outcome whatever the scheduling, so there the only cost of normal scheduling is speed.
 #
-#   realtime_for N   sets REALTIME=1 when N real-time processes fit this machine's CPUs
+#   realtime_for N   sets REALTIME=1 when N real-time threads fit this machine's CPUs
 #                    (nproc: the CPUs this process may run on), else REALTIME=0, and says
 #                    which and why on stderr. BALL_BALANCE_REALTIME=on|off overrides it.
 realtime_for() {
@@ -18,10 +18,10 @@ realtime_for() {
     auto)
       if ((cpus > needed)); then
         REALTIME=1
-        echo "$(basename "$0"): SCHED_FIFO for the control chain ($needed real-time processes, $cpus CPUs)" >&2
+        echo "$(basename "$0"): SCHED_FIFO for the control chain ($needed real-time threads, $cpus CPUs)" >&2
       else
         REALTIME=0
-        echo "$(basename "$0"): normal scheduling: $cpus CPUs are too few for $needed real-time processes and the" \
+        echo "$(basename "$0"): normal scheduling: $cpus CPUs are too few for $needed real-time threads and the" \
              "rest (BALL_BALANCE_REALTIME=on forces it)" >&2
       fi ;;
     *) echo "$(basename "$0"): BALL_BALANCE_REALTIME must be on, off or auto" >&2; exit 2 ;;
