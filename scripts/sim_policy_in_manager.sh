@@ -76,7 +76,7 @@ SIM_CONFIG="$ROOT/config/sim.yaml"
 ((TRUTH_FED)) && SIM_CONFIG="$ROOT/config/sim_truth_fed.yaml"
 LOGS="$(mktemp -d "${TMPDIR:-/tmp}/ball_balance_graph.XXXXXX")"
 source "$ROOT/scripts/lib/realtime.sh"
-realtime_for 3   # the controller manager's loop and executor (the controller in it), the tracker
+realtime_for 3   # the manager's loop (the controller's step worker shares its CPU), executor, tracker
 RT_OFF=()
 STEP_PRIORITY=""
 ((REALTIME)) || { RT_OFF=(-p thread_priority:=0); STEP_PRIORITY=0; }
