@@ -15,12 +15,18 @@ from typing import Optional
 
 import numpy as np
 
-# the running innovation consistency (1 when the model is right) at most this: the model agreed
+# The running innovation consistency (1 when the model is right) at most this: the model agreed
 # with the detections. Only then is a detection beyond maneuver_sigma a push, or a bias of the
 # innovations a change of d: a model that has disagreed for a while (a delay or a gain still
 # being learned) is seeing its own error, and the constant-velocity filter's velocity, or d
 # fitted to that error, would pass it on to the controller
 MODEL_AGREED_NIS = 1.0
+# Once a track's model has agreed, the change test takes it to agree while its consistency is
+# within this many of its own standard deviations above 1 (`consistency_spread`): under
+# detection noise a right model's consistency scatters about 1, and a change, which raises it,
+# would otherwise be tested only while the noise happens to hold it below 1. A change found
+# ends that until the model agrees again: one that stays wrong is not corrected again and again
+MODEL_AGREED_SPREADS = 2.0
 # the running consistency starts at 1 with a track; after this many of its time constants its
 # start weighs 5 % and it describes the detections
 CONSISTENCY_SETTLE_TIME_CONSTANTS = 3.0
@@ -46,11 +52,29 @@ class ChangeFrame:
     """A detection in the change test's window: what the test and the change's estimate need."""
     t: float                     # stamp [s]
     whitened: np.ndarray         # the innovation whitened by its covariance
-    nis: float                   # the running consistency before it
+    agreed: bool                 # the model agreed with the detections before it
     innovation: np.ndarray       # z - H x of the prediction [m]
     S: np.ndarray                # its covariance
     transition: np.ndarray       # the product of the F's since the previous update
     K: Optional[np.ndarray] = None   # the update's gain, once made
+
+
+def consistency_spread(weight) -> np.ndarray:
+    """The standard deviation of the running consistency of a right model, a running mean of
+    the per-axis NIS with `weight` per frame (min(1, dt / model_mismatch_time_constant_s)):
+    that NIS is exponential with mean 1 and variance 1, so the mean's variance is
+    weight / (2 - weight)."""
+    weight = np.asarray(weight, dtype=float)
+    return np.sqrt(weight / (2.0 - weight))
+
+
+def model_agreed(nis, spread, has_agreed) -> np.ndarray:
+    """Whether the model agrees with the detections, for the change test: its running
+    consistency `nis` is at most MODEL_AGREED_NIS or, once the track's model `has_agreed`,
+    within MODEL_AGREED_SPREADS of its standard deviation `spread` above 1."""
+    nis = np.asarray(nis)
+    within_spread = nis <= 1.0 + MODEL_AGREED_SPREADS * np.asarray(spread)
+    return (nis <= MODEL_AGREED_NIS) | (np.asarray(has_agreed) & within_spread)
 
 
 def consistency_settle_s(time_constant_s: float) -> float:
@@ -194,19 +218,19 @@ class ChangeTest:
     before them, innovations, their covariances, the transitions since the previous update and
     the updates' gains, `n` frames from `head`, doubled when a window would overflow it (a
     faster camera). A window is tested once it spans DISTURBANCE_CHANGE_WINDOW_S, if the model
-    agreed with the detections before it (MODEL_AGREED_NIS) and the track is
+    agreed with the detections before it (model_agreed) and the track is
     `settle_s` old at its first frame (consistency_settle_s); otherwise a bias is the model's
     own error. A change found is sized DISTURBANCE_CHANGE_SIZING_DELAY_S later, from the
     window that found it and the frames since."""
 
-    FIELDS = ("t", "whitened", "nis", "innovation", "S", "transition", "K")
+    FIELDS = ("t", "whitened", "agreed", "innovation", "S", "transition", "K")
 
     def __init__(self, batch: int, dim: int, d_index: int, settle_s: float, capacity: int = 32):
         self.b, self.dim, self.cap = batch, dim, capacity
         self.d_index, self.settle_s = d_index, settle_s
         self.t = np.full((batch, capacity), np.nan)
         self.whitened = np.zeros((batch, capacity, 2))
-        self.nis = np.zeros((batch, capacity))
+        self.agreed = np.zeros((batch, capacity), bool)
         self.innovation = np.zeros((batch, capacity, 2))
         self.S = np.zeros((batch, capacity, 2, 2))
         self.transition = np.zeros((batch, capacity, dim, dim))
@@ -222,22 +246,21 @@ class ChangeTest:
         self.start[mask] = np.nan
         self.sizing_at[mask] = np.nan
 
-    def test(self, t: float, add, innovation, S, nis, transition, track_start_s) -> np.ndarray:
+    def test(self, t: float, add, innovation, S, agreed, transition, track_start_s) -> np.ndarray:
         """The frame at t of the filters `add` (b,) joins their windows, before their update:
-        innovation (b, 2) and its covariance S (b, 2, 2), the running consistency before it nis
-        (b,), the transition since the previous update (b, dim, dim); track_start_s (b,) when
-        each track began. Returns the filters to `correct`: those whose window showed a change
-        of d DISTURBANCE_CHANGE_SIZING_DELAY_S ago; for the others call `set_last_gain` after
-        the update."""
+        innovation (b, 2) and its covariance S (b, 2, 2), whether the model agreed with the
+        detections before it (b,) (model_agreed), the transition since the previous update
+        (b, dim, dim); track_start_s (b,) when each track began. Returns the filters to
+        `correct`: those whose window showed a change of d DISTURBANCE_CHANGE_SIZING_DELAY_S
+        ago; for the others call `set_last_gain` after the update."""
         whitened = np.linalg.solve(np.linalg.cholesky(S), innovation[..., None])[..., 0]
-        self._append(add, t, whitened, nis, innovation, S, transition)
+        self._append(add, t, whitened, agreed, innovation, S, transition)
         found = ~np.isnan(self.sizing_at)
         # a change found keeps its window and the frames since until it is sized
         self._drop_older(add & ~found, t, DISTURBANCE_CHANGE_WINDOW_S)
         self.start = np.where(add & np.isnan(self.start), t, self.start)
         full = add & ~found & (t - self.start >= DISTURBANCE_CHANGE_WINDOW_S)
-        first_t, nis_before = self._oldest("t"), self._oldest("nis")
-        tested = full & (nis_before <= MODEL_AGREED_NIS) & self.settled(first_t, track_start_s)
+        tested = full & self._oldest("agreed") & self.settled(self._oldest("t"), track_start_s)
         if tested.any():
             total = self._sum_whitened()
             passed = tested & (np.einsum("bi,bi->b", total, total) / np.maximum(self.n, 1) > DISTURBANCE_CHANGE_CHI2)
@@ -273,15 +296,15 @@ class ChangeTest:
     def frames(self, i: int) -> list:
         """Filter i's window, its ChangeFrame oldest first."""
         at = (self.head[i] + np.arange(self.n[i])) % self.cap
-        return [ChangeFrame(self.t[i, k], self.whitened[i, k], self.nis[i, k], self.innovation[i, k], self.S[i, k],
+        return [ChangeFrame(self.t[i, k], self.whitened[i, k], self.agreed[i, k], self.innovation[i, k], self.S[i, k],
                             self.transition[i, k], self.K[i, k]) for k in at]
 
-    def _append(self, mask, t, whitened, nis, innovation, S, transition) -> None:
+    def _append(self, mask, t, whitened, agreed, innovation, S, transition) -> None:
         if (self.n[mask] >= self.cap).any():
             self._grow()
         i = np.flatnonzero(mask)
         at = (self.head[i] + self.n[i]) % self.cap
-        self.t[i, at], self.whitened[i, at], self.nis[i, at] = t, whitened[i], nis[i]
+        self.t[i, at], self.whitened[i, at], self.agreed[i, at] = t, whitened[i], agreed[i]
         self.innovation[i, at], self.S[i, at], self.transition[i, at] = innovation[i], S[i], transition[i]
         self.n[i] += 1
 

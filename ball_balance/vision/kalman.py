@@ -94,8 +94,10 @@ from ball_balance.vision.disturbance import (
     ChangeTest,
     JumpTest,
     consistency_settle_s,
+    consistency_spread,
     disturbance_jerk,
     disturbance_rows,
+    model_agreed,
 )
 
 CHI2_1_MEDIAN = 0.45493642311957283   # median of a chi-square variable with one degree of freedom
@@ -495,6 +497,8 @@ class BatchBallKalman:
         self.t_last = np.zeros(batch)
         self.coasted = np.zeros(batch, int)    # frames without a usable detection since the last one
         self.nis = np.ones(batch)              # running mean of the normalised innovation squared (per axis)
+        self.nis_spread = np.ones(batch)       # its standard deviation under a right model
+        self.model_has_agreed = np.zeros(batch, bool)   # since the track settled or d last changed (model_agreed)
         self.last_dt = np.zeros(batch)         # the last prediction's dt, q and Q
         self.last_q = np.zeros(batch)
         self.last_Q = np.zeros((batch, self.dim, self.dim))
@@ -635,6 +639,7 @@ class BatchBallKalman:
             self.p[i, D_INDEX, D_INDEX] = self.p[i, D_INDEX + 1, D_INDEX + 1] = self.saved_d_var[i]
         self.transition[i] = np.eye(self.dim)
         self.track_start[i] = t
+        self.model_has_agreed[i] = False
         self.init[i], self.coasted[i], self.t_last[i] = True, 0, t
 
     def _update(self, t: float, z, run, dt, accel, fast_took, lever) -> None:
@@ -659,6 +664,7 @@ class BatchBallKalman:
         if self.cfg.model_mismatch_time_constant_s > 0.0:   # a gated detection counts too, at the gate
             alpha = np.minimum(1.0, dt / self.cfg.model_mismatch_time_constant_s)
             self.nis = np.where(run, self.nis + alpha * (np.minimum(distance, gate) ** 2 / 2.0 - self.nis), self.nis)
+            self.nis_spread = np.where(run, consistency_spread(alpha), self.nis_spread)
         ok = run & (distance <= gate)
         follow = np.zeros(self.b, bool) if fast_took is None else run & ~ok & fast_took & (t <= self.hold_until)
         if follow.any():
@@ -702,12 +708,21 @@ class BatchBallKalman:
         add = ok & ~pushed
         if not add.any():
             return add, False
-        changed = w.test(t, add, y, innovation_covariance(self.p, self.r), self.nis, self.transition,
+        changed = w.test(t, add, y, innovation_covariance(self.p, self.r), self._model_agrees(t), self.transition,
                          self.track_start)
         for i in np.flatnonzero(changed):
             w.correct(i, t, self.x[i], self.p[i])
         self.disturbance_changes += changed
+        self.model_has_agreed &= ~changed
         return add & ~changed, bool(changed.any())
+
+    def _model_agrees(self, t: float) -> np.ndarray:
+        """Per ball, whether the model agrees with the detections for the change test
+        (disturbance.model_agreed); a track has agreed once its settled consistency was at most
+        MODEL_AGREED_NIS since its last change of d (a model that is still wrong after one
+        would otherwise have d corrected window after window)."""
+        self.model_has_agreed |= (self.nis <= MODEL_AGREED_NIS) & self.change.settled(t, self.track_start)
+        return model_agreed(self.nis, self.nis_spread, self.model_has_agreed)
 
     def _start_jump_tests(self, t: float, pushed) -> None:
         """A jump test for each ball in `pushed` whose track has settled and has none yet: the
@@ -744,6 +759,7 @@ class BatchBallKalman:
             self.change.clear(i)
             self.transition[i] = np.eye(self.dim)
             self.disturbance_changes[i] += 1
+            self.model_has_agreed[i] = False
             self.coasted[i] = 0
             adopted[i] = True
         return adopted
