@@ -712,9 +712,14 @@ class BatchBallKalman:
                          self.track_start)
         for i in np.flatnonzero(changed):
             w.correct(i, t, self.x[i], self.p[i])
-        self.disturbance_changes += changed
-        self.model_has_agreed &= ~changed
+        self._count_changes(changed)
         return add & ~changed, bool(changed.any())
+
+    def _count_changes(self, which) -> None:
+        """The balls `which` (a mask or an index) had a change of d found: counted, and their
+        model must agree again before the change test runs on a consistency above 1."""
+        self.disturbance_changes[which] += 1
+        self.model_has_agreed[which] = False
 
     def _model_agrees(self, t: float) -> np.ndarray:
         """Per ball, whether the model agrees with the detections for the change test
@@ -758,8 +763,7 @@ class BatchBallKalman:
             self.hold_until[i] = -np.inf
             self.change.clear(i)
             self.transition[i] = np.eye(self.dim)
-            self.disturbance_changes[i] += 1
-            self.model_has_agreed[i] = False
+            self._count_changes(i)
             self.coasted[i] = 0
             adopted[i] = True
         return adopted
