@@ -6,7 +6,8 @@ scripts/run_demo.sh (the artifacts), and for the live-graph benchmark cells.
 
 Subscribes /sim/ball_truth (true ball, plate frame), /ball_state (tracker), /ball_reference,
 /plate_cmd, /sim/ball_dropped, /sim/ball_pushed (each push: the recovery from it is timed as
-the benchmark does), /clock (only for the wall-clock figures) and, for the video,
+the benchmark does), /sim/ball_force (each change of the force on the ball: a step, timed
+likewise), /clock (only for the wall-clock figures) and, for the video,
 /camera/image_raw or the tracker's overlay (/ball_tracker/debug_image).
 
 One time base, the header stamps (simulated time in the simulated graph, which in lock-step
@@ -15,7 +16,7 @@ nor this node's clock. A slow machine, or a monitor that falls behind its topics
 when the samples are read, not what the figures say:
 
 - every topic is read whole: reliable where its publisher is (/ball_reference, /plate_cmd,
-  /sim/ball_pushed), best effort where it is not (/sim/ball_truth and /ball_state are sensor
+  /sim/ball_pushed, /sim/ball_force), best effort where it is not (/sim/ball_truth and /ball_state are sensor
   data), RECORD_DEPTH deep, the callbacks append only;
 - the recording counts up to the stamp every topic has been read to (`covered_until_s`), so
   a topic still queued is waited for, not held over;
@@ -135,6 +136,7 @@ class Recording:
         self.references = Stamped(3)   # stamp, x, y
         self.commands = Stamped(3)     # stamp, u_x, u_y
         self.pushes: list = []         # stamps of the pushes applied
+        self.force_changes: list = []  # stamps of the changes of the constant force on the ball
         self.latency = CameraToCommand()
         self.dropped = False           # /sim/ball_dropped said so
         self.drop_s: Optional[float] = None   # first truth stamp with the ball off the plate
@@ -162,6 +164,9 @@ class Recording:
 
     def on_pushed(self, msg) -> None:
         self.pushes.append(stamp_s(msg))
+
+    def on_force(self, msg) -> None:
+        self.force_changes.append(stamp_s(msg))
 
     def on_clock(self, msg, written_wall_s: float) -> None:
         self.latency.add_clock(msg.clock.sec + msg.clock.nanosec * 1e-9, written_wall_s)
@@ -280,7 +285,8 @@ def live_metrics(rec: Recording, end_s: float = math.inf) -> Optional[dict]:
     # the ball is still on its way back), nor one after it
     last_timed = last_s - PUSH_TIMED_S
     m = episode_metrics(s, dropped, float(s["t"][-1]),
-                        push_times_s=[p - engaged_at for p in rec.pushes if engaged_at <= p <= last_timed])
+                        push_times_s=[p - engaged_at for p in rec.pushes if engaged_at <= p <= last_timed],
+                        step_times_s=[f - engaged_at for f in sorted(rec.force_changes) if engaged_at <= f < last_s])
     for key, latency in (("latency", rec.latency.stamp_latencies_s(engaged_at, last_s)),
                          ("latency_wall", rec.latency.latencies_s(engaged_at, last_s))):
         if latency.size:
@@ -314,6 +320,9 @@ def format_metrics(m) -> str:
             f"tilt rate RMS {m['smoothness_rad_s']:.2f} rad/s | " +
             (f"push recovery mean {m['push_recover_s']:.2f} s, worst {m['push_recover_max_s']:.2f} s, "
              f"{m['pushes_late']:.0f} of {m['pushes']:.0f} over 1 s | " if m.get("pushes") else "") +
+            (f"force steps: worst back within 5 mm after {m['step_recover_max_s']:.2f} s, "
+             f"{1e3 * m['step_steady_m']:.1f} mm left, {m['steps_unrecovered']:.0f} of {m['steps']:.0f} "
+             "not back | " if m.get("steps") else "") +
             f"camera-to-command {latency}")
 
 
@@ -513,6 +522,9 @@ class LiveRecorder(Recording):
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         node.create_subscription(Bool, "/sim/ball_dropped", self.on_dropped, latched)
+        force_changes = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                                   durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        node.create_subscription(Vector3Stamped, "/sim/ball_force", self.on_force, force_changes)
         if video_s > 0 and video_path is not None:
             from sensor_msgs.msg import Image
 

@@ -36,6 +36,10 @@ A thin adapter around ball_balance.sim.SimWorld (the physics) and CameraThread (
   changes by the vector [m/s] (plate axes), spin kept consistent with rolling;
   /sim/ball_pushed (geometry_msgs/Vector3Stamped, topic, published): every push applied
   (asked for, or the domain's), stamped with the simulated time it acted;
+  /sim/ball_force (geometry_msgs/Vector3Stamped, topic, published, transient local): the
+  constant force on the ball's centre in effect [N, plate axes] (the held one and the
+  domain's force steps), at configure and at every change, stamped with the simulated time
+  it began;
   /sim/set_ball_force (ball_tracker_msgs/SetBallForce): a constant force on the ball's centre
   held from now on, as the plate tilt that rolls the ball the same way (`ball_force_deg`,
   `ball_force_dir_deg`, the parameters that set it at start); a bad request is refused with
@@ -215,6 +219,7 @@ class MujocoSystem(SystemInterface):
         self.world: Optional[SimWorld] = None
         self.camera = None
         self.ros = None
+        self._stepped_forces = []   # (end s, fx N, fy N) of the domain's force steps acting
         self.commands_refused = 0
         self.overruns = 0
         self.answers: Optional[FrameAnswerGate] = None
@@ -313,6 +318,8 @@ class MujocoSystem(SystemInterface):
         self._push_rng = np.random.default_rng(self.params["seed"] + 104729)
         # the domain's force steps (force_1deg ...): on, turned, off at the benchmark's times
         self._force_steps = collections.deque(self.world.knobs.force_steps())
+        self._stepped_forces = []
+        self._announce_force()
         self._next_clock_s = self.world.time_s
         self._wall_anchor = None
         if not self.introspection:  # once, also after cleanup + configure
@@ -385,9 +392,8 @@ class MujocoSystem(SystemInterface):
             angle = self._push_rng.uniform(0.0, 2.0 * math.pi)
             speed = world.knobs.push_speed_m_s
             self._push(speed * math.cos(angle), speed * math.sin(angle))
-        while self._force_steps and t >= self._force_steps[0][0]:
-            _, duration_s, fx_n, fy_n = self._force_steps.popleft()
-            world.apply_force(fx_n, fy_n, duration_s)
+        if (self._force_steps and t >= self._force_steps[0][0]) or self._force_step_ended(t):
+            self._step_forces(t)
         self._copy_states()
         # a camera frame (rendered, and/or a truth-fed detection), unless lock-step holds it back
         if t >= self._next_frame_s and not (answers is not None and answers.must_wait()):
@@ -550,6 +556,30 @@ class MujocoSystem(SystemInterface):
     def _hold_ball_force(self) -> None:
         """(loop, or before it runs) The world holds `ball_force` (tilt, direction) on the ball."""
         self.world.hold_force(*self.world.knobs.tilt_force_n(*self.ball_force))
+        self._announce_force()
+
+    def _force_step_ended(self, t: float) -> bool:
+        return any(t >= end_s for end_s, _, _ in self._stepped_forces)
+
+    def _step_forces(self, t: float) -> None:
+        """(loop) The domain's force steps due by t begin, those past their end stop counting,
+        and /sim/ball_force says what acts now (the world times each step itself)."""
+        while self._force_steps and t >= self._force_steps[0][0]:
+            start_s, duration_s, fx_n, fy_n = self._force_steps.popleft()
+            self.world.apply_force(fx_n, fy_n, duration_s)
+            self._stepped_forces.append((start_s + duration_s, fx_n, fy_n))
+        self._stepped_forces = [step for step in self._stepped_forces if t < step[0]]
+        self._announce_force()
+
+    def _announce_force(self) -> None:
+        """/sim/ball_force: the held force and the force steps acting, once the ROS side exists."""
+        ros = self.ros
+        if ros is None:
+            return
+        fx_n, fy_n = self.world.knobs.tilt_force_n(*self.ball_force)
+        for _, step_fx_n, step_fy_n in self._stepped_forces:
+            fx_n, fy_n = fx_n + step_fx_n, fy_n + step_fy_n
+        ros.publish_force(self.world.time_s, fx_n, fy_n)
 
     def request_wrench(self, force_n, torque_n_m, duration_s: float, in_plate_axes: bool = True) -> None:
         """A force and torque on the ball's centre for `duration_s` (plate or world axes)."""

@@ -43,6 +43,8 @@ IMAGE_SENSOR_DATA = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFOR
 IMAGE_RELIABLE = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 PARTICIPANT_PREFIX_BYTES = 12   # an RTPS GUID: participant prefix (12 bytes), then the entity id
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+FORCE_CHANGES = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                           reliability=ReliabilityPolicy.RELIABLE)
 
 
 def camera_info_msg(camera, frame_id: str) -> CameraInfo:
@@ -74,6 +76,9 @@ class SimRosIo:
         self.truth_pub = node.create_publisher(BallState, "/sim/ball_truth", qos_profile_sensor_data)
         self.dropped_pub = node.create_publisher(Bool, "/sim/ball_dropped", LATCHED)
         self.pushed_pub = node.create_publisher(Vector3Stamped, "/sim/ball_pushed", QoSProfile(depth=10))
+        # transient local, the last changes kept: a monitor that starts later still learns
+        # the force held from the start
+        self.force_pub = node.create_publisher(Vector3Stamped, "/sim/ball_force", FORCE_CHANGES)
         self.clock_pub = node.create_publisher(Clock, "/clock", QoSProfile(depth=1))
         self.detection_pub = (node.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
                               if params["truth_fed"] else None)
@@ -169,6 +174,16 @@ class SimRosIo:
         msg.header.frame_id = PLATE_FRAME
         msg.vector.x, msg.vector.y = dvx_m_s, dvy_m_s
         self._publish(self.pushed_pub, msg)
+
+    def publish_force(self, time_s: float, fx_n: float, fy_n: float) -> None:
+        """The constant force on the ball now in effect (the held one and the domain's force
+        steps; N, plate axes) at each change, stamped with the simulated time it began, so that
+        monitors can time the recovery from each step."""
+        msg = Vector3Stamped()
+        msg.header.stamp = stamp(time_s + self.stamp_offset_s)
+        msg.header.frame_id = PLATE_FRAME
+        msg.vector.x, msg.vector.y = fx_n, fy_n
+        self._publish(self.force_pub, msg)
 
     def publish_clock(self, time_s: float) -> None:
         self._clock.clock = stamp(time_s)
@@ -330,7 +345,7 @@ class SimRosIo:
         if self._pace is not None and not self._closed:
             self.logger.info(self._pace.summary())
         self._closed = True
-        for entity in (self.image_pub, self.info_pub, self.truth_pub, self.dropped_pub, self.pushed_pub,
+        for entity in (self.image_pub, self.info_pub, self.truth_pub, self.dropped_pub, self.pushed_pub, self.force_pub,
                        self.clock_pub, self.detection_pub, self.trace_pub):
             if entity is not None:
                 self.node.destroy_publisher(entity)

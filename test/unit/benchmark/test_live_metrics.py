@@ -192,6 +192,21 @@ def test_pushes_announced_by_the_simulation_are_timed_from_the_engagement():
     assert "push recovery mean 0.60 s, worst 0.60 s, 0 of 1 over 1 s" in format_metrics(m)
 
 
+def test_force_steps_announced_by_the_simulation_are_timed_and_their_error_left_measured():
+    # engaged at 0.5 s; a force on before it (not a step of the run), turned at 1.0 s: 20 mm
+    # off until 1.4 s, then 1 mm off; off at 3.0 s: 10 mm off until 3.3 s, then on target
+    def x(t):
+        return 0.0 if t < 1.0 else 0.02 if t < 1.4 else 0.001 if t < 3.0 else 0.01 if t < 3.3 else 0.0
+    rec = recording(np.arange(0.0, 5.0, 0.01), np.arange(0.5, 5.0, 0.02), x=x)
+    for t in (0.2, 1.0, 3.0):
+        rec.on_force(vector_msg(t, 0.001, 0.0))
+    m = live_metrics(rec)
+    assert m["steps"] == 2 and m["steps_unrecovered"] == 0
+    assert abs(m["step_recover_max_s"] - 0.4) < 0.011
+    assert m["step_steady_m"] == pytest.approx(0.001, abs=1e-6)   # the worst step's last second
+    assert "force steps: worst back within 5 mm after 0.40 s, 1.0 mm left, 0 of 2 not back" in format_metrics(m)
+
+
 def test_a_moving_target_is_taken_at_the_truths_instant_not_held():
     # the target moves at 0.1 m/s, published at 60 Hz; the ball sits exactly on it (sampled at
     # 100 Hz): held, the error would be up to 1.7 mm; between two targets it is the path itself

@@ -348,3 +348,39 @@ def test_force_domain_steps_in_the_hosted_simulation_as_in_an_episode():
         assert vx * math.cos(direction) + vy * math.sin(direction) > 0.95 * math.hypot(vx, vy)
     finally:
         system.on_shutdown(State.ACTIVE)
+
+
+class AnnouncedForces:
+    """The ROS side, reduced to what /sim/ball_force carries: (stamp s, fx N, fy N) per change."""
+
+    def __init__(self):
+        self.forces = []
+
+    def publish_force(self, time_s, fx_n, fy_n):
+        self.forces.append((time_s, fx_n, fy_n))
+
+    def __getattr__(self, name):   # every other publisher and hook: nothing to see here
+        return lambda *args, **kwargs: None
+
+
+def test_every_change_of_the_force_on_the_ball_is_announced_when_it_acts():
+    system, result = make_system({"domain": "force_3deg", "seed": 2, "ball_force_deg": "1"})
+    assert result == CallbackReturn.SUCCESS
+    system.ros = announced = AnnouncedForces()
+    system.on_configure(State.UNCONFIGURED)
+    system.on_activate(State.INACTIVE)
+    try:
+        held = system.world.knobs.tilt_force_n(1.0, 0.0)
+        step = system.world.knobs.tilt_force_n(3.0, system.world.knobs.force_step_dir_deg)
+        turned = system.world.knobs.tilt_force_n(3.0, system.world.knobs.force_step_dir_deg + 90.0)
+        run_cycles(system, int(13.01 / PERIOD_S))
+        system.request_ball_force(0.0, 0.0)
+        run_cycles(system, 1)
+        stamps = [t for t, _, _ in announced.forces]
+        # configured, the step on, turned, off, the held force ended: each once, as it acts
+        assert stamps == pytest.approx([0.0, 5.0, 9.0, 13.0, 13.012], abs=PERIOD_S + 1e-9)
+        expected = [held, tuple(map(sum, zip(held, step))), tuple(map(sum, zip(held, turned))), held, (0.0, 0.0)]
+        for (_, fx, fy), (ex, ey) in zip(announced.forces, expected, strict=True):
+            assert (fx, fy) == pytest.approx((ex, ey), abs=1e-9)
+    finally:
+        system.on_shutdown(State.ACTIVE)
