@@ -2,10 +2,11 @@
 the command line and a constant force on the ball set while it runs (/sim/set_ball_force, as
 the user would call it with ros2py): the ball stays on the plate and the controller's published
 disturbance estimate (its /diagnostics status "Plant Estimate") points the way the plate and
-the force push the ball, roughly as far. Loose bounds on purpose: how fast the estimate
-settles is the benchmark's to measure, not this test's."""
+the force push the ball, roughly as far; /sim/ball_force announces the force. Loose bounds on
+purpose: how fast the estimate settles is the benchmark's to measure, not this test's."""
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import Vector3Stamped
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool
 
@@ -15,6 +16,8 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(900
 
 ESTIMATE_STATUS = "ball_balance_controller: Plant Estimate"
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+FORCE_CHANGES = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                           reliability=ReliabilityPolicy.RELIABLE)
 # deadlines in wall seconds, well above what they took on two cores shared with ~20 busy processes:
 # the controller reporting after 30 s, the first estimate settled after 120-140 s (the simulation
 # resumes once every node is up), the second 20-50 s after the call (lock-step: a slow machine
@@ -59,6 +62,9 @@ def test_plate_offset_and_ball_force_read_as_the_controllers_level_offset(launch
                           "--ball", "0.0", "0.0"], name="sim_balance")
     dropped = []   # /sim/ball_dropped: latched False at start, True if the ball falls off
     graph.node.create_subscription(Bool, "/sim/ball_dropped", lambda msg: dropped.append(msg.data), LATCHED)
+    forces = []    # /sim/ball_force: (fx, fy) N at start and at every change
+    graph.node.create_subscription(Vector3Stamped, "/sim/ball_force",
+                                   lambda msg: forces.append((msg.vector.x, msg.vector.y)), FORCE_CHANGES)
     watch = EstimateWatch(graph)
     graph.spin_until(lambda: watch.latest is not None, START_TIMEOUT_S, f"a '{ESTIMATE_STATUS}' on /diagnostics")
     watch.wait_until_near(0.0, -2.0, "plate mounted 2 deg off level about x")
@@ -70,6 +76,10 @@ def test_plate_offset_and_ball_force_read_as_the_controllers_level_offset(launch
     accepted = set_ball_force(launcher, 2.0, 0.0)
     assert "success=True" in accepted.stdout, accepted.stdout + accepted.stderr
     watch.wait_until_near(2.0, -2.0, "plus a 2 deg force towards +x")
+    # announced for monitors: none at start (the mounting is not a force), then the accepted one
+    # alone, towards +x (the refused one changed nothing)
+    assert len(forces) == 2 and forces[0] == (0.0, 0.0), forces
+    assert forces[1][0] > 0.0 and abs(forces[1][1]) < 1e-12, forces
 
     assert sim.running, sim.output()[-3000:]
     assert dropped and True not in dropped, f"the ball fell off the plate (/sim/ball_dropped: {dropped})"
