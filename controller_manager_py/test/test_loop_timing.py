@@ -137,6 +137,36 @@ def test_gc_idle_mode_collects_in_the_loop_slack_and_restores_automatic_collecti
     assert disabled == [False] and gc.isenabled()
 
 
+def test_a_loop_that_keeps_overrunning_still_does_its_idle_work():
+    # every cycle longer than the period (a machine too slow for the rate): the idle hook still
+    # runs after each one, with no budget (the node publishes only what is overdue), and the
+    # garbage of gc_mode "idle" is still collected once overdue
+    cm = make_manager(rate=200)
+    counting = spawn(cm, "c", COUNTING)
+    litter = Littering()
+    original = counting.update
+
+    def update(time_, period):
+        for _ in range(10):
+            litter()
+        return original(time_, period)
+    counting.update = update
+    counting.sleep_s = 0.008   # the period is 5 ms
+    counting.release.clear()
+    loop = ControlLoop(cm, gc_mode="idle")
+    budgets = []
+    loop.idle_hook = budgets.append
+    gc.collect()
+    loop.start()
+    try:
+        assert wait_for(lambda: loop.collections >= 1 and loop.cycles >= 30, timeout=60.0)
+    finally:
+        loop.stop()
+        gc.unfreeze()
+    assert loop.overruns >= loop.cycles - 2
+    assert len(budgets) >= loop.cycles - 1 and budgets.count(0.0) >= loop.cycles - 3
+
+
 def test_unknown_gc_mode_is_refused():
     with pytest.raises(ValueError, match="gc_mode must be one of"):
         ControlLoop(make_manager(), gc_mode="sometimes")

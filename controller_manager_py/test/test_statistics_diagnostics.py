@@ -3,6 +3,7 @@ import math
 import threading
 import time
 
+import numpy as np
 import pytest
 from cm_helpers import JOINTS, make_manager, run, spawn
 
@@ -191,3 +192,33 @@ def test_values_registered_in_diagnostics_are_listed_and_never_graded():
     assert ("fwd level_offset_deg", "2.0000") in controllers.values
     assert not any("internal_gain" in key for key, _ in controllers.values)
     assert controllers.level == OK
+
+
+class CountedRegistry:
+    """Stands in for a statistics registry: the cycles it was published in, each taking 1 ms."""
+
+    def __init__(self, cycle):
+        self.cycle, self.published = cycle, []
+
+    def publish(self):
+        time.sleep(0.001)
+        self.published.append(self.cycle[0])
+
+
+def test_statistics_wait_for_slack_but_never_more_than_a_publishing_period():
+    from types import SimpleNamespace
+
+    from controller_manager_py.ros.node import ControllerManagerNode
+
+    cycle = [0]
+    node = SimpleNamespace(_cycles_since_due=0, _publish_every=25, _pending_publish=[], _publish_cost={},
+                           statistics=CountedRegistry(cycle), introspection=CountedRegistry(cycle))
+    for cycle[0] in range(100):          # a second to spare after each cycle: every 25 cycles
+        ControllerManagerNode.on_loop_idle(node, 1.0)
+    assert node.statistics.published == [24, 49, 74, 99]
+    for cycle[0] in range(100, 400):     # no slack at all (a machine too slow for the rate)
+        ControllerManagerNode.on_loop_idle(node, 0.0)
+    # each publication a period late, never later: the heartbeat goes on at about the same rate
+    gaps = np.diff(node.statistics.published)
+    assert len(node.statistics.published) >= 4 + 300 // 30 and gaps.max() <= 2 * 25 + 1
+    assert np.diff(node.introspection.published).max() <= 2 * 25 + 1

@@ -53,10 +53,11 @@ benchmarks/controller_manager_bench.py):
   - Scheduling: the loop thread's SCHED_FIFO priority and CPU affinity (realtime.py).
 
 Idle work: after each cycle `idle_hook(budget)` (if set) is called with the time (s) left
-before the loop must start waiting for its next deadline; it must do only what fits (the
-node publishes statistics there when its measured cost fits the budget, else a cycle later:
-see ros/node.py). Garbage is collected (gc_mode "idle") only when more than
-IDLE_GC_FRACTION of a period is left.
+before the loop must start waiting for its next deadline (0 after a cycle that overran);
+it must do only what fits, and what is overdue
+(the node publishes statistics there when its measured cost fits the budget, else a cycle
+later, but never more than a publishing period late: see ros/node.py). Garbage is collected
+(gc_mode "idle") when more than IDLE_GC_FRACTION of a period is left, or once overdue.
 
 Cycle log: with `cycle_log` set (a path), the last CYCLE_LOG_LENGTH cycles' deadline,
 start and end, and when the wait before it came back from its lock-releasing sleep
@@ -166,7 +167,6 @@ class ControlLoop:
         tail, spin = self.wake_tail + self.spin_tail, self.spin_tail
         monotonic, sleep = _time.monotonic, _time.sleep
         log = self._log
-        idle_collect = self.gc_mode == "idle"
         hold = self.hold_interpreter
         wake_interval = sys.getswitchinterval()  # how soon the loop asks for the lock when it wakes
         hold_interval = max(wake_interval, period)  # how long others wait before asking it back
@@ -190,6 +190,7 @@ class ControlLoop:
             self.cycles += 1
             if self.blocking:
                 next_deadline += self.minimum_cycle_time or 0.1 * period
+                self._idle_work(next_deadline)
                 delay = next_deadline - monotonic()
                 if hold:
                     setswitchinterval(wake_interval)
@@ -207,17 +208,10 @@ class ControlLoop:
             if delay <= 0.0:
                 self._overrun(-delay)
                 next_deadline = monotonic()
+                self._idle_work(next_deadline)  # no slack: only what is overdue
                 continue
-            if idle_collect and (delay - tail > IDLE_GC_FRACTION * period
-                                 or gc.get_count()[0] > GC_OVERDUE * gc.get_threshold()[0]):
-                self._collect_garbage()  # (overdue: a loop with no slack must not grow without bound)
-                delay = next_deadline - monotonic()
-            if self.idle_hook is not None and delay > tail:
-                try:
-                    self.idle_hook(delay - tail)
-                except Exception as error:  # noqa: BLE001 - idle work never stops the loop
-                    self.throttle.error("idle", f"idle work failed: {error!r}")
-                delay = next_deadline - monotonic()
+            self._idle_work(next_deadline - tail)
+            delay = next_deadline - monotonic()
             if hold:
                 setswitchinterval(wake_interval)
             if log is not None:
@@ -237,6 +231,21 @@ class ControlLoop:
             if spin > 0.0:
                 while monotonic() < next_deadline:
                     pass
+
+    def _idle_work(self, until: float) -> None:
+        """Between cycles, until `until` (time.monotonic() s; now or past after a cycle that
+        left no slack): garbage (gc_mode "idle") when more than IDLE_GC_FRACTION of a period is
+        left, or once overdue (GC_OVERDUE: a loop with no slack must not grow without bound);
+        then the idle hook with the time left (0 if none), which does what fits in it and what
+        is overdue. A machine too slow for the loop's rate still collects and reports."""
+        if self.gc_mode == "idle" and (until - _time.monotonic() > IDLE_GC_FRACTION * self.period
+                                       or gc.get_count()[0] > GC_OVERDUE * gc.get_threshold()[0]):
+            self._collect_garbage()
+        if self.idle_hook is not None:
+            try:
+                self.idle_hook(max(0.0, until - _time.monotonic()))
+            except Exception as error:  # noqa: BLE001 - idle work never stops the loop
+                self.throttle.error("idle", f"idle work failed: {error!r}")
 
     def _overrun(self, late: float) -> None:
         """The cycle ended `late` s after the next deadline: shed, count, warn (throttled)."""

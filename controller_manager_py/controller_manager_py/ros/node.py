@@ -7,9 +7,9 @@ delays a cycle (the GIL switch interval is lowered so the loop gets the interpre
 quickly after its sleep, and the executor thread shares the loop thread's CPU at a lower
 priority, so it never runs, and never asks for the interpreter, while a cycle runs).
 ~/statistics and ~/introspection_data are filled and published in the loop's idle time
-after a cycle (never when the cycle ran late), because building
-a `full` message holds the interpreter for ~0.2 ms, which from another thread would
-delay the loop's wake-up.
+after a cycle (when the cycle ran late, only once a publication is a whole publishing
+period overdue), because building a `full` message holds the interpreter for ~0.2 ms,
+which from another thread would delay the loop's wake-up.
 
 Robot description, first found: parameter `robot_description` (URDF text), parameter
 `robot_description_file` (a path), else the `robot_description_topic` topic (default
@@ -143,7 +143,7 @@ class ControllerManagerNode(Node):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._published_version = -1
         self._refusal_counts = {}  # refusal counters at the previous /diagnostics (WARN when they grow)
-        self._idle_cycles = 0
+        self._cycles_since_due = 0
         self._publish_every = max(1, round(self.cm.update_rate / self.params["statistics.publish_rate"]))
         # registries still to publish this round, and each one's last publishing time (s)
         self._pending_publish = []
@@ -326,19 +326,23 @@ class ControllerManagerNode(Node):
             self.activity_pub.publish(self.cm_services.activity())
 
     def on_loop_idle(self, budget: float) -> None:
-        """Loop thread, in a cycle's slack (`budget` s before the loop must wait for its next
-        deadline): ~/statistics then ~/introspection_data at statistics.publish_rate, each only
-        when its last measured publishing time (x1.5) fits the budget, else in a later cycle, so
-        publishing never makes a cycle start late."""
-        self._idle_cycles += 1
-        if self._idle_cycles >= self._publish_every and not self._pending_publish:
-            self._idle_cycles = 0
+        """Loop thread, after each cycle (`budget` s before the loop must wait for its next
+        deadline, 0 when the cycle left no slack): ~/statistics then ~/introspection_data at
+        statistics.publish_rate, each when its last measured publishing time (x1.5) fits the
+        budget, else in a later cycle, so publishing does not make a cycle start late; but a
+        publication a whole publishing period overdue goes out anyway, so a loop that keeps
+        overrunning (a machine too slow for its rate) still reports, and the robot manager's
+        watchdog, which takes silence for a stalled manager, sees it cycling."""
+        self._cycles_since_due += 1
+        if self._cycles_since_due >= self._publish_every and not self._pending_publish:
+            self._cycles_since_due = 0
             self._pending_publish = [self.statistics, self.introspection]
         if not self._pending_publish:
             return
         registry = self._pending_publish[0]
         cost = self._publish_cost.get(id(registry), 0.0)
-        if 1.5 * cost > budget:
+        overdue = self._cycles_since_due >= self._publish_every
+        if 1.5 * cost > budget and not overdue:
             self._publish_cost[id(registry)] = 0.95 * cost  # a cost measured in a bad moment fades
             return
         start = time.monotonic()
