@@ -220,6 +220,7 @@ class MujocoSystem(SystemInterface):
         self.camera = None
         self.ros = None
         self._stepped_forces = []   # (end s, fx N, fy N) of the domain's force steps acting
+        self._announced_force = None   # (fx, fy) N last said on /sim/ball_force
         self.commands_refused = 0
         self.overruns = 0
         self.answers: Optional[FrameAnswerGate] = None
@@ -319,6 +320,7 @@ class MujocoSystem(SystemInterface):
         # the domain's force steps (force_1deg ...): on, turned, off at the benchmark's times
         self._force_steps = collections.deque(self.world.knobs.force_steps())
         self._stepped_forces = []
+        self._announced_force = None
         self._announce_force()
         self._next_clock_s = self.world.time_s
         self._wall_anchor = None
@@ -496,6 +498,7 @@ class MujocoSystem(SystemInterface):
             world.set_joint_positions(robot.HOME_POSITIONS_RAD)
             world.place_ball(self.params["ball_x"], self.params["ball_y"])
             world.clear_forces()
+            self._stepped_forces = []   # a domain's force step acting is cleared too
             self._hold_ball_force()   # a setting of the world, like the plate's mounting: it stays
             self._target = world.joint_positions()
             self._copy_states()
@@ -572,14 +575,17 @@ class MujocoSystem(SystemInterface):
         self._announce_force()
 
     def _announce_force(self) -> None:
-        """/sim/ball_force: the held force and the force steps acting, once the ROS side exists."""
+        """/sim/ball_force: the held force and the force steps acting, when that changed (a
+        reset of the world holds the same force again), once the ROS side exists."""
         ros = self.ros
         if ros is None:
             return
         fx_n, fy_n = self.world.knobs.tilt_force_n(*self.ball_force)
         for _, step_fx_n, step_fy_n in self._stepped_forces:
             fx_n, fy_n = fx_n + step_fx_n, fy_n + step_fy_n
-        ros.publish_force(self.world.time_s, fx_n, fy_n)
+        if (fx_n, fy_n) != self._announced_force:
+            self._announced_force = (fx_n, fy_n)
+            ros.publish_force(self.world.time_s, fx_n, fy_n)
 
     def request_wrench(self, force_n, torque_n_m, duration_s: float, in_plate_axes: bool = True) -> None:
         """A force and torque on the ball's centre for `duration_s` (plate or world axes)."""

@@ -374,13 +374,32 @@ def test_every_change_of_the_force_on_the_ball_is_announced_when_it_acts():
         step = system.world.knobs.tilt_force_n(3.0, system.world.knobs.force_step_dir_deg)
         turned = system.world.knobs.tilt_force_n(3.0, system.world.knobs.force_step_dir_deg + 90.0)
         run_cycles(system, int(13.01 / PERIOD_S))
+        system.request_reset_world()        # holds the same force again: no change
+        run_cycles(system, 1)
         system.request_ball_force(0.0, 0.0)
         run_cycles(system, 1)
         stamps = [t for t, _, _ in announced.forces]
         # configured, the step on, turned, off, the held force ended: each once, as it acts
-        assert stamps == pytest.approx([0.0, 5.0, 9.0, 13.0, 13.012], abs=PERIOD_S + 1e-9)
+        assert stamps == pytest.approx([0.0, 5.0, 9.0, 13.0, 13.014], abs=PERIOD_S + 1e-9)
         expected = [held, tuple(map(sum, zip(held, step))), tuple(map(sum, zip(held, turned))), held, (0.0, 0.0)]
         for (_, fx, fy), (ex, ey) in zip(announced.forces, expected, strict=True):
             assert (fx, fy) == pytest.approx((ex, ey), abs=1e-9)
+    finally:
+        system.on_shutdown(State.ACTIVE)
+
+
+def test_a_reset_of_the_world_during_a_force_step_announces_its_end():
+    system, result = make_system({"domain": "force_3deg", "seed": 2})
+    assert result == CallbackReturn.SUCCESS
+    system.ros = announced = AnnouncedForces()
+    system.on_configure(State.UNCONFIGURED)
+    system.on_activate(State.INACTIVE)
+    try:
+        run_cycles(system, int(5.5 / PERIOD_S))
+        system.request_reset_world()        # the world drops the step's force with the others
+        run_cycles(system, 1)
+        (_, _, _), (on_s, _, _), (end_s, fx, fy) = announced.forces   # configured, on, reset
+        assert on_s == pytest.approx(5.0, abs=PERIOD_S) and end_s == pytest.approx(5.5, abs=PERIOD_S)
+        assert (fx, fy) == (0.0, 0.0)
     finally:
         system.on_shutdown(State.ACTIVE)
