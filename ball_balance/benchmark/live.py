@@ -16,8 +16,8 @@ nor this node's clock. A slow machine, or a monitor that falls behind its topics
 when the samples are read, not what the figures say:
 
 - every topic is read whole: reliable where its publisher is (/ball_reference, /plate_cmd,
-  /sim/ball_pushed, /sim/ball_force), best effort where it is not (/sim/ball_truth and /ball_state are sensor
-  data), RECORD_DEPTH deep, the callbacks append only;
+  /sim/ball_pushed, /sim/ball_force), best effort where it is not (/sim/ball_truth and
+  /ball_state are sensor data), RECORD_DEPTH deep, the callbacks append only;
 - the recording counts up to the stamp every topic has been read to (`covered_until_s`), so
   a topic still queued is waited for, not held over;
 - the error is the true ball against the target at the truth's stamp (between the two

@@ -220,6 +220,7 @@ class MujocoSystem(SystemInterface):
         self.camera = None
         self.ros = None
         self._stepped_forces = []   # (end s, fx N, fy N) of the domain's force steps acting
+        self._next_force_change_s = math.inf   # a step begins or one acting ends
         self._announced_force = None   # (fx, fy) N last said on /sim/ball_force
         self.commands_refused = 0
         self.overruns = 0
@@ -320,6 +321,7 @@ class MujocoSystem(SystemInterface):
         # the domain's force steps (force_1deg ...): on, turned, off at the benchmark's times
         self._force_steps = collections.deque(self.world.knobs.force_steps())
         self._stepped_forces = []
+        self._next_force_change_s = self._next_force_change()
         self._announced_force = None
         self._announce_force()
         self._next_clock_s = self.world.time_s
@@ -394,7 +396,7 @@ class MujocoSystem(SystemInterface):
             angle = self._push_rng.uniform(0.0, 2.0 * math.pi)
             speed = world.knobs.push_speed_m_s
             self._push(speed * math.cos(angle), speed * math.sin(angle))
-        if (self._force_steps and t >= self._force_steps[0][0]) or self._force_step_ended(t):
+        if t >= self._next_force_change_s:
             self._step_forces(t)
         self._copy_states()
         # a camera frame (rendered, and/or a truth-fed detection), unless lock-step holds it back
@@ -499,6 +501,7 @@ class MujocoSystem(SystemInterface):
             world.place_ball(self.params["ball_x"], self.params["ball_y"])
             world.clear_forces()
             self._stepped_forces = []   # a domain's force step acting is cleared too
+            self._next_force_change_s = self._next_force_change()
             self._hold_ball_force()   # a setting of the world, like the plate's mounting: it stays
             self._target = world.joint_positions()
             self._copy_states()
@@ -561,8 +564,13 @@ class MujocoSystem(SystemInterface):
         self.world.hold_force(*self.world.knobs.tilt_force_n(*self.ball_force))
         self._announce_force()
 
-    def _force_step_ended(self, t: float) -> bool:
-        return any(t >= end_s for end_s, _, _ in self._stepped_forces)
+    def _next_force_change(self) -> float:
+        """When the next force step of the domain begins or one acting ends (inf: none), so
+        the loop compares one time per cycle."""
+        times = [end_s for end_s, _, _ in self._stepped_forces]
+        if self._force_steps:
+            times.append(self._force_steps[0][0])
+        return min(times, default=math.inf)
 
     def _step_forces(self, t: float) -> None:
         """(loop) The domain's force steps due by t begin, those past their end stop counting,
@@ -572,6 +580,7 @@ class MujocoSystem(SystemInterface):
             self.world.apply_force(fx_n, fy_n, duration_s)
             self._stepped_forces.append((start_s + duration_s, fx_n, fy_n))
         self._stepped_forces = [step for step in self._stepped_forces if t < step[0]]
+        self._next_force_change_s = self._next_force_change()
         self._announce_force()
 
     def _announce_force(self) -> None:
