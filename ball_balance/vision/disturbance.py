@@ -15,18 +15,14 @@ from typing import Optional
 
 import numpy as np
 
-# The running innovation consistency (1 when the model is right) at most this: the model agreed
-# with the detections. Only then is a detection beyond maneuver_sigma a push, or a bias of the
-# innovations a change of d: a model that has disagreed for a while (a delay or a gain still
-# being learned) is seeing its own error, and the constant-velocity filter's velocity, or d
-# fitted to that error, would pass it on to the controller
+# The running innovation consistency (1 when the model is right) at most this: the model agrees
+# with the detections. Only then is a detection beyond maneuver_sigma a push. The change test of
+# d runs on a track whose model has agreed since its last change of d: a model that agreed and
+# now disagrees has seen something change, which is the test's to find, whatever the detection
+# noise does to the consistency meanwhile; a model that has not agreed since a change is seeing
+# its own error (a delay or a gain still being learned), and the constant-velocity filter's
+# velocity, or d fitted to that error window after window, would pass it on to the controller
 MODEL_AGREED_NIS = 1.0
-# Once a track's model has agreed, the change test takes it to agree while its consistency is
-# within this many of its own standard deviations above 1 (`consistency_spread`): under
-# detection noise a right model's consistency scatters about 1, and a change, which raises it,
-# would otherwise be tested only while the noise happens to hold it below 1. A change found
-# ends that until the model agrees again: one that stays wrong is not corrected again and again
-MODEL_AGREED_SPREADS = 2.0
 # the running consistency starts at 1 with a track; after this many of its time constants its
 # start weighs 5 % and it describes the detections
 CONSISTENCY_SETTLE_TIME_CONSTANTS = 3.0
@@ -57,24 +53,6 @@ class ChangeFrame:
     S: np.ndarray                # its covariance
     transition: np.ndarray       # the product of the F's since the previous update
     K: Optional[np.ndarray] = None   # the update's gain, once made
-
-
-def consistency_spread(weight) -> np.ndarray:
-    """The standard deviation of the running consistency of a right model, a running mean of
-    the per-axis NIS with `weight` per frame (min(1, dt / model_mismatch_time_constant_s)):
-    that NIS is exponential with mean 1 and variance 1, so the mean's variance is
-    weight / (2 - weight)."""
-    weight = np.asarray(weight, dtype=float)
-    return np.sqrt(weight / (2.0 - weight))
-
-
-def model_agreed(nis, spread, has_agreed) -> np.ndarray:
-    """Whether the model agrees with the detections, for the change test: its running
-    consistency `nis` is at most MODEL_AGREED_NIS or, once the track's model `has_agreed`,
-    within MODEL_AGREED_SPREADS of its standard deviation `spread` above 1."""
-    nis = np.asarray(nis)
-    within_spread = nis <= 1.0 + MODEL_AGREED_SPREADS * np.asarray(spread)
-    return (nis <= MODEL_AGREED_NIS) | (np.asarray(has_agreed) & within_spread)
 
 
 def consistency_settle_s(time_constant_s: float) -> float:
@@ -214,14 +192,14 @@ class Jumps:
 
 class ChangeTest:
     """The change test per filter of a batch of `batch` (BallKalman's is a batch of one): each
-    filter's window, a ring of its frames' stamps, whitened innovations, running consistencies
-    before them, innovations, their covariances, the transitions since the previous update and
-    the updates' gains, `n` frames from `head`, doubled when a window would overflow it (a
-    faster camera). A window is tested once it spans DISTURBANCE_CHANGE_WINDOW_S, if the model
-    agreed with the detections before it (model_agreed) and the track is
-    `settle_s` old at its first frame (consistency_settle_s); otherwise a bias is the model's
-    own error. A change found is sized DISTURBANCE_CHANGE_SIZING_DELAY_S later, from the
-    window that found it and the frames since."""
+    filter's window, a ring of its frames' stamps, whitened innovations, whether the model had
+    agreed before them, innovations, their covariances, the transitions since the previous
+    update and the updates' gains, `n` frames from `head`, doubled when a window would overflow
+    it (a faster camera). A window is tested once it spans DISTURBANCE_CHANGE_WINDOW_S, if at
+    its first frame the track's model had agreed with the detections since its last change of d
+    (MODEL_AGREED_NIS) and the track was `settle_s` old (consistency_settle_s); otherwise a bias
+    is the model's own error. A change found is sized DISTURBANCE_CHANGE_SIZING_DELAY_S later,
+    from the window that found it and the frames since."""
 
     FIELDS = ("t", "whitened", "agreed", "innovation", "S", "transition", "K")
 
@@ -248,8 +226,8 @@ class ChangeTest:
 
     def test(self, t: float, add, innovation, S, agreed, transition, track_start_s) -> np.ndarray:
         """The frame at t of the filters `add` (b,) joins their windows, before their update:
-        innovation (b, 2) and its covariance S (b, 2, 2), whether the model agreed with the
-        detections before it (b,) (model_agreed), the transition since the previous update
+        innovation (b, 2) and its covariance S (b, 2, 2), whether the track's model had agreed
+        with the detections since its last change of d (b,), the transition since the previous update
         (b, dim, dim); track_start_s (b,) when each track began. Returns the filters to
         `correct`: those whose window showed a change of d DISTURBANCE_CHANGE_SIZING_DELAY_S
         ago; for the others call `set_last_gain` after the update."""

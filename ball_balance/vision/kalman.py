@@ -94,10 +94,8 @@ from ball_balance.vision.disturbance import (
     ChangeTest,
     JumpTest,
     consistency_settle_s,
-    consistency_spread,
     disturbance_jerk,
     disturbance_rows,
-    model_agreed,
 )
 
 CHI2_1_MEDIAN = 0.45493642311957283   # median of a chi-square variable with one degree of freedom
@@ -497,8 +495,7 @@ class BatchBallKalman:
         self.t_last = np.zeros(batch)
         self.coasted = np.zeros(batch, int)    # frames without a usable detection since the last one
         self.nis = np.ones(batch)              # running mean of the normalised innovation squared (per axis)
-        self.nis_spread = np.ones(batch)       # its standard deviation under a right model
-        self.model_has_agreed = np.zeros(batch, bool)   # since the track settled or d last changed (model_agreed)
+        self.model_has_agreed = np.zeros(batch, bool)   # since the track settled or d last changed
         self.last_dt = np.zeros(batch)         # the last prediction's dt, q and Q
         self.last_q = np.zeros(batch)
         self.last_Q = np.zeros((batch, self.dim, self.dim))
@@ -664,7 +661,6 @@ class BatchBallKalman:
         if self.cfg.model_mismatch_time_constant_s > 0.0:   # a gated detection counts too, at the gate
             alpha = np.minimum(1.0, dt / self.cfg.model_mismatch_time_constant_s)
             self.nis = np.where(run, self.nis + alpha * (np.minimum(distance, gate) ** 2 / 2.0 - self.nis), self.nis)
-            self.nis_spread = np.where(run, consistency_spread(alpha), self.nis_spread)
         ok = run & (distance <= gate)
         follow = np.zeros(self.b, bool) if fast_took is None else run & ~ok & fast_took & (t <= self.hold_until)
         if follow.any():
@@ -717,17 +713,16 @@ class BatchBallKalman:
 
     def _count_changes(self, which) -> None:
         """The balls `which` (a mask or an index) had a change of d found: counted, and their
-        model must agree again before the change test runs on a consistency above 1."""
+        model must agree again before the change test runs again."""
         self.disturbance_changes[which] += 1
         self.model_has_agreed[which] = False
 
     def _model_agrees(self, t: float) -> np.ndarray:
-        """Per ball, whether the model agrees with the detections for the change test
-        (disturbance.model_agreed); a track has agreed once its settled consistency was at most
-        MODEL_AGREED_NIS since its last change of d (a model that is still wrong after one
-        would otherwise have d corrected window after window)."""
+        """Per ball, whether its model has agreed with the detections for the change test: its
+        settled consistency was at most MODEL_AGREED_NIS since its last change of d (a model
+        that is still wrong after one would otherwise have d corrected window after window)."""
         self.model_has_agreed |= (self.nis <= MODEL_AGREED_NIS) & self.change.settled(t, self.track_start)
-        return model_agreed(self.nis, self.nis_spread, self.model_has_agreed)
+        return self.model_has_agreed.copy()
 
     def _start_jump_tests(self, t: float, pushed) -> None:
         """A jump test for each ball in `pushed` whose track has settled and has none yet: the

@@ -546,12 +546,28 @@ def test_a_force_step_under_detection_noise_is_found():
 def test_a_model_that_stops_agreeing_is_not_corrected_again_and_again():
     # the filter is told the circle's acceleration, then half of it from 4 s (a gain it does not
     # estimate): the first bias may pass for a change of d, but once a change is found the
-    # model must agree again before the test runs on a consistency above 1
+    # model must agree again before the test runs again
     cfg = dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=20.0, estimate_input_gain=False)
     for seed in range(4):
         kf = BallKalman(cfg)
         _ball_on_a_circle_told(kf, lambda t: 1.0 if t < 4.0 else 0.5, 10.0, seed)
         assert kf.disturbance_changes <= 3
+
+
+def test_once_the_model_has_agreed_the_change_test_runs_whatever_the_consistency():
+    # a model that agreed and now disagrees has seen something change, which is the change
+    # test's to find however high the detection noise or the change drives the consistency;
+    # after a change found it must agree again first
+    kf = BallKalman(dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=20.0))
+    _ball_under_a_loop(kf, lambda t: np.zeros(2), 2.0)
+    f = kf.filter
+    assert f._model_agrees(2.0)[0]
+    f.nis[:] = 5.0
+    assert f._model_agrees(2.0)[0]
+    f._count_changes(0)
+    assert not f._model_agrees(2.0)[0]
+    f.nis[:] = 0.9
+    assert f._model_agrees(2.0)[0]
 
 
 def test_a_model_that_disagrees_finds_no_change_of_the_disturbance():
