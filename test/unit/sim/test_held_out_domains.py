@@ -1,4 +1,4 @@
-"""The tuning and held-out domain sets: every domain in exactly one, the tuning set the 17
+"""The tuning and held-out domain sets: every domain in exactly one, the tuning set the 18
 domains the defaults were chosen on; each held-out domain's knobs are what its description
 says, and the plate mounted off level is a real mounting tilt in the model."""
 import dataclasses
@@ -21,7 +21,7 @@ from ball_balance.sim.world import SimWorld
 
 TUNING = ("standard", "slippery", "sticky", "heavy_ball", "low_gravity", "high_gravity", "noisy_vision",
           "high_latency", "full_dr", "noise_5mm", "latency_200ms", "extreme_dr", "solid_ball", "pushes",
-          "hand_1", "hand_2", "hand_3")
+          "hand_1", "hand_2", "hand_3", "force_3deg_noise")
 
 
 def test_every_domain_is_in_exactly_one_set():
@@ -55,6 +55,8 @@ def test_stronger_pushes_are_twice_the_pushes_at_the_same_interval():
     ("off_level_pushes_noise", ("off_level_2deg", "pushes", "noisy_vision")),
     ("force_2deg_hand_2", ("force_2deg", "hand_2")),
     ("latency_off_level_heavy", ("high_latency", "off_level_2deg", "heavy_ball")),
+    ("force_2deg_noise_latency", ("force_2deg", "noisy_vision", "high_latency")),
+    ("force_3deg_noise", ("force_3deg", "noisy_vision")),
 ])
 def test_combinations_have_each_fault_of_their_parts(combo, parts):
     expected = {knob: spec for part in parts for knob, spec in DOMAINS[part].items()}
