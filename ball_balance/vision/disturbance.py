@@ -48,7 +48,7 @@ class ChangeFrame:
     """A detection in the change test's window: what the test and the change's estimate need."""
     t: float                     # stamp [s]
     whitened: np.ndarray         # the innovation whitened by its covariance
-    agreed: bool                 # the model agreed with the detections before it
+    agreed: bool                 # the model had agreed since the last change of d, before it
     innovation: np.ndarray       # z - H x of the prediction [m]
     S: np.ndarray                # its covariance
     transition: np.ndarray       # the product of the F's since the previous update
