@@ -227,8 +227,8 @@ class ChangeTest:
     def test(self, t: float, add, innovation, S, agreed, transition, track_start_s) -> np.ndarray:
         """The frame at t of the filters `add` (b,) joins their windows, before their update:
         innovation (b, 2) and its covariance S (b, 2, 2), whether the track's model had agreed
-        with the detections since its last change of d (b,), the transition since the previous update
-        (b, dim, dim); track_start_s (b,) when each track began. Returns the filters to
+        with the detections since its last change of d (b,), the transition since the previous
+        update (b, dim, dim); track_start_s (b,) when each track began. Returns the filters to
         `correct`: those whose window showed a change of d DISTURBANCE_CHANGE_SIZING_DELAY_S
         ago; for the others call `set_last_gain` after the update."""
         whitened = np.linalg.solve(np.linalg.cholesky(S), innovation[..., None])[..., 0]
