@@ -6,7 +6,8 @@ A change of d (a force that starts, turns or ends) shows as innovations that kee
 `ChangeTest` keeps each filter's last DISTURBANCE_CHANGE_WINDOW_S of frames and tests their
 whitened sum; on a change, `estimate_change` sizes it from the window (a generalised
 likelihood ratio over the onsets, `Jumps`) and `open_disturbance` widens the covariance by a
-change of unknown size. After a push's detection `JumpTest` tells a push from a force.
+change of unknown size. After a push's detection `JumpTest` tells a push from a force;
+after a change found, `ChangeReview` asks whether it was a push after all.
 """
 from __future__ import annotations
 
@@ -356,14 +357,60 @@ class JumpTest:
         once decided, else None."""
         self.forces.take_up(K)
         self.pushes.take_up(K)
-        force, push = self.forces.statistics().max(), self.pushes.statistics().max()
-        if force - push > DISTURBANCE_CHANGE_CHI2:
-            return "force"
-        if push - force > DISTURBANCE_CHANGE_CHI2:
-            return "push"
-        return None
+        return decision(self.log_ratio())
 
-    def force_posterior(self, prior_std: float):
-        """The best-fitting change of d's effect on the reference filter's state: the mean and
-        the covariance to add (Jumps.posterior)."""
-        return self.forces.posterior(int(np.argmax(self.forces.statistics())), prior_std)
+    def log_ratio(self) -> float:
+        """Twice the log-likelihood ratio of the best force against the best push."""
+        return self.forces.statistics().max() - self.pushes.statistics().max()
+
+    def posterior(self, jump: str, prior_std: float):
+        """The best-fitting `jump`'s ("force": of d, "push": of the velocity) effect on the
+        reference filter's state: the mean and the covariance to add (Jumps.posterior)."""
+        jumps = self.forces if jump == "force" else self.pushes
+        return jumps.posterior(int(np.argmax(jumps.statistics())), prior_std)
+
+
+class ChangeReview(JumpTest):
+    """After a change of d was found with a push's detection in the change test's window (one
+    the detection noise did not let the push test confirm): was it a push after all? The
+    change stands, in the filter, unless a push explains the frames better. The reference
+    filter is the filter as it was, without the change, and the explanations are compared by
+    their evidence (the jump's size integrated over its prior) since the window began:
+    a change of d, the evidence of its best onset in the window (estimate_change's fit) and
+    the likelihood of the frames since under the filter that took it; a push, the reference
+    filter's likelihood and the evidence of its best onset (prior N(0, push_std^2 I)). Decided
+    when one is ahead by DISTURBANCE_CHANGE_CHI2, or, by `until`, the change stands."""
+
+    def __init__(self, x: np.ndarray, P: np.ndarray, r: float, window, transition: np.ndarray, t: float,
+                 d_index: int, push_std: float, until: float):
+        super().__init__(x, P, r, window, transition, t, d_index)
+        self.push_std, self.until = push_std, until
+        self.force_evidence = float(self.forces.evidence(DISTURBANCE_STD_M_S2).max())
+        self.filter_log_ratio = 0.0    # twice the log-likelihood of the frames since: filter less reference
+
+    def add_filtered(self, innovation: np.ndarray, S: np.ndarray) -> None:
+        """The innovation of a detection and its covariance in the filter that took the change."""
+        self.filter_log_ratio -= _log_likelihood_terms(innovation, S)
+
+    def add(self, innovation: np.ndarray, S: np.ndarray) -> None:
+        super().add(innovation, S)
+        self.filter_log_ratio += _log_likelihood_terms(innovation, S)
+
+    def log_ratio(self) -> float:
+        push_evidence = float(self.pushes.evidence(self.push_std).max())
+        return self.force_evidence + self.filter_log_ratio - push_evidence
+
+
+def decision(log_ratio: float) -> Optional[str]:
+    """"force" or "push" once twice the log-likelihood ratio of a force against a push is
+    beyond DISTURBANCE_CHANGE_CHI2 either way, else None."""
+    if log_ratio > DISTURBANCE_CHANGE_CHI2:
+        return "force"
+    if log_ratio < -DISTURBANCE_CHANGE_CHI2:
+        return "push"
+    return None
+
+
+def _log_likelihood_terms(innovation: np.ndarray, S: np.ndarray) -> float:
+    """y^T S^-1 y + log det S: minus twice a Gaussian innovation's log-likelihood, less a constant."""
+    return float(innovation @ np.linalg.solve(S, innovation) + np.log(np.linalg.det(S)))

@@ -59,7 +59,11 @@ reference filter runs with the model's own process noise, and the detections it 
 explained both ways, as a jump of the ball's velocity and as a jump of d, each at the onset
 that fits it best (vision/disturbance.py JumpTest). As soon as one explanation is better by
 the change test's bound, it stands: a change of d ends the hold and the reference filter,
-corrected by the change, takes over.
+corrected by the change, takes over. The other way round, a push the noise kept from being
+confirmed shows to the change test as a change of d: a change found with a detection beyond
+`maneuver_sigma` in its window is reviewed by the same kind of reference filter, the filter
+without the change, until `maneuver_hold_s` after it (ChangeReview), and if a push explains
+the frames better the change is undone.
 
 Delay: the plate reaches a command some time after the tracker receives it (the arm's latency
 and servo lag, 0.03-0.2 s in the benchmark's latency domains); the known acceleration and the
@@ -91,6 +95,7 @@ from ball_balance.vision.config import TRACKER_SCHEMA
 from ball_balance.vision.disturbance import (
     DISTURBANCE_STD_M_S2,
     MODEL_AGREED_NIS,
+    ChangeReview,
     ChangeTest,
     JumpTest,
     consistency_settle_s,
@@ -506,6 +511,7 @@ class BatchBallKalman:
         self.excess_pending = np.zeros(batch, bool)
         self.excess_y = np.zeros((batch, 2))
         self.excess_nis = np.ones(batch)
+        self.beyond_t = np.full(batch, -np.inf)          # the last detection beyond maneuver_sigma
         self.fast: Optional[BatchBallKalman] = None
         if cfg.maneuver_hold_s > 0.0 and cfg.maneuver_sigma > 0.0:
             self.fast = BatchBallKalman(batch, cfg.constant_velocity())
@@ -515,7 +521,7 @@ class BatchBallKalman:
         self.gated_count = np.zeros(batch, int)
         self.reset_count = np.zeros(batch, int)
         self.maneuver_count = np.zeros(batch, int)       # predictions widened for a push
-        self.disturbance_changes = np.zeros(batch, int)  # changes of d found
+        self.disturbance_changes = np.zeros(batch, int)  # changes of d found (less those undone)
 
     @property
     def gain(self) -> np.ndarray:
@@ -649,6 +655,7 @@ class BatchBallKalman:
         if self.cfg.maneuver_sigma > 0.0:
             seen = run & (dt > 0.0)
             push, nis = seen & (distance > self.cfg.maneuver_sigma), self.nis
+            self.beyond_t = np.where(push, t, self.beyond_t)
             push, nis = self._confirmed_pushes(seen, push, y, distance)
             agreed = push & (nis <= MODEL_AGREED_NIS)   # a model that agreed until the push began
             self.hold_until = np.where(agreed, t + self.cfg.maneuver_hold_s, self.hold_until)
@@ -677,6 +684,7 @@ class BatchBallKalman:
                 y = z - self.x[:, :2]
                 inv, _ = innovation_inverse(self.p, self.r, y)
             ok = ok & ~self._decide_jumps(ok, z)
+            appended &= ok                # a filter replaced starts its window again
         if not ok.any():
             return
         i = np.flatnonzero(ok)
@@ -707,6 +715,15 @@ class BatchBallKalman:
         changed = w.test(t, add, y, innovation_covariance(self.p, self.r), self._model_agrees(t), self.transition,
                          self.track_start)
         for i in np.flatnonzero(changed):
+            frames = w.frames(i)
+            # a detection beyond maneuver_sigma in the window that did not start a push's hold
+            # (not confirmed under the noise, or the model had not agreed): a review, of the
+            # filter as it is without the change, undoes the change if the frames that follow
+            # show a push
+            if self.beyond_t[i] >= frames[0].t:
+                self.jump_tests[int(i)] = ChangeReview(self.x[i], self.p[i], float(self.r[i]), frames[:-1],
+                                                       frames[-1].transition, t, D_INDEX, self.cfg.init_vel_std_m_s,
+                                                       until=t + self.cfg.maneuver_hold_s)
             w.correct(i, t, self.x[i], self.p[i])
         self._count_changes(changed)
         return add & ~changed, bool(changed.any())
@@ -741,6 +758,9 @@ class BatchBallKalman:
         adopted = np.zeros(self.b, bool)
         for i in [i for i in self.jump_tests if ok[i]]:
             test = self.jump_tests[i]
+            after_change = isinstance(test, ChangeReview)
+            if after_change:
+                test.add_filtered(z[i] - self.x[i, :2], innovation_covariance(self.p[i], self.r[i]))
             x, P, r = test.x[None], test.P[None], np.array([test.r])
             y = z[i][None] - x[:, :2]
             inv, _ = innovation_inverse(P, r, y)
@@ -751,16 +771,21 @@ class BatchBallKalman:
             if decision is None:
                 continue
             del self.jump_tests[i]
-            if decision == "push":
-                continue
-            mean, covariance = test.force_posterior(DISTURBANCE_STD_M_S2)
+            if decision == ("force" if after_change else "push"):
+                continue     # what the filter took it for
+            prior_std = test.push_std if after_change else DISTURBANCE_STD_M_S2
+            mean, covariance = test.posterior(decision, prior_std)
             self.x[i], self.p[i], self.r[i] = self._clamp_gain((test.x + mean)[None])[0], test.P + covariance, test.r
-            self.hold_until[i] = -np.inf
             self.change.clear(i)
             self.transition[i] = np.eye(self.dim)
-            self._count_changes(i)
             self.coasted[i] = 0
             adopted[i] = True
+            if after_change:          # a push: the change is undone, the model still agrees
+                self.disturbance_changes[i] -= 1
+                self.model_has_agreed[i] = True
+            else:
+                self.hold_until[i] = -np.inf
+                self._count_changes(i)
         return adopted
 
     def _confirmed_pushes(self, seen, beyond, y, distance):
@@ -824,7 +849,7 @@ class BatchBallKalman:
         for k in [k for k, ball in enumerate(i) if int(ball) in self.jump_tests]:
             ball = int(i[k])
             test = self.jump_tests[ball]
-            if t > self.hold_until[ball]:     # undecided: the push stands
+            if t > (test.until if isinstance(test, ChangeReview) else self.hold_until[ball]):   # undecided: as taken
                 del self.jump_tests[ball]
                 continue
             q_model = process_noise(self.nis[[ball]], known, False, self.cfg)
@@ -930,5 +955,5 @@ class BallKalman:
 
     @property
     def disturbance_changes(self) -> int:
-        """Changes of d found (total)."""
+        """Changes of d found (total), less those a review took for a push."""
         return int(self.filter.disturbance_changes[0])
