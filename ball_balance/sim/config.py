@@ -255,23 +255,27 @@ DOMAINS = {
     "force_3deg": {"force_step_deg": 3.0, "force_step_dir_deg": (0.0, 360.0)},
     "off_level_2deg": {"plate_mount_tilt_deg": 2.0, "plate_mount_axis_deg": (0.0, 360.0)},
     "pushes_0.3": {"push_speed_m_s": 0.3, "push_interval_s": 4.0},
-    "off_level_pushes_noise": {"plate_mount_tilt_deg": 2.0, "plate_mount_axis_deg": (0.0, 360.0),
-                               "push_speed_m_s": 0.15, "push_interval_s": 4.0, "detection_noise_m": 0.003},
+    "off_level_pushes_noise_latency": {"plate_mount_tilt_deg": 1.0, "plate_mount_axis_deg": (0.0, 360.0),
+                                       "push_speed_m_s": 0.2, "push_interval_s": 4.0, "detection_noise_m": 0.003,
+                                       "latency_s": (0.03, 0.15)},
     "force_2deg_hand_2": {"force_step_deg": 2.0, "force_step_dir_deg": (0.0, 360.0), "occlusion_markers": 2,
                           "occlusion_interval_s": 3.0, "occlusion_duration_s": 1.0},
     "latency_off_level_heavy": {"latency_s": (0.03, 0.15), "plate_mount_tilt_deg": 2.0,
                                 "plate_mount_axis_deg": (0.0, 360.0), "ball_mass_kg": 0.0050},
     "force_2deg_noise_latency": {"force_step_deg": 2.0, "force_step_dir_deg": (0.0, 360.0),
                                  "detection_noise_m": 0.003, "latency_s": (0.03, 0.15)},
-    # a tuning domain: the change test's agreement rule was chosen on it
+    # tuning domains: the change test's agreement rule was chosen on the first, the review of a
+    # change found (a push after all?) on the second
     "force_3deg_noise": {"force_step_deg": 3.0, "force_step_dir_deg": (0.0, 360.0), "detection_noise_m": 0.003},
+    "off_level_pushes_noise": {"plate_mount_tilt_deg": 2.0, "plate_mount_axis_deg": (0.0, 360.0),
+                               "push_speed_m_s": 0.15, "push_interval_s": 4.0, "detection_noise_m": 0.003},
 }
 TUNING_DOMAINS = ("standard", "slippery", "sticky", "heavy_ball", "low_gravity", "high_gravity", "noisy_vision",
                   "high_latency", "full_dr", "noise_5mm", "latency_200ms", "extreme_dr", "solid_ball", "pushes",
-                  "hand_1", "hand_2", "hand_3", "force_3deg_noise")
+                  "hand_1", "hand_2", "hand_3", "force_3deg_noise", "off_level_pushes_noise")
 HELD_OUT_DOMAINS = ("force_1deg", "force_2deg", "force_3deg", "off_level_2deg", "pushes_0.3",
-                    "off_level_pushes_noise", "force_2deg_hand_2", "latency_off_level_heavy",
-                    "force_2deg_noise_latency")
+                    "force_2deg_hand_2", "latency_off_level_heavy", "force_2deg_noise_latency",
+                    "off_level_pushes_noise_latency")
 # defaults are chosen on the tuning set only; the held-out set is reported, never tuned on
 DOMAIN_SETS = {"tuning": TUNING_DOMAINS, "held_out": HELD_OUT_DOMAINS}
 DOMAIN_ALIASES = {"gravity_0.5g": "low_gravity", "gravity_1.5g": "high_gravity"}
@@ -302,8 +306,8 @@ DOMAIN_DESCRIPTIONS = {
     "off_level_2deg": "held out: the plate mounted 2 deg off level on the tool flange, about a seeded "
                       "horizontal plate axis, for the whole episode (built into the MuJoCo model)",
     "pushes_0.3": "held out: the ball pushed at 0.3 m/s (twice pushes) in a seeded direction every 4 s",
-    "off_level_pushes_noise": "held out: off_level_2deg + pushes (0.15 m/s every 4 s) + detection noise "
-                              "3 mm (noisy_vision)",
+    "off_level_pushes_noise_latency": "held out: the plate mounted 1 deg off level + pushes at 0.2 m/s every "
+                                      "4 s + detection noise 3 mm + latency 30-150 ms",
     "force_2deg_hand_2": "held out: force_2deg's steps + a hand over 2 seeded markers for 1 s every 3 s "
                          "(hand_2)",
     "latency_off_level_heavy": "held out: latency 30-150 ms (high_latency) + off_level_2deg + a 5 g ball "
@@ -311,6 +315,7 @@ DOMAIN_DESCRIPTIONS = {
     "force_2deg_noise_latency": "held out: force_2deg's steps + detection noise 3 mm (noisy_vision) + latency "
                                 "30-150 ms (high_latency)",
     "force_3deg_noise": "force_3deg's steps + detection noise 3 mm (noisy_vision)",
+    "off_level_pushes_noise": "off_level_2deg + pushes (0.15 m/s every 4 s) + detection noise 3 mm (noisy_vision)",
 }
 
 

@@ -1,4 +1,4 @@
-"""The tuning and held-out domain sets: every domain in exactly one, the tuning set the 18
+"""The tuning and held-out domain sets: every domain in exactly one, the tuning set the 19
 domains the defaults were chosen on; each held-out domain's knobs are what its description
 says, and the plate mounted off level is a real mounting tilt in the model."""
 import dataclasses
@@ -21,7 +21,7 @@ from ball_balance.sim.world import SimWorld
 
 TUNING = ("standard", "slippery", "sticky", "heavy_ball", "low_gravity", "high_gravity", "noisy_vision",
           "high_latency", "full_dr", "noise_5mm", "latency_200ms", "extreme_dr", "solid_ball", "pushes",
-          "hand_1", "hand_2", "hand_3", "force_3deg_noise")
+          "hand_1", "hand_2", "hand_3", "force_3deg_noise", "off_level_pushes_noise")
 
 
 def test_every_domain_is_in_exactly_one_set():
@@ -49,6 +49,14 @@ def test_stronger_pushes_are_twice_the_pushes_at_the_same_interval():
     strong, pushes = DomainKnobs.sample("pushes_0.3", 0), DomainKnobs.sample("pushes", 0)
     assert strong.push_speed_m_s == 0.3 == 2 * pushes.push_speed_m_s
     assert strong.push_interval_s == pushes.push_interval_s == 4.0
+
+
+def test_off_level_pushes_under_noise_and_latency_are_milder_and_stronger_than_the_tuning_ones():
+    knobs = DomainKnobs.sample("off_level_pushes_noise_latency", 2)
+    tuning = DomainKnobs.sample("off_level_pushes_noise", 2)
+    assert knobs.plate_mount_tilt_deg == 1.0 < tuning.plate_mount_tilt_deg
+    assert knobs.push_speed_m_s == 0.2 > tuning.push_speed_m_s and knobs.push_interval_s == 4.0
+    assert knobs.detection_noise_m == 0.003 and 0.03 <= knobs.latency_s <= 0.15
 
 
 @pytest.mark.parametrize("combo,parts", [
