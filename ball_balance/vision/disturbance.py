@@ -397,6 +397,7 @@ class ChangeReview(JumpTest):
         self.filter_log_ratio += _log_likelihood_terms(innovation, S)
 
     def log_ratio(self) -> float:
+        """Twice the log evidence ratio of the change, as the filter took it, against a push."""
         push_evidence = float(self.pushes.evidence(self.push_std).max())
         return self.force_evidence + self.filter_log_ratio - push_evidence
 
