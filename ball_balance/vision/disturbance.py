@@ -324,49 +324,57 @@ class JumpTest:
     parameters and an onset, so their best fits compare directly: once twice the
     log-likelihood ratio between the best of each passes DISTURBANCE_CHANGE_CHI2 (the change
     test's bound) the test has decided. The filter (vision/kalman.py BatchBallKalman) predicts
-    and updates the reference filter; this class keeps the fits."""
+    and updates the reference filter; this class keeps the fits. `taken`: what the filter took
+    the jump for meanwhile (a push: its hold); the other decision replaces the filter by the
+    reference filter with that jump's posterior, under its prior (DISTURBANCE_STD_M_S2 for a
+    change of d, push_std for a velocity jump)."""
+
+    taken = "push"
 
     def __init__(self, x: np.ndarray, P: np.ndarray, r: float, window, transition: np.ndarray, t: float,
-                 d_index: int):
+                 d_index: int, push_std: float):
         self.x, self.P, self.r = x.copy(), P.copy(), r
+        self.push_std = push_std
         n = x.shape[0]
         transitions = [frame.transition for frame in window] + [transition]
         self.forces = Jumps.fitted(window, transitions, state_pair(n, d_index))   # of d
         self.pushes = Jumps.fitted(window, transitions, state_pair(n, 2))         # of (vx, vy)
+        self.fits = [self.forces, self.pushes]     # the fits kept up frame by frame
         self._add_onset(t, transition)
 
     def _add_onset(self, t: float, transition: np.ndarray) -> None:
-        """Both jumps in the prediction into the frame at t, whose transition that is."""
-        self.forces.add_onset(t, transition)
-        self.pushes.add_onset(t, transition)
+        """The jumps in the prediction into the frame at t, whose transition that is."""
+        for fit in self.fits:
+            fit.add_onset(t, transition)
 
     def predict(self, t: float, F: np.ndarray) -> None:
         """After the reference filter's prediction F into the frame at t: the jumps so far move
         on, and either may happen in this prediction too."""
-        self.forces.predict(F)
-        self.pushes.predict(F)
+        for fit in self.fits:
+            fit.predict(F)
         self._add_onset(t, F)
 
     def add(self, innovation: np.ndarray, S: np.ndarray) -> None:
         """The reference filter's innovation of a detection and its covariance, before its update."""
-        self.forces.add(innovation, S)
-        self.pushes.add(innovation, S)
+        for fit in self.fits:
+            fit.add(innovation, S)
 
     def take_up(self, K: np.ndarray) -> Optional[str]:
         """The reference filter's update gain K for the detection just added: "force" or "push"
         once decided, else None."""
-        self.forces.take_up(K)
-        self.pushes.take_up(K)
+        for fit in self.fits:
+            fit.take_up(K)
         return decision(self.log_ratio())
 
     def log_ratio(self) -> float:
         """Twice the log-likelihood ratio of the best force against the best push."""
         return self.forces.statistics().max() - self.pushes.statistics().max()
 
-    def posterior(self, jump: str, prior_std: float):
+    def posterior(self, jump: str):
         """The best-fitting `jump`'s ("force": of d, "push": of the velocity) effect on the
-        reference filter's state: the mean and the covariance to add (Jumps.posterior)."""
-        jumps = self.forces if jump == "force" else self.pushes
+        reference filter's state under its prior: the mean and the covariance to add
+        (Jumps.posterior)."""
+        jumps, prior_std = (self.forces, DISTURBANCE_STD_M_S2) if jump == "force" else (self.pushes, self.push_std)
         return jumps.posterior(int(np.argmax(jumps.statistics())), prior_std)
 
 
@@ -381,11 +389,14 @@ class ChangeReview(JumpTest):
     filter's likelihood and the evidence of its best onset (prior N(0, push_std^2 I)). Decided
     when one is ahead by DISTURBANCE_CHANGE_CHI2, or, by `until`, the change stands."""
 
+    taken = "force"
+
     def __init__(self, x: np.ndarray, P: np.ndarray, r: float, window, transition: np.ndarray, t: float,
                  d_index: int, push_std: float, until: float):
-        super().__init__(x, P, r, window, transition, t, d_index)
-        self.push_std, self.until = push_std, until
+        super().__init__(x, P, r, window, transition, t, d_index, push_std)
+        self.until = until
         self.force_evidence = float(self.forces.evidence(DISTURBANCE_STD_M_S2).max())
+        self.fits = [self.pushes]      # the change's side is the window's fit and the filter
         self.filter_log_ratio = 0.0    # twice the log-likelihood of the frames since: filter less reference
 
     def add_filtered(self, innovation: np.ndarray, S: np.ndarray) -> None:

@@ -93,7 +93,6 @@ from ball_balance.control.prediction import StampedDelayEstimator
 from ball_balance.rotations import matrix_to_rotvec
 from ball_balance.vision.config import TRACKER_SCHEMA
 from ball_balance.vision.disturbance import (
-    DISTURBANCE_STD_M_S2,
     MODEL_AGREED_NIS,
     ChangeReview,
     ChangeTest,
@@ -747,7 +746,7 @@ class BatchBallKalman:
         for i in np.flatnonzero(pushed & self.change.settled(t, self.track_start)):
             if int(i) not in self.jump_tests:
                 self.jump_tests[int(i)] = JumpTest(self.x[i], self.p[i], float(self.r[i]), self.change.frames(i),
-                                                   self.transition[i], t, D_INDEX)
+                                                   self.transition[i], t, D_INDEX, self.cfg.init_vel_std_m_s)
 
     def _decide_jumps(self, ok, z) -> np.ndarray:
         """The balls `ok` with a jump test fold their detection into it. When it finds a change
@@ -758,7 +757,7 @@ class BatchBallKalman:
         adopted = np.zeros(self.b, bool)
         for i in [i for i in self.jump_tests if ok[i]]:
             test = self.jump_tests[i]
-            after_change = isinstance(test, ChangeReview)
+            after_change = test.taken == "force"
             if after_change:
                 test.add_filtered(z[i] - self.x[i, :2], innovation_covariance(self.p[i], self.r[i]))
             x, P, r = test.x[None], test.P[None], np.array([test.r])
@@ -771,10 +770,9 @@ class BatchBallKalman:
             if decision is None:
                 continue
             del self.jump_tests[i]
-            if decision == ("force" if after_change else "push"):
+            if decision == test.taken:
                 continue     # what the filter took it for
-            prior_std = test.push_std if after_change else DISTURBANCE_STD_M_S2
-            mean, covariance = test.posterior(decision, prior_std)
+            mean, covariance = test.posterior(decision)
             self.x[i], self.p[i], self.r[i] = self._clamp_gain((test.x + mean)[None])[0], test.P + covariance, test.r
             self.change.clear(i)
             self.transition[i] = np.eye(self.dim)
@@ -849,7 +847,7 @@ class BatchBallKalman:
         for k in [k for k, ball in enumerate(i) if int(ball) in self.jump_tests]:
             ball = int(i[k])
             test = self.jump_tests[ball]
-            if t > (test.until if isinstance(test, ChangeReview) else self.hold_until[ball]):   # undecided: as taken
+            if t > (self.hold_until[ball] if test.taken == "push" else test.until):   # undecided: as taken
                 del self.jump_tests[ball]
                 continue
             q_model = process_noise(self.nis[[ball]], known, False, self.cfg)
