@@ -28,7 +28,7 @@ A thin adapter around ball_balance.sim.SimWorld (the physics) and CameraThread (
   rest (time keeps running: the clock never goes backwards);
   /sim/set_pause (std_srvs/SetBool): data=true stops physics and the simulated clock;
   /sim/step_simulation (std_srvs/Trigger): while paused, advance `step_simulation_steps`
-  physics steps;
+  physics steps (both reply once the loop has taken the request, with the simulated time);
   /sim/ball_wrench (geometry_msgs/WrenchStamped, topic): force [N] and torque [N m] on the
   ball's centre, axes of header.frame_id (plate_center, default, or base_link/world), for
   `wrench_duration` s from receipt (a timed external wrench; keep publishing for longer);
@@ -59,6 +59,7 @@ from __future__ import annotations
 import collections
 import math
 import time as _time
+from concurrent.futures import Future
 from typing import Dict, Mapping, Optional
 
 import numpy as np
@@ -270,6 +271,7 @@ class MujocoSystem(SystemInterface):
         self._requests = collections.deque()   # callables from other threads, run in read()
         self.paused = self.params["start_paused"]
         self._steps_requested = 0
+        self._steps_waiting = []   # futures of the step requests taken, resolved once stepped
         self._copy_states()
         return CallbackReturn.SUCCESS
 
@@ -384,12 +386,15 @@ class MujocoSystem(SystemInterface):
             steps = 0   # lock-step: the next frame waits for the answer to the last one
         else:
             steps = self._steps_for(period)
+        start_s = world.time_s
         try:
             world.step(steps)
         except SimulationError as error:
             self.get_logger().error(f"{self.get_name()}: {error}")
             self._copy_states()
             return return_type.ERROR
+        finally:
+            self._resolve_steps((start_s, world.time_s))
         t = world.time_s
         if t >= self._next_push_s:
             self._next_push_s += world.knobs.push_interval_s
@@ -512,18 +517,34 @@ class MujocoSystem(SystemInterface):
             raise _InjectedError()
         self._requests.append(fail)
 
-    def request_pause(self, paused: bool) -> None:
-        """Stop (true) or resume (false) physics and the simulated clock."""
+    def request_pause(self, paused: bool) -> Future:
+        """Stop (true) or resume (false) physics and the simulated clock at the next read().
+        The future's result is the simulated time (s) at which the loop took the request."""
+        taken = Future()
+
         def pause():
             self.paused = bool(paused)
             self._steps_requested = 0
+            self._resolve_steps(None)   # steps asked for before a resume are not taken
+            taken.set_result(self.world.time_s)
         self._requests.append(pause)
+        return taken
 
-    def request_steps(self, steps: int) -> None:
-        """While paused: advance `steps` physics steps at the next read()."""
+    def request_steps(self, steps: int) -> Future:
+        """While paused: advance `steps` physics steps at the next read(). The future's result
+        is the (start, end) simulated times of that read's steps, None if a resume came first."""
+        taken = Future()
+
         def step():
             self._steps_requested += int(steps)
+            self._steps_waiting.append(taken)
         self._requests.append(step)
+        return taken
+
+    def _resolve_steps(self, result) -> None:
+        """(loop) Tell the step requests waiting what became of them."""
+        while self._steps_waiting:
+            self._steps_waiting.pop().set_result(result)
 
     def request_push(self, dv_m_s, in_plate_axes: bool = True) -> None:
         """An impulse on the ball: velocity change (m/s; plate or world axes, its part along

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import Future
+from concurrent.futures import TimeoutError as FutureTimeout
 from typing import Mapping
 
 import numpy as np
@@ -43,6 +45,8 @@ IMAGE_SENSOR_DATA = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFOR
 IMAGE_RELIABLE = QoSProfile(depth=2, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 PARTICIPANT_PREFIX_BYTES = 12   # an RTPS GUID: participant prefix (12 bytes), then the entity id
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE)
+# how long a service waits for the control loop to take its request (one cycle, normally)
+REQUEST_WAIT_S = 5.0
 FORCE_CHANGES = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                            reliability=ReliabilityPolicy.RELIABLE)
 
@@ -57,6 +61,15 @@ def camera_info_msg(camera, frame_id: str) -> CameraInfo:
     info.r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
     info.p = [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]
     return info
+
+
+def _taken(request: Future, timeout_s: float = REQUEST_WAIT_S):
+    """The result of a request to the control loop, None if the loop has not taken it in time
+    (it still will: the request stays queued)."""
+    try:
+        return request.result(timeout=timeout_s)
+    except FutureTimeout:
+        return None
 
 
 def stamp(time_s: float) -> Time:
@@ -281,10 +294,15 @@ class SimRosIo:
         return response
 
     def _handle_pause(self, request, response):
+        # the reply comes once the loop has taken the request, so a caller that steps or reads
+        # the clock next sees a paused simulation
         self.paused = bool(request.data)
-        self.controls.request_pause(self.paused)
+        taken_s = _taken(self.controls.request_pause(self.paused))
+        state = "paused" if self.paused else "running"
         response.success = True
-        response.message = "simulation paused" if self.paused else "simulation running"
+        response.message = (f"simulation {state} from t={taken_s:.6f} s" if taken_s is not None else
+                            f"simulation {state} from the control loop's next cycle (none ran within "
+                            f"{REQUEST_WAIT_S:g} s)")
         return response
 
     def _handle_step(self, request, response):
@@ -292,10 +310,17 @@ class SimRosIo:
         if not self.paused:
             response.success, response.message = False, "not paused: call /sim/set_pause with data: true first"
             return response
-        self.controls.request_steps(steps)
-        response.success = True
-        response.message = (f"advancing {steps} physics step(s) of {self.world.physics_dt_s * 1e3:g} ms "
-                            f"from t={self.world.time_s:.6f} s")
+        taken = self.controls.request_steps(steps)
+        span = _taken(taken)
+        of_steps = f"{steps} physics step(s) of {self.world.physics_dt_s * 1e3:g} ms"
+        response.success = span is not None or not taken.done()
+        if span is not None:
+            response.message = f"advanced {of_steps}: t={span[0]:.6f} -> {span[1]:.6f} s"
+        elif taken.done():
+            response.message = f"{of_steps} not taken: the simulation was resumed first"
+        else:
+            response.message = (f"{of_steps} requested; the control loop takes them at its next cycle (none "
+                                f"ran within {REQUEST_WAIT_S:g} s)")
         return response
 
     def _handle_ball_force(self, request, response):

@@ -202,20 +202,24 @@ def test_pause_step_reset_and_push_services(launcher, graph, tmp_path):
     graph.node.create_subscription(Vector3Stamped, "/sim/ball_pushed", pushed.append, 10)
     graph.spin_until(lambda: len(clocks) > 0, 60, "/clock")
     assert not graph.call(Trigger, "/sim/step_simulation", Trigger.Request()).success  # not paused
-    assert graph.call(SetBool, "/sim/set_pause", SetBool.Request(data=True)).success
+    # the reply comes once the loop has paused: nothing moves time from here but the steps
+    paused = graph.call(SetBool, "/sim/set_pause", SetBool.Request(data=True))
+    assert paused.success and paused.message.startswith("simulation paused from t="), paused.message
+    paused_s = float(paused.message.rsplit("t=", 1)[1].split()[0])
 
-    def step() -> float:
+    def step() -> tuple:
         response = graph.call(Trigger, "/sim/step_simulation", Trigger.Request())
-        assert response.success and "10 physics step" in response.message
-        start = float(response.message.rsplit("t=", 1)[1].split()[0])
+        assert response.success and response.message.startswith("advanced 10 physics step"), response.message
+        start, end = (float(t) for t in response.message.rsplit("t=", 1)[1].split()[0:3:2])
         # /clock ticks every 10 ms of sim time (clock_rate_hz 100): the 10 ms step shows in one tick
         graph.spin_until(lambda: clocks[-1] >= start + 0.008 - 1e-6, 30, "the clock to follow the step")
-        return start
+        return start, end
 
-    step()                  # after this one the pause has surely been taken by the loop
-    first = step()
-    second = step()
-    assert second - first == pytest.approx(0.010, abs=1e-6)   # paused: only the steps move time
+    spans = [step() for _ in range(3)]
+    assert spans[0][0] == pytest.approx(paused_s, abs=1e-9)
+    for (start, end), (next_start, _) in zip(spans, spans[1:] + [(spans[-1][1], None)]):
+        assert end - start == pytest.approx(0.010, abs=1e-6) and next_start == pytest.approx(end, abs=1e-9)
+    second = spans[-1][1]
     assert graph.call(SetBool, "/sim/set_pause", SetBool.Request(data=False)).success
     graph.spin_until(lambda: clocks[-1] > second + 0.1, 30, "the clock to run again")
 

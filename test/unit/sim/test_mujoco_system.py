@@ -215,17 +215,30 @@ def test_initial_speed_scaling_factor_slows_the_joints(caplog):
 
 def test_pause_stops_the_clock_and_steps_advance_it_exactly(system):
     run_cycles(system, 5)
-    system.request_pause(True)
+    pause = system.request_pause(True)
+    assert not pause.done()   # the loop takes it at its next read()
     run_cycles(system, 1)
     paused_at = system.now()
+    assert pause.result(0) == paused_at
     run_cycles(system, 20)
     assert system.now() == paused_at
-    system.request_steps(7)
+    steps = system.request_steps(7)
     run_cycles(system, 3)
-    assert system.now() == pytest.approx(paused_at + 7 * system.world.physics_dt_s)
+    dt = system.world.physics_dt_s
+    assert system.now() == pytest.approx(paused_at + 7 * dt)
+    assert steps.result(0) == (paused_at, system.now())
     system.request_pause(False)
     run_cycles(system, 10)
-    assert system.now() == pytest.approx(paused_at + 7 * system.world.physics_dt_s + 10 * PERIOD_S)
+    assert system.now() == pytest.approx(paused_at + 7 * dt + 10 * PERIOD_S)
+
+
+def test_steps_asked_for_before_a_resume_are_answered_not_taken(system):
+    system.request_pause(True)
+    run_cycles(system, 1)
+    steps = system.request_steps(5)
+    system.request_pause(False)
+    run_cycles(system, 1)
+    assert steps.result(0) is None
 
 
 def test_start_paused_waits_for_resume_with_the_ball_where_it_was_placed():
