@@ -22,13 +22,14 @@ A thin adapter around ball_balance.sim.SimWorld (the physics) and CameraThread (
   (BallState, plate frame), /sim/ball_dropped (Bool, transient local), /clock; with
   truth_fed=true also /ball_state from the truth plus detection noise (no tracker needed).
   Services and topics to drive the simulation (as mujoco_ros2_control users have them,
-  with std_srvs / geometry_msgs types; see docs/simulation.md):
+  with std_srvs / geometry_msgs types; services reply once the loop has applied the
+  request; see docs/simulation.md):
   /sim/reset_ball (std_srvs/Trigger): ball back to rest at the plate centre;
   /sim/reset_world (std_srvs/Trigger): arm at home at rest, ball at (ball_x, ball_y) at
   rest (time keeps running: the clock never goes backwards);
   /sim/set_pause (std_srvs/SetBool): data=true stops physics and the simulated clock;
   /sim/step_simulation (std_srvs/Trigger): while paused, advance `step_simulation_steps`
-  physics steps (both reply once the loop has taken the request, with the simulated time);
+  physics steps;
   /sim/ball_wrench (geometry_msgs/WrenchStamped, topic): force [N] and torque [N m] on the
   ball's centre, axes of header.frame_id (plate_center, default, or base_link/world), for
   `wrench_duration` s from receipt (a timed external wrench; keep publishing for longer);
@@ -493,12 +494,27 @@ class MujocoSystem(SystemInterface):
         return return_type.OK
 
     # ---- other threads ----------------------------------------------------------------------
-    # Simulation requests (any thread; applied by the loop at its next read()).
-    def request_reset_ball(self) -> None:
-        """Ball back to rest at the plate centre."""
-        self._requests.append(lambda: self.world.place_ball(0.0, 0.0))
+    # Simulation requests (any thread; applied by the loop at its next read()). Each returns a
+    # future the loop resolves when it has applied the request, with the simulated time then
+    # (request_steps: the time before and after its steps).
+    def _submit(self, action) -> Future:
+        taken = Future()
 
-    def request_reset_world(self) -> None:
+        def run():
+            try:
+                action()
+            except BaseException as error:
+                taken.set_exception(error)
+                raise
+            taken.set_result(self.world.time_s)
+        self._requests.append(run)
+        return taken
+
+    def request_reset_ball(self) -> Future:
+        """Ball back to rest at the plate centre."""
+        return self._submit(lambda: self.world.place_ball(0.0, 0.0))
+
+    def request_reset_world(self) -> Future:
         """Arm at home at rest (servo targets too), ball at rest at (ball_x, ball_y)."""
         def reset():
             world = self.world
@@ -510,29 +526,24 @@ class MujocoSystem(SystemInterface):
             self._hold_ball_force()   # a setting of the world, like the plate's mounting: it stays
             self._target = world.joint_positions()
             self._copy_states()
-        self._requests.append(reset)
+        return self._submit(reset)
 
-    def request_hardware_error(self) -> None:
+    def request_hardware_error(self) -> Future:
         def fail():
             raise _InjectedError()
-        self._requests.append(fail)
+        return self._submit(fail)
 
     def request_pause(self, paused: bool) -> Future:
-        """Stop (true) or resume (false) physics and the simulated clock at the next read().
-        The future's result is the simulated time (s) at which the loop took the request."""
-        taken = Future()
-
+        """Stop (true) or resume (false) physics and the simulated clock."""
         def pause():
             self.paused = bool(paused)
             self._steps_requested = 0
             self._resolve_steps(None)   # steps asked for before a resume are not taken
-            taken.set_result(self.world.time_s)
-        self._requests.append(pause)
-        return taken
+        return self._submit(pause)
 
     def request_steps(self, steps: int) -> Future:
-        """While paused: advance `steps` physics steps at the next read(). The future's result
-        is the (start, end) simulated times of that read's steps, None if a resume came first."""
+        """While paused: advance `steps` physics steps. The future's result is the (start, end)
+        simulated times of the read() that took them, None if a resume came first."""
         taken = Future()
 
         def step():
@@ -546,7 +557,7 @@ class MujocoSystem(SystemInterface):
         while self._steps_waiting:
             self._steps_waiting.pop().set_result(result)
 
-    def request_push(self, dv_m_s, in_plate_axes: bool = True) -> None:
+    def request_push(self, dv_m_s, in_plate_axes: bool = True) -> Future:
         """An impulse on the ball: velocity change (m/s; plate or world axes, its part along
         the plate taken), spin kept consistent with rolling."""
         def push():
@@ -554,7 +565,7 @@ class MujocoSystem(SystemInterface):
             if not in_plate_axes:
                 dv = self.world.plate_pose()[1].T @ dv
             self._push(float(dv[0]), float(dv[1]))
-        self._requests.append(push)
+        return self._submit(push)
 
     def _push(self, dvx_m_s: float, dvy_m_s: float) -> None:
         """(loop) Apply a push and say so on /sim/ball_pushed."""
@@ -563,22 +574,25 @@ class MujocoSystem(SystemInterface):
         if ros is not None:
             ros.publish_pushed(self.world.time_s, dvx_m_s, dvy_m_s)
 
-    def request_ball_force(self, tilt_deg: float, direction_deg: float) -> str:
+    def request_ball_force(self, tilt_deg: float, direction_deg: float) -> Future:
         """A constant force on the ball's centre from the next read() on, replacing the last one:
         the force of a plate tilted by `tilt_deg` (F = m g sin(tilt), this domain's ball and
         gravity), towards `direction_deg` (plate axes, from +x). Raises ParameterError, naming
         the bad value, and changes nothing when a value is out of the bounds of
-        ball_force_deg / ball_force_dir_deg. Returns what will act, in words."""
+        ball_force_deg / ball_force_dir_deg."""
         tilt = _PARAMS["ball_force_deg"].validate(tilt_deg)
         direction = _PARAMS["ball_force_dir_deg"].validate(direction_deg)
 
         def hold():
             self.ball_force = (tilt, direction)
             self._hold_ball_force()
-        self._requests.append(hold)
-        f_n = math.hypot(*self.world.knobs.tilt_force_n(tilt, 0.0))
-        return (f"ball force {f_n * 1e3:.3f} mN towards {direction:g} deg (plate axes), as a plate tilted "
-                f"{tilt:g} deg" if tilt > 0.0 else "no ball force")
+        return self._submit(hold)
+
+    def ball_force_words(self, tilt_deg: float, direction_deg: float) -> str:
+        """The force request_ball_force(tilt_deg, direction_deg) holds, in words."""
+        f_n = math.hypot(*self.world.knobs.tilt_force_n(tilt_deg, 0.0))
+        return (f"ball force {f_n * 1e3:.3f} mN towards {direction_deg:g} deg (plate axes), as a plate tilted "
+                f"{tilt_deg:g} deg" if tilt_deg > 0.0 else "no ball force")
 
     def _hold_ball_force(self) -> None:
         """(loop, or before it runs) The world holds `ball_force` (tilt, direction) on the ball."""
@@ -617,9 +631,9 @@ class MujocoSystem(SystemInterface):
             self._announced_force = (fx_n, fy_n)
             ros.publish_force(self.world.time_s, fx_n, fy_n)
 
-    def request_wrench(self, force_n, torque_n_m, duration_s: float, in_plate_axes: bool = True) -> None:
+    def request_wrench(self, force_n, torque_n_m, duration_s: float, in_plate_axes: bool = True) -> Future:
         """A force and torque on the ball's centre for `duration_s` (plate or world axes)."""
-        self._requests.append(lambda: self.world.apply_wrench(force_n, torque_n_m, duration_s, in_plate_axes))
+        return self._submit(lambda: self.world.apply_wrench(force_n, torque_n_m, duration_s, in_plate_axes))
 
     def _on_frame(self, image, snapshot) -> None:
         ros = self.ros

@@ -72,6 +72,14 @@ def _taken(request: Future, timeout_s: float = REQUEST_WAIT_S):
         return None
 
 
+def _since(request: Future) -> str:
+    """When a request to the control loop took effect, in words (once it has, or in time)."""
+    taken_s = _taken(request)
+    if taken_s is None:
+        return f"from the control loop's next cycle (none ran within {REQUEST_WAIT_S:g} s)"
+    return f"from t={taken_s:.6f} s"
+
+
 def stamp(time_s: float) -> Time:
     sec = int(time_s // 1)
     return Time(sec=sec, nanosec=min(999_999_999, int(round((time_s - sec) * 1e9))))
@@ -276,8 +284,10 @@ class SimRosIo:
             self.logger.info(line)
 
     def _handle_reset(self, request, response):
-        self.controls.request_reset_ball()
-        response.success, response.message = True, "ball reset to the plate centre"
+        # the replies below come once the loop has applied the request (services run on the
+        # executor's thread, the loop on its own), so what a caller reads next follows it
+        since = _since(self.controls.request_reset_ball())
+        response.success, response.message = True, f"ball at rest at the plate centre {since}"
         return response
 
     def _handle_hardware_error(self, request, response):
@@ -287,22 +297,17 @@ class SimRosIo:
         return response
 
     def _handle_reset_world(self, request, response):
-        self.controls.request_reset_world()
+        since = _since(self.controls.request_reset_world())
         response.success = True
         response.message = (f"arm at home, ball at rest at ({self.params['ball_x']:+.3f}, "
-                            f"{self.params['ball_y']:+.3f}) m; the clock keeps running")
+                            f"{self.params['ball_y']:+.3f}) m {since}; the clock keeps running")
         return response
 
     def _handle_pause(self, request, response):
-        # the reply comes once the loop has taken the request, so a caller that steps or reads
-        # the clock next sees a paused simulation
         self.paused = bool(request.data)
-        taken_s = _taken(self.controls.request_pause(self.paused))
-        state = "paused" if self.paused else "running"
+        since = _since(self.controls.request_pause(self.paused))
         response.success = True
-        response.message = (f"simulation {state} from t={taken_s:.6f} s" if taken_s is not None else
-                            f"simulation {state} from the control loop's next cycle (none ran within "
-                            f"{REQUEST_WAIT_S:g} s)")
+        response.message = f"simulation {'paused' if self.paused else 'running'} {since}"
         return response
 
     def _handle_step(self, request, response):
@@ -325,15 +330,16 @@ class SimRosIo:
 
     def _handle_ball_force(self, request, response):
         try:
-            held = self.controls.request_ball_force(request.ball_force_deg, request.ball_force_dir_deg)
+            taken = self.controls.request_ball_force(request.ball_force_deg, request.ball_force_dir_deg)
         except ParameterError as error:
             self.refused_force_requests += 1
             response.success, response.message = False, f"refused, the force in effect is unchanged: {error}"
             self.logger.warning(f"/sim/set_ball_force: {response.message} ({self.refused_force_requests} refused "
                                 "so far)", throttle_duration_sec=1.0)
             return response
-        response.success, response.message = True, f"from the next cycle: {held}"
-        self.logger.info(f"/sim/set_ball_force: {held}")
+        held = self.controls.ball_force_words(request.ball_force_deg, request.ball_force_dir_deg)
+        response.success, response.message = True, f"{held} {_since(taken)}"
+        self.logger.info(f"/sim/set_ball_force: {response.message}")
         return response
 
     def _plate_axes(self, frame_id: str, what: str):

@@ -318,8 +318,11 @@ def test_ball_force_from_the_start_and_changed_while_running():
         run_cycles(system, 100)    # 0.2 s towards +y
         vx, vy = _ball_velocity(system)
         assert vy == pytest.approx(_tilt_speed(system, 2.0, 0.2), rel=0.1) and abs(vx) < 1e-3
-        said = system.request_ball_force(1.0, 180.0)
+        said = system.ball_force_words(1.0, 180.0)
         assert "180 deg" in said and "1 deg" in said
+        asked_s, taken = system.now(), system.request_ball_force(1.0, 180.0)
+        run_cycles(system, 1)
+        assert taken.result(0) == asked_s   # applied at the start of the next read(), before its steps
         run_cycles(system, 100)    # the y speed kept, -x gained at half the rate
         vx, vy2 = _ball_velocity(system)
         assert vx == pytest.approx(-_tilt_speed(system, 1.0, 0.2), rel=0.1) and vy2 == pytest.approx(vy, rel=0.05)
@@ -327,7 +330,8 @@ def test_ball_force_from_the_start_and_changed_while_running():
         run_cycles(system, 100)
         vx, vy = _ball_velocity(system)
         assert vx == pytest.approx(-_tilt_speed(system, 1.0, 0.2), rel=0.1) and abs(vy) < 1e-3
-        assert system.request_ball_force(0.0, 0.0) == "no ball force"
+        assert system.ball_force_words(0.0, 0.0) == "no ball force"
+        system.request_ball_force(0.0, 0.0)
         run_cycles(system, 50)
         assert _ball_velocity(system)[0] == pytest.approx(vx, rel=0.05)
     finally:
