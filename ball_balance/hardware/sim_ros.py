@@ -63,11 +63,11 @@ def camera_info_msg(camera, frame_id: str) -> CameraInfo:
     return info
 
 
-def _taken(request: Future, timeout_s: float = REQUEST_WAIT_S):
-    """The result of a request to the control loop, None if the loop has not taken it in time
-    (it still will: the request stays queued)."""
+def _taken(request: Future):
+    """The result of a request to the control loop, None if the loop has not taken it within
+    REQUEST_WAIT_S (it still will: the request stays queued)."""
     try:
-        return request.result(timeout=timeout_s)
+        return request.result(timeout=REQUEST_WAIT_S)
     except FutureTimeout:
         return None
 
@@ -283,9 +283,9 @@ class SimRosIo:
         if line:
             self.logger.info(line)
 
+    # The replies below come once the loop has applied the request (services run on the
+    # executor's thread, the loop on its own), so what a caller reads next follows it.
     def _handle_reset(self, request, response):
-        # the replies below come once the loop has applied the request (services run on the
-        # executor's thread, the loop on its own), so what a caller reads next follows it
         since = _since(self.controls.request_reset_ball())
         response.success, response.message = True, f"ball at rest at the plate centre {since}"
         return response
@@ -318,12 +318,12 @@ class SimRosIo:
         taken = self.controls.request_steps(steps)
         span = _taken(taken)
         of_steps = f"{steps} physics step(s) of {self.world.physics_dt_s * 1e3:g} ms"
-        response.success = span is not None or not taken.done()
         if span is not None:
-            response.message = f"advanced {of_steps}: t={span[0]:.6f} -> {span[1]:.6f} s"
+            response.success, response.message = True, f"advanced {of_steps}: t={span[0]:.6f} -> {span[1]:.6f} s"
         elif taken.done():
-            response.message = f"{of_steps} not taken: the simulation was resumed first"
+            response.success, response.message = False, f"{of_steps} not taken: the simulation was resumed first"
         else:
+            response.success = True
             response.message = (f"{of_steps} requested; the control loop takes them at its next cycle (none "
                                 f"ran within {REQUEST_WAIT_S:g} s)")
         return response

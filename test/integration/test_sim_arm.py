@@ -217,8 +217,8 @@ def test_pause_step_reset_and_push_services(launcher, graph, tmp_path):
 
     spans = [step() for _ in range(3)]
     assert spans[0][0] == pytest.approx(paused_s, abs=1e-9)
-    for (start, end), (next_start, _) in zip(spans, spans[1:] + [(spans[-1][1], None)]):
-        assert end - start == pytest.approx(0.010, abs=1e-6) and next_start == pytest.approx(end, abs=1e-9)
+    assert all(end - start == pytest.approx(0.010, abs=1e-6) for start, end in spans)
+    assert all(next_start == pytest.approx(end, abs=1e-9) for (_, end), (next_start, _) in zip(spans, spans[1:]))
     second = spans[-1][1]
     assert graph.call(SetBool, "/sim/set_pause", SetBool.Request(data=False)).success
     graph.spin_until(lambda: clocks[-1] > second + 0.1, 30, "the clock to run again")
