@@ -543,10 +543,14 @@ class MujocoSystem(SystemInterface):
 
     def request_steps(self, steps: int) -> Future:
         """While paused: advance `steps` physics steps. The future's result is the (start, end)
-        simulated times of the read() that took them, None if a resume came first."""
+        simulated times of the read() that took them, None if the loop was running when the
+        request reached it or a resume came first."""
         taken = Future()
 
         def step():
+            if not self.paused:   # a resume got in first: a running cycle is not these steps
+                taken.set_result(None)
+                return
             self._steps_requested += int(steps)
             self._steps_waiting.append(taken)
         self._requests.append(step)

@@ -241,6 +241,17 @@ def test_steps_asked_for_before_a_resume_are_answered_not_taken(system):
     assert steps.result(0) is None
 
 
+def test_steps_that_reach_a_running_loop_are_answered_not_taken(system):
+    system.request_pause(True)
+    system.request_pause(False)   # another caller resumes before the steps arrive
+    steps = system.request_steps(5)
+    run_cycles(system, 1)
+    start = system.now()
+    assert steps.result(0) is None
+    run_cycles(system, 3)
+    assert system.now() == pytest.approx(start + 3 * PERIOD_S)   # running as before, no extra steps
+
+
 def test_start_paused_waits_for_resume_with_the_ball_where_it_was_placed():
     system, result = make_system({"start_paused": True, "domain": "pushes", "ball_x": 0.05})
     assert result == CallbackReturn.SUCCESS
