@@ -380,7 +380,8 @@ class JumpTest:
 
 class ChangeReview(JumpTest):
     """After a change of d was found with a push's detection in the change test's window (one
-    the detection noise did not let the push test confirm): was it a push after all? The
+    the detection noise did not let the push test confirm), or a jump test decided on one
+    (`after`): was it a push after all? The
     change stands, in the filter, unless a push explains the frames better. The reference
     filter is the filter as it was, without the change, and the explanations are compared by
     their evidence (the jump's size integrated over its prior) since the window began:
@@ -398,6 +399,19 @@ class ChangeReview(JumpTest):
         self.force_evidence = float(self.forces.evidence(DISTURBANCE_STD_M_S2).max())
         self.fits = [self.pushes]      # the change's side is the window's fit and the filter
         self.filter_log_ratio = 0.0    # twice the log-likelihood of the frames since: filter less reference
+
+    @classmethod
+    def after(cls, test: JumpTest, until: float) -> ChangeReview:
+        """The review of a change of d `test` has just decided on: its reference filter, without
+        the change, and its push fits run on; the change's side is its best fit so far."""
+        review = cls.__new__(cls)
+        review.x, review.P, review.r, review.push_std = test.x.copy(), test.P.copy(), test.r, test.push_std
+        review.forces, review.pushes = test.forces, test.pushes
+        review.until = until
+        review.force_evidence = float(test.forces.evidence(DISTURBANCE_STD_M_S2).max())
+        review.fits = [review.pushes]
+        review.filter_log_ratio = 0.0
+        return review
 
     def add_filtered(self, innovation: np.ndarray, S: np.ndarray) -> None:
         """The innovation of a detection and its covariance in the filter that took the change."""

@@ -59,11 +59,12 @@ reference filter runs with the model's own process noise, and the detections it 
 explained both ways, as a jump of the ball's velocity and as a jump of d, each at the onset
 that fits it best (vision/disturbance.py JumpTest). As soon as one explanation is better by
 the change test's bound, it stands: a change of d ends the hold and the reference filter,
-corrected by the change, takes over. The other way round, a push the noise kept from being
-confirmed shows to the change test as a change of d: a change found with a detection beyond
-`maneuver_sigma` in its window is reviewed by the same kind of reference filter, the filter
-without the change, until `maneuver_hold_s` after it (ChangeReview), and if a push explains
-the frames better the change is undone.
+corrected by the change, takes over, and the change is reviewed as below. The other way
+round, a push the noise kept from being confirmed shows to the change test as a change of d:
+a change found with a detection beyond `maneuver_sigma` in its window, and a change the jump
+test decided on, is reviewed by the same kind of reference filter, the filter without the
+change, until `maneuver_hold_s` after it (ChangeReview), and if a push explains the frames
+better the change is undone.
 
 Delay: the plate reaches a command some time after the tracker receives it (the arm's latency
 and servo lag, 0.03-0.2 s in the benchmark's latency domains); the known acceleration and the
@@ -682,7 +683,7 @@ class BatchBallKalman:
             if changed:                   # a change found corrected the state
                 y = z - self.x[:, :2]
                 inv, _ = innovation_inverse(self.p, self.r, y)
-            ok = ok & ~self._decide_jumps(ok, z)
+            ok = ok & ~self._decide_jumps(t, ok, z)
             appended &= ok                # a filter replaced starts its window again
         if not ok.any():
             return
@@ -748,12 +749,15 @@ class BatchBallKalman:
                 self.jump_tests[int(i)] = JumpTest(self.x[i], self.p[i], float(self.r[i]), self.change.frames(i),
                                                    self.transition[i], t, D_INDEX, self.cfg.init_vel_std_m_s)
 
-    def _decide_jumps(self, ok, z) -> np.ndarray:
+    def _decide_jumps(self, t: float, ok, z) -> np.ndarray:
         """The balls `ok` with a jump test fold their detection into it. When it finds a change
         of d, the reference filter, with the change's posterior (its mean and covariance given
         the frames since its onset, under the DISTURBANCE_STD_M_S2 prior) added, becomes the
-        ball's filter and the push's hold ends; when it finds a push, the test ends and the
-        hold goes on. Returns the balls whose filter was replaced (their detection is in it)."""
+        ball's filter, the push's hold ends and the change is reviewed until `maneuver_hold_s`
+        after it, as a change the change test found is (ChangeReview.after: the decision is
+        taken on the frames so far, and a push may still explain the ones that follow
+        better); when it finds a push, the test ends and the hold goes on. Returns the balls
+        whose filter was replaced (their detection is in it)."""
         adopted = np.zeros(self.b, bool)
         for i in [i for i in self.jump_tests if ok[i]]:
             test = self.jump_tests[i]
@@ -784,6 +788,7 @@ class BatchBallKalman:
             else:
                 self.hold_until[i] = -np.inf
                 self._count_changes(i)
+                self.jump_tests[i] = ChangeReview.after(test, until=t + self.cfg.maneuver_hold_s)
         return adopted
 
     def _confirmed_pushes(self, seen, beyond, y, distance):

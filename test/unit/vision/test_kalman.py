@@ -4,6 +4,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from ball_balance.vision.disturbance import JumpTest
 from ball_balance.vision.kalman import BallKalman, DetectionNoiseEstimator, KalmanConfig, PlateCommandInput
 
 # the filter these tests start from: every adaptation and the push detection off (a test switches
@@ -503,6 +504,31 @@ def test_a_push_under_detection_noise_taken_for_a_change_of_the_disturbance_is_u
         changes += kf.disturbance_changes
         assert np.all(np.abs(d[t >= 6.0].mean(axis=0)) < 0.02)
     assert changes <= 2
+
+
+def test_a_push_the_jump_test_took_for_a_force_is_undone_by_the_frames_that_follow(monkeypatch):
+    # the jump test decides on the frames so far, and under noise and latency a push can win
+    # as a force by a hair; the frames that follow, which the filter that took the change
+    # mispredicts, then show the push: the change is reviewed and undone within the hold
+    misjudged = []
+    take_up = JumpTest.take_up
+
+    def first_decision_a_force(test, K):
+        decided = take_up(test, K)
+        if type(test) is JumpTest and not misjudged:
+            misjudged.append(decided)
+            return "force"
+        return decided
+
+    monkeypatch.setattr(JumpTest, "take_up", first_decision_a_force)
+    cfg = dataclasses.replace(KalmanConfig(), disturbance_time_constant_s=20.0, estimate_input_gain=False)
+    kf = BallKalman(cfg)
+    changes = []
+    t, d = _ball_under_a_loop(kf, lambda t: np.zeros(2), 8.0, push_at_s=4.0, changes=changes)
+    assert misjudged and max(changes) == 1 and kf.disturbance_changes == 0
+    undone_s = t[np.flatnonzero(np.array(changes) == 1)[-1] + 1]
+    assert undone_s < 4.0 + 2.0 * cfg.maneuver_hold_s    # within the review's hold after the decision
+    assert np.all(np.abs(d[t >= undone_s + 0.1]) < 0.02)
 
 
 def test_a_push_just_after_an_outlier_began_a_hold_is_still_a_push():
