@@ -37,7 +37,7 @@ DRY_RUN=0
 MAX_HOME_DISTANCE=0.3
 TRACKER_ARGS=()
 CTRL_PARAMS=()
-usage() { sed -n '2,27p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,/^[^#]/{/^#/p}' "$0" | sed 's/^# \{0,1\}//'; }   # the header comment
 while (($#)); do
   case "$1" in
     --controller) CONTROLLER="$2"; shift 2 ;;

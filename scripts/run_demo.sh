@@ -21,7 +21,7 @@ CONTROLLER=mpc
 DURATION=30
 OUT="$ROOT/artifacts/demo"
 LIVE_VIEW=(--live-view-port "${BALL_BALANCE_LIVE_VIEW_PORT:-8080}")
-usage() { sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,/^[^#]/{/^#/p}' "$0" | sed 's/^# \{0,1\}//'; }   # the header comment
 while (($#)); do
   case "$1" in
     --controller) CONTROLLER="$2"; shift 2 ;;
@@ -44,6 +44,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST
 echo "run_demo.sh: [2/3] simulated graph: ball released at (0.08, -0.05) m, balanced at the centre for 6 s," \
      "then a circle r = 0.10 m, T = 10 s; ${DURATION} s of simulated time" >&2
 mkdir -p "$OUT"
+STARTED="$(mktemp)"   # files in $OUT newer than this are this run's
 set +e
 "$ROOT/scripts/sim_balance.sh" --controller "$CONTROLLER" --ball 0.08 -0.05 \
   --reference circle --radius 0.10 --period 10 --start-delay 6 \
@@ -53,13 +54,20 @@ set -e
 
 echo "run_demo.sh: [3/3] results in $OUT:" >&2
 ls -l "$OUT" >&2 || true
-if [[ -f "$OUT/metrics.txt" ]]; then
+WRITTEN="$(find "$OUT" -maxdepth 1 -type f -newer "$STARTED" -printf '%f ' 2>/dev/null)"
+rm -f "$STARTED"
+if [[ " $WRITTEN" == *" metrics.txt "* ]]; then   # not an earlier run's
   echo "--- metrics ($CONTROLLER) ---"
   cat "$OUT/metrics.txt"
 fi
 case "$CODE" in
   0) echo "run_demo.sh: done: the ball stayed on the plate" >&2 ;;
   1) echo "run_demo.sh: the ball DROPPED (see $OUT/plot.png)" >&2 ;;
+  130) if [[ -n "$WRITTEN" ]]; then
+         echo "run_demo.sh: interrupted: ${WRITTEN% } cover the run up to the interrupt" >&2
+       else
+         echo "run_demo.sh: interrupted before anything was written" >&2
+       fi ;;
   *) echo "run_demo.sh: the graph did not produce results (exit $CODE); see the logs named above" >&2 ;;
 esac
 exit "$CODE"

@@ -162,9 +162,10 @@ export BALL_BALANCE_ROOT="$ROOT"
 export VIRTUAL_ENV="$VENV"
 export PATH="$ROOT/install/lib/ball_balance:$ROOT/install/lib/controller_manager_py:$VENV/bin:\$PATH"
 $( [[ $MODE == wheels ]] && echo "export AMENT_PREFIX_PATH=\"$VENV\${AMENT_PREFIX_PATH:+:\$AMENT_PREFIX_PATH}\"" )
-case $- in *u*) _bb_nounset=1; set +u;; *) _bb_nounset=0;; esac
+# the ROS setup scripts read unset variables: nounset off while they run, then the caller's again
+case \$- in *u*) _bb_nounset=1; set +u;; *) _bb_nounset=0;; esac
 source "$ROOT/install/local_setup.bash"
-((_bb_nounset)) && set -u; unset _bb_nounset
+if ((_bb_nounset)); then set -u; fi; unset _bb_nounset
 export MUJOCO_GL="\${MUJOCO_GL:-egl}"
 export PYOPENGL_PLATFORM="\${PYOPENGL_PLATFORM:-\$MUJOCO_GL}"
 # DDS settings for camera frames at full rate (docs/transport.md); your own files win

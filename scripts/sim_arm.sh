@@ -4,10 +4,10 @@
 # joint_state_broadcaster and forward_position_controller come up active (with
 # --trajectory: scaled_joint_trajectory_controller instead). Ctrl-C stops everything.
 #
-#   scripts/sim_arm.sh                              # standard domain, camera 30 Hz 640x480
+#   scripts/sim_arm.sh                              # standard domain, camera rate and size of config/sim.yaml
 #   scripts/sim_arm.sh --domain slippery --seed 3   # an evaluation domain (docs/design.md section 7)
 #   scripts/sim_arm.sh --sim-config config/sim_truth_fed.yaml   # no camera, /ball_state from truth
-#   scripts/sim_arm.sh --param camera_rate_hz=60 --param camera_width=320 --param camera_height=240
+#   scripts/sim_arm.sh --param camera_rate_hz=30 --param camera_width=320 --param camera_height=240
 #   scripts/sim_arm.sh --trajectory                 # MPC-style: the trajectory controller active
 #   scripts/sim_arm.sh --managed                    # for the robot manager: hardware inactive, only
 #                                                   # joint_state_broadcaster active (nothing moves)

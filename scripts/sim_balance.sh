@@ -14,7 +14,7 @@
 #   scripts/sim_balance.sh --duration 30 --out DIR --video-s 10 --debug-image   # + camera.mp4 with overlay
 #   scripts/sim_balance.sh --truth-fed                          # no camera/tracker: /ball_state from truth
 #   scripts/sim_balance.sh --param kp:=2.0                      # any controller parameter
-#   scripts/sim_balance.sh --tracker-param disturbance_time_constant_s:=0   # any tracker parameter
+#   scripts/sim_balance.sh --tracker-param disturbance_time_constant_s:=0.0   # any tracker parameter
 #   scripts/sim_balance.sh --sim-param camera_rate_hz=60        # any simulation parameter (config/sim.yaml)
 #   scripts/sim_balance.sh --force 2 90       # a constant force on the ball, as a plate 2 deg off level, towards +y
 #   scripts/sim_balance.sh --plate-offset 2 0 # the plate mounted 2 deg off level about its x axis (rolls to -y)

@@ -12,7 +12,7 @@
 #   scripts/sim_policy_in_manager.sh --tilt-law mpc --params-file my_values.yaml   # another law, its values
 #   scripts/sim_policy_in_manager.sh --reference circle --radius 0.1 --period 10 --duration 20
 #   scripts/sim_policy_in_manager.sh --truth-fed           # no camera/tracker: /ball_state from truth
-#   scripts/sim_policy_in_manager.sh --tracker-param disturbance_time_constant_s:=0   # any tracker parameter
+#   scripts/sim_policy_in_manager.sh --tracker-param disturbance_time_constant_s:=0.0   # any tracker parameter
 #   scripts/sim_policy_in_manager.sh --live-view-port 8081  # the live view's port (8080; --no-live-view: none)
 #
 # The live view (docs/live_view.md) shows the run on http://127.0.0.1:8080/ (the address is
