@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib
 import re
+import sys
 from collections import OrderedDict
 from typing import Any, Optional
 
@@ -52,22 +53,41 @@ def is_message(value: Any) -> bool:
 
 
 # --- message -> YAML ---------------------------------------------------------------------
+# As rosidl_runtime_py's message_to_ordereddict (Jazzy) renders them, which `ros2 topic echo`
+# and `ros2 action send_goal` print through yaml.dump:
+# - bytes (a `byte`/`octet` field, which rclpy gives as a bytes of length 1, and the items of
+#   a `byte[]`, a list of them) become a text string of one character per byte (chr(b)), so
+#   b'\x02' prints as `"\x02"` and b'A' as `A`; longer than the truncate length: cut, '...' added.
+#   `uint8`/`char` fields are ints and print as numbers (`uint8[]`: array.array, numpy array).
+# - --no-arr abbreviates an array field by its declared type: `<array type: double[3]>`,
+#   `<sequence type: octet[8], length: 2>` (bounded) or `<sequence type: octet, length: 2>`.
 def message_to_ordered(value: Any, truncate_length: Optional[int] = None, no_arr: bool = False,
-                       no_str: bool = False) -> Any:
-    """Message (or field value) -> plain OrderedDict / list / scalar, for YAML output."""
+                       no_str: bool = False, field_type: Any = None) -> Any:
+    """Message (or field value) -> plain OrderedDict / list / scalar, for YAML output.
+
+    field_type: the rosidl_parser type of the field `value` comes from (a message's SLOT_TYPES
+    entry), which --no-arr names; a bare value has none and is never abbreviated.
+    """
     if is_message(value):
-        return OrderedDict((name, message_to_ordered(getattr(value, name), truncate_length, no_arr, no_str))
-                           for name in value.get_fields_and_field_types())
-    if isinstance(value, (bytes, str)):
-        if no_str and isinstance(value, str):
+        fields = value.get_fields_and_field_types()
+        slot_types = getattr(value, "SLOT_TYPES", None) or [None] * len(fields)
+        return OrderedDict((name, message_to_ordered(getattr(value, name), truncate_length, no_arr, no_str, slot))
+                           for name, slot in zip(fields, slot_types, strict=False))
+    if isinstance(value, bytes):
+        text = "".join(map(chr, value))
+        if truncate_length is not None and len(text) > truncate_length:
+            return text[:truncate_length] + "..."
+        return text
+    if isinstance(value, str):
+        if no_str:
             return f"<string length: <{len(value)}>>"
         if truncate_length is not None and len(value) > truncate_length:
-            return value[:truncate_length] + ("..." if isinstance(value, str) else b"...")
+            return value[:truncate_length] + "..."
         return value
     if hasattr(value, "tolist") or isinstance(value, (list, tuple)):  # array.array, numpy, sequences
+        if no_arr and field_type is not None:
+            return _abbreviated_array(value, field_type)
         items = value.tolist() if hasattr(value, "tolist") else list(value)
-        if no_arr:
-            return f"<array type: {_element_name(items)}[{len(items)}]>"
         truncated = truncate_length is not None and len(items) > truncate_length
         if truncated:
             items = items[:truncate_length]
@@ -78,8 +98,30 @@ def message_to_ordered(value: Any, truncate_length: Optional[int] = None, no_arr
     return value
 
 
-def _element_name(items) -> str:
-    return type(items[0]).__name__ if items else "unknown"
+def _abbreviated_array(value: Any, field_type: Any) -> str:
+    """What --no-arr prints instead of an array field, named by its declared type."""
+    from rosidl_parser import definition
+
+    element = field_type.value_type if isinstance(field_type, definition.AbstractNestedType) else None
+    if isinstance(element, definition.BasicType):
+        element_name = element.typename
+    elif isinstance(element, definition.AbstractString):
+        element_name = "string"
+    elif isinstance(element, definition.AbstractWString):
+        element_name = "wstring"
+    elif isinstance(element, definition.NamespacedType):
+        element_name = "/".join(element.namespaced_name())
+    elif isinstance(element, definition.NamedType):
+        element_name = element.name
+    else:
+        element_name = "unknown"
+    if isinstance(field_type, definition.Array):
+        return f"<array type: {element_name}[{field_type.size}]>"
+    if isinstance(field_type, definition.BoundedSequence):
+        return f"<sequence type: {element_name}[{field_type.maximum_size}], length: {len(value)}>"
+    if isinstance(field_type, definition.UnboundedSequence):
+        return f"<sequence type: {element_name}, length: {len(value)}>"
+    return "unknown"
 
 
 def to_yaml(value: Any) -> str:
@@ -92,7 +134,7 @@ def to_yaml(value: Any) -> str:
     Dumper.add_representer(OrderedDict, lambda d, data: d.represent_mapping(
         "tag:yaml.org,2002:map", data.items()))
     return yaml.dump(value, Dumper=Dumper, default_flow_style=False, allow_unicode=True,
-                     width=10 ** 9, sort_keys=False)
+                     width=sys.maxsize, sort_keys=False)
 
 
 def message_to_yaml(msg: Any, truncate_length: Optional[int] = 128, no_arr: bool = False,
@@ -101,6 +143,16 @@ def message_to_yaml(msg: Any, truncate_length: Optional[int] = 128, no_arr: bool
     if not is_message(msg) and text.endswith("\n...\n"):  # a bare scalar: no document end marker
         text = text[:-4]
     return text
+
+
+def echo_text(value: Any, truncate_length: Optional[int] = 128, no_arr: bool = False,
+              no_str: bool = False) -> str:
+    """One `ros2 topic echo` output (without the '---' line): a message as YAML; a field that is
+    not a message (--field) as Python's str() of it, untruncated, as ros2cli prints it (e.g.
+    `b'\\x02'` for a byte field, `array('d', [1.0, 2.0])` for a float64[])."""
+    if is_message(value):
+        return message_to_yaml(value, truncate_length, no_arr, no_str)
+    return f"{value}\n"
 
 
 def get_field(msg: Any, path: str) -> Any:

@@ -33,7 +33,7 @@ def cmd_list(args) -> int:
 
 
 def cmd_echo(args) -> int:
-    from ball_balance.cli.messages import get_field, get_interface, message_to_yaml
+    from ball_balance.cli.messages import echo_text, get_field, get_interface
 
     topic = absolute_name(args.topic_name)
     truncate = None if args.full_length else args.truncate_length
@@ -48,7 +48,7 @@ def cmd_echo(args) -> int:
 
         def on_message(msg):
             value = get_field(msg, args.field) if args.field else msg
-            sys.stdout.write(message_to_yaml(value, truncate, args.no_arr, args.no_str) + "---\n")
+            sys.stdout.write(echo_text(value, truncate, args.no_arr, args.no_str) + "---\n")
             sys.stdout.flush()
             if not args.once or not received:
                 received.append(True)

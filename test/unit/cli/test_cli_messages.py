@@ -3,6 +3,7 @@ import pytest
 
 from ball_balance.cli.errors import CliError
 from ball_balance.cli.messages import (
+    echo_text,
     get_field,
     get_interface,
     message_to_yaml,
@@ -29,6 +30,44 @@ def test_arrays_are_block_lists_and_truncated():
     assert "name:\n- a\n- b\nposition:\n- 1.0\n- 2.5\nvelocity: []\n" in text
     long = get_interface("std_msgs/msg/Float64MultiArray")(data=[float(i) for i in range(5)])
     assert message_to_yaml(long, truncate_length=2).endswith("data:\n- 0.0\n- 1.0\n- '...'\n")
+
+
+def test_byte_fields_print_as_ros2_topic_echo_does():
+    # rosidl_runtime_py (Jazzy) convert.py: bytes -> ''.join(chr(b)), dumped by yaml.dump; never `!!binary`
+    status = get_interface("diagnostic_msgs/msg/DiagnosticStatus")(
+        level=b"\x02", name="camera", message="stale", hardware_id="cam0")
+    status.values = [get_interface("diagnostic_msgs/msg/KeyValue")(key="age", value="3.5")]
+    expected = ('level: "\\x02"\nname: camera\nmessage: stale\nhardware_id: cam0\n'
+                "values:\n- key: age\n  value: '3.5'\n")
+    assert message_to_yaml(status) == expected
+    array = get_interface("diagnostic_msgs/msg/DiagnosticArray")(status=[status])
+    assert message_to_yaml(array).endswith("status:\n- level: \"\\x02\"\n  name: camera\n" + "".join(
+        f"  {line}\n" for line in expected.splitlines()[2:]))
+    assert message_to_yaml(get_interface("diagnostic_msgs/msg/DiagnosticStatus")(level=b"A")).startswith("level: A\n")
+    # `--field level`: ros2cli prints a field that is not a message with print(), i.e. str()
+    assert echo_text(status.level) == "b'\\x02'\n"
+    assert echo_text(status) == expected
+
+
+def test_byte_and_uint8_arrays_print_as_ros2_topic_echo_does():
+    # byte[]: rclpy gives a list of 1-byte bytes -> one-character strings; uint8[]: numbers
+    data = [b"\x01", b"A", b"\xff"]
+    byte_array = get_interface("std_msgs/msg/ByteMultiArray")(data=data)
+    assert message_to_yaml(byte_array) == 'layout:\n  dim: []\n  data_offset: 0\ndata:\n- "\\x01"\n- A\n- \xff\n'
+    assert message_to_yaml(byte_array, truncate_length=1).endswith('data:\n- "\\x01"\n- \'...\'\n')
+    assert message_to_yaml(byte_array, no_arr=True).endswith("data: '<sequence type: octet, length: 3>'\n")
+    uint8_array = get_interface("std_msgs/msg/UInt8MultiArray")(data=[1, 65, 255])
+    assert message_to_yaml(uint8_array).endswith("data:\n- 1\n- 65\n- 255\n")
+    assert echo_text(byte_array.data) == "[b'\\x01', b'A', b'\\xff']\n"
+
+
+def test_no_arr_names_the_declared_array_type_as_ros2cli():
+    joints = get_interface("sensor_msgs/msg/JointState")(name=["a"], position=[1.0, 2.0])
+    assert message_to_yaml(joints, no_arr=True).endswith(
+        "name: '<sequence type: string, length: 1>'\nposition: '<sequence type: double, length: 2>'\n"
+        "velocity: '<sequence type: double, length: 0>'\neffort: '<sequence type: double, length: 0>'\n")
+    imu = get_interface("sensor_msgs/msg/Imu")()
+    assert "orientation_covariance: '<array type: double[9]>'\n" in message_to_yaml(imu, no_arr=True)
 
 
 def test_field_selection_and_scalars():
