@@ -1,8 +1,9 @@
 """What the live view's page shows, kept as plain numbers and strings (no ROS).
 
 The node feeds it from its subscriptions on the executor's thread and asks it for a
-`snapshot()` a few times a second while a page is connected; the snapshot is a new dict of
-plain values (JSON-ready), handed to the web server's thread as it is and never changed after.
+`snapshot()` a few times a second while a page is connected, and once for each GET /api/state;
+the snapshot is a new dict of plain values (JSON-ready), handed to the web server's thread as it
+is and never changed after.
 
 Times are the messages' stamps in seconds (the graph's clock: simulated time in simulation), so
 the path and the error plot show the last seconds of the run as the camera saw them, however

@@ -2,7 +2,10 @@
 
   GET /            the page (static/index.html; its script and style from /static/, nothing
                    from the internet)
-  GET /api/state   the newest state as JSON (for scripts and curl)
+  GET /api/state   the newest state as JSON (for scripts and curl), whether or not a page is
+                   connected: built on request by `state()` (the ROS side), which returns a
+                   concurrent.futures.Future of the state dict; without `state` (or when it
+                   does not answer within `reply_timeout_s`), the last state pushed
   GET /ws          WebSocket: the server sends the state as JSON text messages
                    ({"type": "state", ...}) and camera frames as binary messages (JPEG); the
                    page sends requests ({"id": n, "op": ...}, live_view.commands) and gets one
@@ -64,9 +67,11 @@ class _Page:
 class LiveViewServer:
     def __init__(self, host: str, port: int, handle: Callable[[dict], concurrent.futures.Future],
                  on_pages: Callable[[int], None] = lambda count: None, reply_timeout_s: float = 5.0,
-                 log: Callable[[str], None] = print):
+                 log: Callable[[str], None] = print,
+                 state: Optional[Callable[[], concurrent.futures.Future]] = None):
         self.host, self.requested_port = host, port
         self.handle, self.on_pages, self.reply_timeout_s, self.log = handle, on_pages, reply_timeout_s, log
+        self.state = state
         self.port: Optional[int] = None
         self.pages: Set[_Page] = set()
         self.latest_state: Optional[str] = None    # JSON, once the ROS side has pushed a state
@@ -151,7 +156,16 @@ class LiveViewServer:
         return web.FileResponse(STATIC_DIR / "index.html")
 
     async def _state(self, request: web.Request) -> web.Response:
-        return web.Response(text=self.latest_state or "{}", content_type="application/json")
+        """The newest state: asked of the ROS side for this request, not kept up to date for nobody."""
+        text = None
+        if self.state is not None:
+            try:
+                snapshot = await asyncio.wait_for(asyncio.wrap_future(self.state()), self.reply_timeout_s)
+                text = json.dumps(dict(snapshot, type="state"))
+            except Exception as error:  # noqa: BLE001 - no answer in time, shutting down: the last state
+                self.log(f"GET /api/state: the newest state was not built ({type(error).__name__}: {error}); "
+                         f"answered with the last one sent to the pages")
+        return web.Response(text=text or self.latest_state or "{}", content_type="application/json")
 
     async def _websocket(self, request: web.Request) -> web.StreamResponse:
         origin = request.headers.get("Origin")

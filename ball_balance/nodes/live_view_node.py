@@ -9,11 +9,15 @@ the reference and the controller's gains.
 Threads and cost. One single-threaded executor runs this node. The web server (aiohttp) runs
 on an asyncio loop in a thread of its own (ball_balance.live_view.server), the JPEG encoder in
 another (ball_balance.live_view.frames). Nothing is subscribed at the camera's or the ball
-state's rate while no page is connected: the high-rate topics (/ball_state, /ball_reference,
+state's rate while nobody looks: the high-rate topics (/ball_state, /ball_reference,
 /joint_states, the camera) are subscriptions of a hidden node that no executor spins, created
-when the first page connects and destroyed when the last leaves. A timer at `update_rate_hz`
-takes what they hold (no callback per message), updates the model and pushes one state to the
-pages; the encoder thread takes the newest frame itself at most `image_rate_hz` times a second.
+when the first page connects and destroyed when the last leaves. A `GET /api/state` (a script)
+follows the ball, the reference and the arm too, not the camera, until API_FOLLOW_S after the
+last such request. A timer at `update_rate_hz` takes what they hold (no callback per message),
+updates the model and, while a page is connected, pushes one state to the pages; the encoder
+thread takes the newest frame itself at most `image_rate_hz` times a second. `/api/state` gets a
+state built for it on the executor from the newest messages (the first request after a quiet
+spell waits at most FIRST_STATE_WAIT_S for the first ball state), never one kept from a page.
 
 Requests from the page arrive on the web thread, are checked there (live_view.commands), and
 cross to the executor through a queue and a guard condition. Every service call has a deadline
@@ -84,6 +88,8 @@ POLL_PERIOD_S = 1.0         # the robot manager's state and the controller's par
 DEADLINE_CHECK_S = 0.05     # how often pending calls are checked against their deadline
 TAKE_LIMIT = 100            # messages taken from one topic per update at most
 FRESH_S = 1.0               # a topic silent (wall clock) this long is shown as stale
+API_FOLLOW_S = 10.0         # after a GET /api/state the ball, reference and arm are followed this long
+FIRST_STATE_WAIT_S = 2.0    # a GET /api/state that starts following waits this long at most for a ball state
 
 
 def _stamp_s(header) -> float:
@@ -156,10 +162,15 @@ class LiveViewNode(Node):
         self.create_subscription(DiagnosticStatus, f"{manager}/events", self.on_event, 10)
         self.create_subscription(TransitionEvent, f"{manager}/transition_event", self.on_transition, 10)
         self.create_subscription(DiagnosticArray, "/diagnostics", self.on_diagnostics, 10)
-        # the high-rate topics: subscribed on the unspun reader only while a page is connected
+        # the high-rate topics: subscribed on the unspun reader only while a page or a script looks (watch)
         self.reader = Node("_ball_balance_live_view_reader", context=self.context, use_global_arguments=False,
                            start_parameter_services=False, enable_rosout=False)
         self.watched: Optional[dict] = None
+        self.asked_s = -math.inf                # (monotonic) the last GET /api/state
+        self.following_since = -math.inf        # (monotonic) the ball state subscription's creation
+        self.ball_taken = False                 # a ball state was taken since then
+        self.state_requests: queue.SimpleQueue = queue.SimpleQueue()
+        self.state_waiting: List[concurrent.futures.Future] = []
         self.wall = {"ball": -math.inf, "joints": -math.inf}
         self.pages = 0
         self.refused_requests = 0
@@ -168,7 +179,7 @@ class LiveViewNode(Node):
         self.encoder = FrameEncoder(self.take_frame, self.decode_frame, self.on_jpeg, p["image_rate_hz"],
                                     p["jpeg_quality"], p["image_scale"], self.on_frame_error)
         self.server = LiveViewServer(p["host"], p["port"], self.on_request, self.on_pages, p["call_timeout_s"] + 2.0,
-                                     log=self.get_logger().info)
+                                     log=self.get_logger().info, state=self.on_state_request)
         try:
             self.server.start()
         except OSError as error:
@@ -198,9 +209,23 @@ class LiveViewNode(Node):
         self.wake.trigger()
         return answer
 
+    def on_state_request(self) -> concurrent.futures.Future:
+        """GET /api/state (web thread): the newest state, built on the executor's thread."""
+        answer: concurrent.futures.Future = concurrent.futures.Future()
+        self.asked_s = time.monotonic()
+        self.state_requests.put(answer)
+        self.wake.trigger()
+        return answer
+
     # ---- executor thread ---------------------------------------------------------------------
     def on_wake(self) -> None:
-        self.watch(self.pages > 0)
+        while True:   # before watch(): each request's asked_s is then seen by it
+            try:
+                self.state_waiting.append(self.state_requests.get_nowait())
+            except queue.Empty:
+                break
+        self.watch()
+        self.answer_state_requests()
         while True:
             try:
                 command, answer = self.requests.get_nowait()
@@ -209,30 +234,46 @@ class LiveViewNode(Node):
             self.get_logger().info(f"page: {command.describe()}")
             self.carry_out(command, answer)
 
-    def watch(self, wanted: bool) -> None:
-        """Subscribe to the high-rate topics while a page is connected (reader node, never spun)."""
-        if wanted == (self.watched is not None):
-            return
-        if wanted:
+    def watch(self) -> None:
+        """Subscribe to the high-rate topics while looked at (reader node, never spun): the ball, the
+        reference and the arm while a page is connected or a script asked for /api/state less than
+        API_FOLLOW_S ago, the camera while a page is connected. self.watched is replaced, not changed
+        (the encoder thread reads it)."""
+        page = self.pages > 0
+        follow = page or time.monotonic() - self.asked_s < API_FOLLOW_S
+        if follow and self.watched is None:
             self.watched = {
                 "ball": self.reader.create_subscription(BallState, "/ball_state", lambda m: None, BALL_QOS),
                 "reference": self.reader.create_subscription(PointStamped, "/ball_reference", lambda m: None,
                                                              QoSProfile(depth=KEPT)),
                 "joints": self.reader.create_subscription(JointState, "/joint_states", lambda m: None,
                                                           QoSProfile(depth=1)),
-                "image": self.reader.create_subscription(Image, self.params["image_topic"], lambda m: None,
-                                                         QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT),
-                                                         raw=True),
             }
+            self.following_since, self.ball_taken = time.monotonic(), False
+            if not page:
+                self.get_logger().info(f"asked for /api/state: following the ball and the arm until "
+                                       f"{API_FOLLOW_S:g} s after the last request")
+            self.on_poll()
+        if page and "image" not in self.watched:
+            image = self.reader.create_subscription(Image, self.params["image_topic"], lambda m: None,
+                                                    QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT),
+                                                    raw=True)
+            self.watched = dict(self.watched, image=image)
             self.get_logger().info("a page is connected: following the ball, the arm and the camera")
             self.encoder.set_active(True)
-            self.on_poll()
-        else:
+        elif not page and self.watched is not None and "image" in self.watched:
             self.encoder.set_active(False)
+            watched, self.watched = self.watched, {k: v for k, v in self.watched.items() if k != "image"}
+            self.reader.destroy_subscription(watched["image"])
+            if follow:
+                self.get_logger().info("no page connected: following the ball and the arm for /api/state, "
+                                       "not the camera")
+        if not follow and self.watched is not None:
             watched, self.watched = self.watched, None
             for subscription in watched.values():
                 self.reader.destroy_subscription(subscription)
-            self.get_logger().info("no page connected: not following the high-rate topics")
+            self.get_logger().info("no page connected and no /api/state request for a while: "
+                                   "not following the high-rate topics")
 
     def carry_out(self, command: commands.Command, answer: concurrent.futures.Future) -> None:
         if command.op == "lifecycle":
@@ -334,9 +375,18 @@ class LiveViewNode(Node):
                 self.model.controller["plant"] = status.message
 
     def on_update(self) -> None:
-        """Take what the watched topics hold, update the model, push one state to the pages."""
+        """Take what the watched topics hold, update the model, push one state to the pages (if any)
+        and answer the /api/state requests that wait for a first ball state."""
+        self.watch()
         if self.watched is None:
             return
+        self.take()
+        self.answer_state_requests()
+        if self.pages > 0:
+            self.server.push_state(self.snapshot())
+
+    def take(self) -> None:
+        """The watched topics' waiting messages into the model."""
         now = time.monotonic()
         for msg in _take(self.watched["reference"]):
             self.model.on_reference(msg.point.x, msg.point.y, _stamp_s(msg.header))
@@ -345,22 +395,42 @@ class LiveViewNode(Node):
                         msg.pixel_u, msg.pixel_v)
             if self.model.on_ball(ball, _stamp_s(msg.header)):
                 self.wall["ball"] = now
+            self.ball_taken = True
         for msg in _take(self.watched["joints"]):
             self.model.on_joint_velocities(msg.velocity, _stamp_s(msg.header))
             self.wall["joints"] = now
+
+    def answer_state_requests(self) -> None:
+        """Answer the waiting /api/state requests with the newest state; just after the ball state
+        was subscribed, once its first message is there or FIRST_STATE_WAIT_S has passed."""
+        if not self.state_waiting:
+            return
+        if self.watched is not None:
+            self.take()
+            if not self.ball_taken and time.monotonic() - self.following_since < FIRST_STATE_WAIT_S:
+                return
+        snapshot = self.snapshot()
+        waiting, self.state_waiting = self.state_waiting, []
+        for answer in waiting:
+            if not answer.done():
+                answer.set_result(snapshot)
+
+    def snapshot(self) -> dict:
+        """The state the pages and /api/state get: a new dict, never changed once handed over."""
+        now = time.monotonic()
         snapshot = self.model.snapshot()
         snapshot["fresh"] = {k: now - t < FRESH_S for k, t in self.wall.items()}
         snapshot["gain_names"] = list(self.gain_names)
         snapshot["pending_calls"] = len(self.pending)
         snapshot["refused_requests"] = self.refused_requests
-        self.server.push_state(snapshot)
+        return snapshot
 
     # ---- the encoder thread ------------------------------------------------------------------
     def take_frame(self) -> Optional[bytes]:
-        watched = self.watched
-        if watched is None:
+        image = (self.watched or {}).get("image")
+        if image is None:
             return None
-        frames = _take(watched["image"], 2)
+        frames = _take(image, 2)
         return frames[-1] if frames else None
 
     def decode_frame(self, serialized: bytes):

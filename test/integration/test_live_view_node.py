@@ -1,13 +1,19 @@
 """ball_balance_live_view without a browser: a page's requests reach the robot manager's
 services as lifecycle_msgs and std_srvs calls, and a robot manager that does not answer is
 reported at the deadline while the server keeps serving. The robot manager here is this test's
-own node (its services answer only while the test spins it)."""
+own node (its services answer only while the test spins it). GET /api/state gives the newest
+ball state whether or not a page is connected."""
 import asyncio
 import json
+import threading
+import time
+import urllib.request
 
 import aiohttp
 import pytest
+from ball_tracker_msgs.msg import BallState
 from lifecycle_msgs.srv import ChangeState
+from rclpy.qos import qos_profile_sensor_data
 from std_srvs.srv import Trigger
 
 from harness import executable
@@ -98,3 +104,48 @@ def test_a_robot_manager_that_does_not_answer_is_reported_at_the_deadline(launch
     assert reply["message"] == "emergency stop: /robot_manager/emergency_stop did not answer within 1 s"
     # and the server still serves
     assert asyncio.run(ask(url, [{"op": "set_parameters", "values": {"kp": "x"}}]))[0]["ok"] is False
+
+
+def test_api_state_is_the_newest_ball_state_with_or_without_a_page(launcher, graph):
+    """A script's GET /api/state follows the ball with no page ever connected, and after a page has
+    come and gone (it answered {} before any page, then stayed at the page's last state)."""
+    url, node = start_live_view(launcher, graph)
+    publisher = graph.node.create_publisher(BallState, "/ball_state", qos_profile_sensor_data)
+    ball = {"x": 0.011}              # what the publisher sends now (replaced as a whole)
+    stop = threading.Event()
+
+    def publish() -> None:           # a tracker at 50 Hz: stamps advance 0.02 s a message
+        for i in range(10 ** 9):
+            if stop.wait(0.02):
+                return
+            msg = BallState(x=ball["x"], y=-0.02, tracking_valid=True, ball_found=True, markers_found=4)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = 100 + i // 50, (i % 50) * 20_000_000
+            publisher.publish(msg)
+
+    def state_with(x: float, timeout: float = 60.0) -> dict:
+        """GET /api/state until its ball is at x (discovery of a new subscription takes its time)."""
+        deadline, state = time.monotonic() + timeout, {}
+        while time.monotonic() < deadline:
+            with urllib.request.urlopen(url + "api/state", timeout=30.0) as response:
+                state = json.loads(response.read())
+            if (state.get("ball") or {}).get("x") == x:
+                return state
+            time.sleep(0.1)
+        raise AssertionError(f"/api/state did not show the ball at x={x} within {timeout:.0f} s: {state}")
+
+    thread = threading.Thread(target=publish, daemon=True)
+    thread.start()
+    try:
+        first = state_with(0.011)                 # no page has ever connected
+        assert first["type"] == "state" and first["t"] >= 100.0 and first["ball"]["y"] == -0.02
+        ball = {"x": 0.022}
+        second = state_with(0.022)
+        assert second["t"] > first["t"]
+        asyncio.run(ask(url, []))                 # a page comes and goes
+        ball = {"x": 0.033}
+        third = state_with(0.033)
+        assert third["t"] > second["t"]
+    finally:
+        stop.set()
+        thread.join(timeout=10.0)
+    assert "asked for /api/state: following the ball and the arm" in node.output()

@@ -1,8 +1,11 @@
 """The live view's web server without ROS: the page and its files, the state and frames pushed
-to a WebSocket, requests answered (or refused, or timed out) without holding the server."""
+to a WebSocket, requests answered (or refused, or timed out) without holding the server, and
+/api/state built on request with no page connected."""
 import asyncio
 import concurrent.futures
 import json
+import time
+import urllib.request
 
 import aiohttp
 import pytest
@@ -95,3 +98,45 @@ def test_a_busy_port_is_one_clear_error(server):
     other = LiveViewServer("127.0.0.1", server.port, lambda request: None)
     with pytest.raises(OSError):
         other.start()
+
+
+def get_state(server) -> dict:
+    with urllib.request.urlopen(server.url + "api/state", timeout=20.0) as response:
+        return json.loads(response.read())
+
+
+def test_api_state_is_built_on_request_without_a_page():
+    """No page, nothing pushed: each GET /api/state gets the state the ROS side has then."""
+    asked = []
+
+    def state():
+        asked.append(len(asked))
+        future = concurrent.futures.Future()
+        future.set_result({"t": 43.68 + len(asked), "ball": {"x": 0.001 * len(asked)}})
+        return future
+    server = LiveViewServer("127.0.0.1", 0, lambda request: None, state=state)
+    server.start()
+    try:
+        first, second = get_state(server), get_state(server)
+    finally:
+        server.stop()
+    assert not server.pages and server.latest_state is None
+    assert first == {"t": 44.68, "ball": {"x": 0.001}, "type": "state"}
+    assert second["t"] > first["t"] and second["ball"] == {"x": 0.002}
+
+
+def test_api_state_falls_back_to_the_last_state_sent_when_the_ros_side_does_not_answer():
+    logged = []
+    server = LiveViewServer("127.0.0.1", 0, lambda request: None, reply_timeout_s=0.2, log=logged.append,
+                            state=concurrent.futures.Future)     # never answered
+    server.start()
+    try:
+        assert get_state(server) == {}
+        server.push_state({"t": 1.5})
+        deadline = time.monotonic() + 20.0
+        while server.latest_state is None and time.monotonic() < deadline:   # through the server's loop
+            time.sleep(0.02)
+        assert get_state(server) == {"t": 1.5, "type": "state"}
+    finally:
+        server.stop()
+    assert "the newest state was not built" in logged[0]
