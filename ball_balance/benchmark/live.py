@@ -8,7 +8,17 @@ Subscribes /sim/ball_truth (true ball, plate frame), /ball_state (tracker), /bal
 /plate_cmd, /sim/ball_dropped, /sim/ball_pushed (each push: the recovery from it is timed as
 the benchmark does), /sim/ball_force (each change of the force on the ball: a step, timed
 likewise), /clock (only for the wall-clock figures) and, for the video,
-/camera/image_raw or the tracker's overlay (/ball_tracker/debug_image).
+/camera/image_raw or the tracker's overlay (/ball_tracker/debug_image). For the progress
+line only, the robot manager's /robot_manager/events and /robot_manager/transition_event (is
+the command applied?).
+
+The progress line shows the state at its stamp: DROPPED while the truth there shows the ball off
+the plate (not after /sim/reset_ball or /sim/reset_world put it back; the metrics still end at the
+first drop and count it); `tilt` is the commanded tilt (/plate_cmd) while the robot manager is
+active (or absent: no event from it), the arm executing it; otherwise the column reads `cmd` and
+the line ends "not applied (robot manager STATE)" or "not applied (emergency stop)": the arm
+does not follow /plate_cmd then (after an emergency stop it holds its last position). A robot
+manager's state change carries no stamp: it counts from the newest stamp read when it arrived.
 
 One time base, the header stamps (simulated time in the simulated graph, which in lock-step
 runs as slowly as the machine makes the control chain): never the time a message was read,
@@ -60,6 +70,7 @@ RECORD_DEPTH = 5000
 DRAIN_WALL_S = 10.0       # at the end, stop waiting for the other topics after this long without progress
 STAMP_MATCH_S = 1e-6      # header stamps are whole nanoseconds: one frame's stamp survives as one
 PLOT_POINTS = 20000       # the plot draws at most this many samples per line
+ROBOT_MANAGER = "/robot_manager"   # its state tells whether the arm executes /plate_cmd
 
 
 def stamp_s(msg) -> float:
@@ -140,6 +151,9 @@ class Recording:
         self.latency = CameraToCommand()
         self.dropped = False           # /sim/ball_dropped said so
         self.drop_s: Optional[float] = None   # first truth stamp with the ball off the plate
+        # the robot manager's state changes (newest stamp read on arrival, lifecycle state label
+        # or "emergency stop"), in arrival order
+        self.manager: list = []
         self.clip: Optional[VideoClip] = None
 
     # --- callbacks: O(1) ------------------------------------------------------------------
@@ -173,6 +187,28 @@ class Recording:
 
     def on_dropped(self, msg) -> None:
         self.dropped = self.dropped or bool(msg.data)
+
+    def on_manager_event(self, msg) -> None:
+        """/robot_manager/events (DiagnosticStatus): an emergency stop, or the lifecycle state
+        after a transition, a failed one or a reset."""
+        values = {kv.key: kv.value for kv in msg.values}
+        state = "emergency stop" if values.get("event") == "emergency_stop" else values.get("lifecycle_state")
+        if state:
+            self._manager_state(state)
+
+    def on_manager_transition(self, msg) -> None:
+        """/robot_manager/transition_event: the state a transition goes to (deactivating at its
+        start: the plate is being levelled, the command no longer applied)."""
+        self._manager_state(msg.goal_state.label)
+
+    def _manager_state(self, state: str) -> None:
+        newest = max(self.truth.last_s, self.states.last_s, self.references.last_s, self.commands.last_s)
+        self.manager.append((newest, state))
+
+    def manager_at(self, t_s: float) -> Optional[str]:
+        """The robot manager's state at stamp t_s; None before its first event (or without one)."""
+        i = bisect.bisect_right(self.manager, t_s, key=lambda change: change[0])
+        return self.manager[i - 1][1] if i else None
 
     # --- how far the recording goes -------------------------------------------------------
     @property
@@ -208,14 +244,19 @@ class Recording:
         return min(self.t0_s + duration_s, self.drop_s if self.drop_s is not None else math.inf)
 
     def at(self, t_s: float) -> dict:
-        """The recording at one stamp: ball (truth, interpolated), tracker (the /ball_state of
-        exactly this stamp), target and tilt (as the metrics take them); None where unknown."""
+        """The recording at one stamp: ball (truth, interpolated), on_plate (the newest truth at
+        or before it), tracker (the /ball_state of exactly this stamp), target and tilt (as the
+        metrics take them), manager (manager_at); None where unknown."""
         t = np.array([t_s])
-        out = {"ball": None, "tracker": None, "target": None, "tilt": None}
+        out = {"ball": None, "on_plate": None, "tracker": None, "target": None, "tilt": None,
+               "manager": self.manager_at(t_s)}
         truth = self.truth.near(t_s)
         if len(truth) and truth[0, 0] <= t_s <= truth[-1, 0]:
             out["ball"] = (float(np.interp(t_s, truth[:, 0], truth[:, 1])),
                            float(np.interp(t_s, truth[:, 0], truth[:, 2])))
+        upto = truth[truth[:, 0] <= t_s + STAMP_MATCH_S]
+        if len(upto):
+            out["on_plate"] = bool(upto[-1, 3])
         states = self.states.near(t_s)
         same = states[np.abs(states[:, 0] - t_s) <= STAMP_MATCH_S]
         if len(same):
@@ -342,11 +383,23 @@ def format_at(rec: Recording, t_s: float) -> str:
         line += "  (controller not engaged yet)"
     else:
         line += "  (controller not engaged)"
-    if now["tilt"] is not None:
-        line += f"  tilt ({math.degrees(now['tilt'][0]):+5.2f}, {math.degrees(now['tilt'][1]):+5.2f}) deg"
-    if rec.drop_s is not None and rec.drop_s <= t_s:
+    not_applied = not_applied_because(now["manager"])
+    if now["tilt"] is not None:   # the command: "cmd" (same width) when the arm does not execute it
+        line += (f"  {'tilt' if not_applied is None else 'cmd '} "
+                 f"({math.degrees(now['tilt'][0]):+5.2f}, {math.degrees(now['tilt'][1]):+5.2f}) deg")
+    if now["on_plate"] is False:   # now: not since the first drop (the metrics keep that)
         line += "  DROPPED"
+    if now["tilt"] is not None and not_applied is not None:
+        line += f"  not applied ({not_applied})"
     return line
+
+
+def not_applied_because(manager: Optional[str]) -> Optional[str]:
+    """Why the arm does not execute /plate_cmd, from the robot manager's state (None: it does,
+    the manager active or never heard from)."""
+    if manager is None or manager == "active":
+        return None
+    return manager if manager == "emergency stop" else f"robot manager {manager}"
 
 
 # ---- the video -------------------------------------------------------------------------------
@@ -441,6 +494,9 @@ def overlay_lines(rec: Recording, stamp: float) -> list:
     now = rec.at(stamp)
     tilt = "-" if now["tilt"] is None else \
         f"({math.degrees(now['tilt'][0]):+5.2f}, {math.degrees(now['tilt'][1]):+5.2f}) deg"
+    not_applied = not_applied_because(now["manager"])
+    if now["tilt"] is not None and not_applied is not None:
+        tilt = f"cmd {tilt} not applied ({not_applied})"
     return [f"t {stamp - rec.t0_s:6.2f} s  ball {mm(now['ball'])}  target {mm(now['target'])}",
             f"tracker {mm(now['tracker'])}  tilt {tilt}"]
 
@@ -501,7 +557,9 @@ class LiveRecorder(Recording):
                  video_topic: str = "/camera/image_raw", video_path: Optional[Path] = None):
         super().__init__()
         from ball_tracker_msgs.msg import BallState
+        from diagnostic_msgs.msg import DiagnosticStatus
         from geometry_msgs.msg import PointStamped, Vector3Stamped
+        from lifecycle_msgs.msg import TransitionEvent
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
         from rosgraph_msgs.msg import Clock
         from std_msgs.msg import Bool
@@ -525,6 +583,11 @@ class LiveRecorder(Recording):
         force_changes = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                                    durability=DurabilityPolicy.TRANSIENT_LOCAL)
         node.create_subscription(Vector3Stamped, "/sim/ball_force", self.on_force, force_changes)
+        # the robot manager (docs/robot_manager.md): its events are transient local (the last 20)
+        events = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE,
+                            durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        node.create_subscription(DiagnosticStatus, f"{ROBOT_MANAGER}/events", self.on_manager_event, events)
+        node.create_subscription(TransitionEvent, f"{ROBOT_MANAGER}/transition_event", self.on_manager_transition, 10)
         if video_s > 0 and video_path is not None:
             from sensor_msgs.msg import Image
 
