@@ -9,6 +9,7 @@ child process publishes them, ball_balance/hardware/camera_process.py). Services
 from __future__ import annotations
 
 import math
+import sys
 import time
 from concurrent.futures import Future
 from concurrent.futures import TimeoutError as FutureTimeout
@@ -372,9 +373,19 @@ class SimRosIo:
         if axes is not None:
             self.controls.request_push(values, axes)
 
+    def _log_at_close(self, text: str) -> None:
+        """Log a line while closing. close() usually runs once Ctrl-C or SIGTERM has shut the
+        context down (the manager's destroy_node shuts the hardware down then); the ROS logger
+        could no longer publish to /rosout (rcl would print an error instead), so the line goes
+        to stderr in the logger's format."""
+        if self.node.context.ok():
+            self.logger.info(text)
+        else:
+            print(f"[INFO] [{self.logger.name}]: {text}", file=sys.stderr, flush=True)
+
     def close(self) -> None:
         if self._pace is not None and not self._closed:
-            self.logger.info(self._pace.summary())
+            self._log_at_close(self._pace.summary())
         self._closed = True
         for entity in (self.image_pub, self.info_pub, self.truth_pub, self.dropped_pub, self.pushed_pub, self.force_pub,
                        self.clock_pub, self.detection_pub, self.trace_pub):
