@@ -395,10 +395,7 @@ class ChangeReview(JumpTest):
     def __init__(self, x: np.ndarray, P: np.ndarray, r: float, window, transition: np.ndarray, t: float,
                  d_index: int, push_std: float, until: float):
         super().__init__(x, P, r, window, transition, t, d_index, push_std)
-        self.until = until
-        self.force_evidence = float(self.forces.evidence(DISTURBANCE_STD_M_S2).max())
-        self.fits = [self.pushes]      # the change's side is the window's fit and the filter
-        self.filter_log_ratio = 0.0    # twice the log-likelihood of the frames since: filter less reference
+        self._review(until)
 
     @classmethod
     def after(cls, test: JumpTest, until: float) -> ChangeReview:
@@ -407,11 +404,15 @@ class ChangeReview(JumpTest):
         review = cls.__new__(cls)
         review.x, review.P, review.r, review.push_std = test.x.copy(), test.P.copy(), test.r, test.push_std
         review.forces, review.pushes = test.forces, test.pushes
-        review.until = until
-        review.force_evidence = float(test.forces.evidence(DISTURBANCE_STD_M_S2).max())
-        review.fits = [review.pushes]
-        review.filter_log_ratio = 0.0
+        review._review(until)
         return review
+
+    def _review(self, until: float) -> None:
+        """From the fits so far on: the change's side fixed at its best fit, the push's kept up."""
+        self.until = until
+        self.force_evidence = float(self.forces.evidence(DISTURBANCE_STD_M_S2).max())
+        self.fits = [self.pushes]      # the change's side is the window's fit and the filter
+        self.filter_log_ratio = 0.0    # twice the log-likelihood of the frames since: filter less reference
 
     def add_filtered(self, innovation: np.ndarray, S: np.ndarray) -> None:
         """The innovation of a detection and its covariance in the filter that took the change."""
