@@ -225,6 +225,8 @@ class LiveViewNode(Node):
             except queue.Empty:
                 break
         self.watch()
+        if self.state_waiting and self.watched is not None:
+            self.take()
         self.answer_state_requests()
         while True:
             try:
@@ -401,14 +403,14 @@ class LiveViewNode(Node):
             self.wall["joints"] = now
 
     def answer_state_requests(self) -> None:
-        """Answer the waiting /api/state requests with the newest state; just after the ball state
-        was subscribed, once its first message is there or FIRST_STATE_WAIT_S has passed."""
+        """Answer the waiting /api/state requests with the state the model holds (the caller has
+        taken the newest messages); just after the ball state was subscribed, once its first
+        message is there or FIRST_STATE_WAIT_S has passed."""
         if not self.state_waiting:
             return
-        if self.watched is not None:
-            self.take()
-            if not self.ball_taken and time.monotonic() - self.following_since < FIRST_STATE_WAIT_S:
-                return
+        if (self.watched is not None and not self.ball_taken
+                and time.monotonic() - self.following_since < FIRST_STATE_WAIT_S):
+            return
         snapshot = self.snapshot()
         waiting, self.state_waiting = self.state_waiting, []
         for answer in waiting:
