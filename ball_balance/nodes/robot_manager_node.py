@@ -13,11 +13,12 @@ States (lifecycle_msgs; reference in docs/robot_manager.md):
   cleanup       hardware unconfigured. shutdown: controllers stopped, hardware inactive.
 
 Emergency stop: ~/emergency_stop (std_srvs/Trigger), and the watchdogs (a hardware component
-that left `active`, no heartbeat from the controller manager, no camera frame while the ball
-is on the plate) call `trigger_emergency_stop(reason, source)`: every commanding controller is
-deactivated in one switch, the hardware goes inactive (it holds its last target), the latch
-is set (~/emergency_stop_active, Bool, transient local) and the node ends up inactive. It stays
-so until ~/reset_emergency_stop, which clears the latch and moves nothing.
+or a balancing controller that left `active`, no heartbeat from the controller manager, no
+camera frame while the ball is on the plate) call `trigger_emergency_stop(reason, source)`:
+every commanding controller is deactivated in one switch, the hardware goes inactive (it
+holds its last target), the latch is set (~/emergency_stop_active, Bool, transient local) and
+the node ends up inactive. It stays so until ~/reset_emergency_stop, which clears the latch
+and moves nothing.
 Every stop and transition is an event on ~/events (diagnostic_msgs/DiagnosticStatus, name
 robot_manager, values event/source/lifecycle_state) and a status on /diagnostics.
 
@@ -323,6 +324,7 @@ class RobotManagerNode(LifecycleNode):
                 await self.cm.set_hardware_state(name, lc.ACTIVE, "active")
             elif state != "active":
                 return f"hardware '{name}' is {state}, not inactive"
+        self.watchdog.forget_controllers()
         try:
             await self.cm.switch(activate=names(self.params["controllers"]), strictness=STRICT)
         except ManagerCallError as error:
@@ -501,6 +503,8 @@ class RobotManagerNode(LifecycleNode):
     # ---- inputs -----------------------------------------------------------------------------
     def on_activity(self, msg) -> None:
         self.controller_states = {c.name: c.state.label for c in msg.controllers}
+        balancing = names(self.params["controllers"])
+        self.watchdog.watch_controllers({n: s for n, s in self.controller_states.items() if n in balancing})
         wanted = names(self.params["hardware_components"])
         self.watchdog.hardware = {c.name: c.state.label for c in msg.hardware_components
                                   if not wanted or c.name in wanted}

@@ -268,6 +268,21 @@ def test_ros2py_lifecycle_drives_it_by_hand_and_survives_a_late_answer(rig):
     assert rig.state() == "inactive"
 
 
+def test_a_balancing_controller_switched_off_by_someone_else_ends_in_the_safe_state(rig):
+    rig.ensure_active()
+    rig.events.clear()
+    result = rig.launcher.run([executable("ros2py"), "control", "switch_controllers", "--deactivate",
+                               "forward_position_controller"], timeout=180)
+    assert result.returncode == 0, result.stdout + result.stderr
+    event = rig.wait_for_event(lambda e: value(e, "event") == "emergency_stop", "the stop event")
+    assert value(event, "source") == "controller_stopped", event.message
+    assert "'forward_position_controller' is inactive" in event.message
+    rig.graph.spin_until(lambda: rig.state() == "inactive", 60, "inactive after the stop")
+    assert rig.latch[-1]
+    t0 = rig.now()
+    _estop_holds(rig, t0 - 0.1, t0 + 1.0)
+
+
 def _manager_pid(rig) -> int:
     match = re.search(r"ros2_control_node (\d+)", rig.sim.output())
     assert match, rig.sim.output()

@@ -3,7 +3,14 @@ import pytest
 
 from ball_balance.operation import lifecycle as lc
 from ball_balance.operation.levelling import SMOOTHSTEP_PEAK, levelling_duration, levelling_path, smoothstep
-from ball_balance.operation.watchdog import CAMERA_LOST, HARDWARE_ERROR, MANAGER_STALLED, Watchdog, WatchdogLimits
+from ball_balance.operation.watchdog import (
+    CAMERA_LOST,
+    CONTROLLER_STOPPED,
+    HARDWARE_ERROR,
+    MANAGER_STALLED,
+    Watchdog,
+    WatchdogLimits,
+)
 
 
 def test_each_state_offers_the_transitions_ros2_lifecycle_lists():
@@ -44,6 +51,22 @@ def test_a_quiet_graph_is_fine():
 def test_a_component_that_left_active_is_a_hardware_error():
     source, reason = _watchdog(hardware={"arm": "unconfigured"}).check(10.1)
     assert source == HARDWARE_ERROR and "'arm' is unconfigured" in reason
+
+
+def test_a_balancing_controller_that_left_active_is_stopped_once_it_had_been_active():
+    dog = _watchdog()
+    dog.forget_controllers()
+    dog.watch_controllers({"balance": "inactive"})   # the state from before the activation's switch
+    assert dog.check(10.1) is None
+    dog.watch_controllers({"balance": "active"})
+    assert dog.check(10.1) is None
+    dog.watch_controllers({"balance": "inactive"})   # someone switched it off
+    source, reason = dog.check(10.1)
+    assert source == CONTROLLER_STOPPED and "'balance' is inactive" in reason
+    dog.watch_controllers({})                          # unloaded
+    assert "'balance' is unloaded" in dog.check(10.1)[1]
+    dog.forget_controllers()                          # the next activation starts afresh
+    assert dog.check(10.1) is None
 
 
 def test_no_heartbeat_for_longer_than_the_limit_is_a_stalled_manager():
