@@ -11,7 +11,8 @@
 #   scripts/sim_arm.sh --trajectory                 # MPC-style: the trajectory controller active
 #   scripts/sim_arm.sh --managed                    # for the robot manager: hardware inactive, only
 #                                                   # joint_state_broadcaster active (nothing moves)
-#   scripts/sim_arm.sh --check-params --param ball_force_deg=2   # only check the parameters: exit 0, or 2
+#   scripts/sim_arm.sh --check-params --param ball_force_deg=2   # only check the parameters and that
+#                                                   # the ROS domain is free: exit 0, or 2
 #
 # Topics: /joint_states, /tf, /tf_static, /robot_description, /camera/image_raw,
 # /camera/camera_info, /sim/ball_truth, /sim/ball_dropped, /clock; services /sim/reset_ball,
@@ -32,7 +33,7 @@ PARAMS=()
 TRAJECTORY=0
 CHECK_ONLY=0
 MANAGED=0
-usage() { sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'; }
 while (($#)); do
   case "$1" in
     --sim-config) SIM_CONFIG="$(realpath "$2")"; shift 2 ;;
@@ -57,6 +58,28 @@ python -m ball_balance.robot --hardware mujoco --param "sim_config=$SIM_CONFIG" 
   --param "robot_description_file=$URDF" ${PARAMS[@]+"${PARAMS[@]}"} >"$URDF" || { rm -rf "$WORK"; exit 2; }
 # bad parameters: one clear line before anything starts
 python -m ball_balance.hardware.mujoco_system --check "$URDF" || { rm -rf "$WORK"; exit 2; }
+# Another graph on this ROS domain (a second terminal, a bag played with --clock, an arm's
+# driver) would drive this arm and be driven by it: one clear line instead. Discovery gets
+# 2 s; a graph that answers later than that is not caught. The graph scripts check with
+# --check-params before they start anything and set SIM_ARM_DOMAIN_CHECKED=1.
+if [[ -z "${SIM_ARM_DOMAIN_CHECKED:-}" ]]; then
+  (timeout -k 5 30 ros2py topic info /clock --spin-time 2 >"$WORK/clock.txt" 2>/dev/null || true) &
+  (timeout -k 5 30 ros2py node list --spin-time 2 >"$WORK/nodes.txt" 2>/dev/null || true) &
+  wait
+  TAKEN=()
+  CLOCKS="$(sed -n 's/^Publisher count: //p' "$WORK/clock.txt")"
+  ((${CLOCKS:-0} > 0)) && TAKEN+=("/clock has ${CLOCKS} publisher(s)")
+  grep -qx /controller_manager "$WORK/nodes.txt" && TAKEN+=("/controller_manager is running")
+  if ((${#TAKEN[@]})); then
+    DOMAIN_ID="${ROS_DOMAIN_ID:-0}"
+    echo "sim_arm.sh: ROS_DOMAIN_ID=$DOMAIN_ID is taken: $(IFS=,; echo "${TAKEN[*]}" | sed 's/,/ and /') (another" \
+      "simulation, a bag played with --clock or an arm's driver); stop it, or run this graph on a domain of" \
+      "its own (export ROS_DOMAIN_ID=$((DOMAIN_ID + 1)))" >&2
+    rm -rf "$WORK"
+    exit 2
+  fi
+fi
+
 ((CHECK_ONLY)) && { rm -rf "$WORK"; exit 0; }
 
 HW_STATE=()

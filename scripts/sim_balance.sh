@@ -128,8 +128,10 @@ SIM_CONFIG="$ROOT/config/sim.yaml"
 ((TRUTH_FED)) && SIM_CONFIG="$ROOT/config/sim_truth_fed.yaml"
 SIM_ARGS=(--sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y"
           --param start_paused=true --managed ${SIM_PARAMS[@]+"${SIM_PARAMS[@]}"})
-# a bad simulation parameter (--force 20, --sim-param ...): its one line, before anything starts
+# a bad simulation parameter (--force 20, --sim-param ...) or another graph on this ROS domain:
+# its one line, before anything starts
 "$ROOT/scripts/sim_arm.sh" --check-params "${SIM_ARGS[@]}" || exit 2
+export SIM_ARM_DOMAIN_CHECKED=1
 LOGS="$(mktemp -d "${TMPDIR:-/tmp}/ball_balance_graph.XXXXXX")"
 source "$ROOT/scripts/lib/stop_all.sh"
 source "$ROOT/scripts/lib/graph.sh"

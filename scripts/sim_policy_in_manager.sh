@@ -98,6 +98,11 @@ yaml.safe_dump(values, sys.stdout)
 EOF
   PARAMS_FILE="$LOGS/controller_params.yaml"
 fi
+SIM_ARGS=(--sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y"
+          --param start_paused=true --managed)
+# a bad simulation parameter or another graph on this ROS domain: its one line, before anything starts
+"$ROOT/scripts/sim_arm.sh" --check-params "${SIM_ARGS[@]}" || exit 2
+export SIM_ARM_DOMAIN_CHECKED=1
 source "$ROOT/scripts/lib/stop_all.sh"
 source "$ROOT/scripts/lib/graph.sh"
 on_stopped() { echo "sim_policy_in_manager.sh: stopped (logs in $LOGS)" >&2; }
@@ -105,8 +110,7 @@ trap stop_all INT TERM EXIT
 
 echo "sim_policy_in_manager.sh: ${TILT_LAW:-policy} tilt law in the controller manager, domain $DOMAIN seed $SEED," \
   "ball released at ($BALL_X, $BALL_Y) m; logs in $LOGS" >&2
-start sim "$ROOT/scripts/sim_arm.sh" --sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" \
-  --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y" --param start_paused=true --managed
+start sim "$ROOT/scripts/sim_arm.sh" "${SIM_ARGS[@]}"
 if ((! TRUTH_FED)); then
   start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
     ${RT_OFF[@]+"${RT_OFF[@]}"} ${TRACKER_PARAMS[@]+"${TRACKER_PARAMS[@]}"}

@@ -253,7 +253,7 @@ def test_bad_hardware_parameter_stops_the_node_with_a_clear_error(launcher, tmp_
     assert message in process.output()
 
 
-def test_sim_arm_script_runs_the_graph_and_ctrl_c_stops_everything(launcher, graph, tmp_path):
+def test_sim_arm_script_runs_the_graph_refuses_a_second_and_ctrl_c_stops_everything(launcher, graph, tmp_path):
     import os
     import signal
 
@@ -261,6 +261,11 @@ def test_sim_arm_script_runs_the_graph_and_ctrl_c_stops_everything(launcher, gra
     graph.collect(JointState, "/joint_states", timeout=START_TIMEOUT)
     graph.wait_for_topic("/tf_static")
     graph.wait_for_topic("/forward_position_controller/commands")
+    # a second graph on the same ROS domain is refused with one line, and this one runs on
+    second = launcher.run(["bash", str(ROOT / "scripts" / "sim_arm.sh")], timeout=120)
+    assert second.returncode == 2, second.stderr[-2000:]
+    assert "is taken: /clock has 1 publisher(s) and /controller_manager is running" in second.stderr, second.stderr
+    assert script.popen.poll() is None
     os.kill(script.popen.pid, signal.SIGINT)  # the script only: its trap must stop the rest
     assert script.wait(30) is not None
     graph.spin_until(lambda: graph.node.count_publishers("/joint_states") == 0
