@@ -61,8 +61,9 @@ SCHEMA = (
     Param("autostart", False, "configure and activate at start-up (the outcome is logged and published as events)",
           user_facing=True),
     Param("controller_manager", "/controller_manager", "the controller manager's node name", user_facing=True),
-    Param("controllers", ["forward_position_controller"], "the balancing controllers, activated with the hardware",
-          user_facing=True),
+    Param("controllers", ["forward_position_controller"],
+          "the balancing controllers, activated with the hardware; one that leaves active while the robot "
+          "manager is active is an emergency stop", user_facing=True),
     Param("stop_controllers", ["forward_position_controller", "scaled_joint_trajectory_controller",
                                "ball_balance_controller"],
           "controllers a stop deactivates (those loaded and active; with `controllers` and `level_controller`)"),
