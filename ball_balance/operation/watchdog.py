@@ -3,8 +3,8 @@
 Plain Python, no ROS. The node feeds it arrival times (monotonic wall-clock seconds: a
 watchdog must fire when the graph's simulated clock itself has stopped) and the hardware and
 controller states it learns from the controller manager, and asks `check(now)` every tick
-while it is active. The first problem found is returned as (source, reason); sources are the `source`
-values of the robot manager's events.
+while it is active. The first problem found is returned as (source, reason); sources are the
+`source` values of the robot manager's events.
 """
 from __future__ import annotations
 
