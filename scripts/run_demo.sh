@@ -51,6 +51,11 @@ set +e
   --duration "$DURATION" --out "$OUT" --video-s 12 --debug-image "${LIVE_VIEW[@]}"
 CODE=$?
 set -e
+if ((CODE == 2)); then   # refused before anything started (a bad value, the ROS domain taken)
+  rm -f "$STARTED"
+  echo "run_demo.sh: the graph was not started: the line above says why" >&2
+  exit 2
+fi
 
 echo "run_demo.sh: [3/3] results in $OUT:" >&2
 ls -l "$OUT" >&2 || true
