@@ -60,11 +60,11 @@ python -m ball_balance.robot --hardware mujoco --param "sim_config=$SIM_CONFIG" 
 python -m ball_balance.hardware.mujoco_system --check "$URDF" || { rm -rf "$WORK"; exit 2; }
 # Another graph on this ROS domain (a second terminal, a bag played with --clock, an arm's
 # driver) would drive this arm and be driven by it: one clear line instead. Discovery gets
-# 2 s; a graph that answers later than that is not caught. The graph scripts check with
+# 3 s; a graph that answers later than that is not caught. The graph scripts check with
 # --check-params before they start anything and set SIM_ARM_DOMAIN_CHECKED=1.
 if [[ -z "${SIM_ARM_DOMAIN_CHECKED:-}" ]]; then
-  (timeout -k 5 30 ros2py topic info /clock --spin-time 2 >"$WORK/clock.txt" 2>/dev/null || true) &
-  (timeout -k 5 30 ros2py node list --spin-time 2 >"$WORK/nodes.txt" 2>/dev/null || true) &
+  (timeout -k 5 30 ros2py topic info /clock --spin-time 3 >"$WORK/clock.txt" 2>/dev/null || true) &
+  (timeout -k 5 30 ros2py node list --spin-time 3 >"$WORK/nodes.txt" 2>/dev/null || true) &
   wait
   TAKEN=()
   CLOCKS="$(sed -n 's/^Publisher count: //p' "$WORK/clock.txt")"
