@@ -66,13 +66,13 @@ if [[ -z "${SIM_ARM_DOMAIN_CHECKED:-}" ]]; then
   (timeout -k 5 30 ros2py topic info /clock --spin-time 3 >"$WORK/clock.txt" 2>/dev/null || true) &
   (timeout -k 5 30 ros2py node list --spin-time 3 >"$WORK/nodes.txt" 2>/dev/null || true) &
   wait
-  TAKEN=()
+  TAKEN=""
   CLOCKS="$(sed -n 's/^Publisher count: //p' "$WORK/clock.txt")"
-  ((${CLOCKS:-0} > 0)) && TAKEN+=("/clock has ${CLOCKS} publisher(s)")
-  grep -qx /controller_manager "$WORK/nodes.txt" && TAKEN+=("/controller_manager is running")
-  if ((${#TAKEN[@]})); then
+  ((${CLOCKS:-0} > 0)) && TAKEN="/clock has ${CLOCKS} publisher(s)"
+  grep -qx /controller_manager "$WORK/nodes.txt" && TAKEN="${TAKEN:+$TAKEN and }/controller_manager is running"
+  if [[ -n "$TAKEN" ]]; then
     DOMAIN_ID="${ROS_DOMAIN_ID:-0}"
-    echo "sim_arm.sh: ROS_DOMAIN_ID=$DOMAIN_ID is taken: $(IFS=,; echo "${TAKEN[*]}" | sed 's/,/ and /') (another" \
+    echo "sim_arm.sh: ROS_DOMAIN_ID=$DOMAIN_ID is taken: $TAKEN (another" \
       "simulation, a bag played with --clock or an arm's driver); stop it, or run this graph on a domain of" \
       "its own (export ROS_DOMAIN_ID=$((DOMAIN_ID + 1)))" >&2
     rm -rf "$WORK"
