@@ -2,9 +2,10 @@
 protocol (test/cdp_client.py), on the simulated graph as scripts/sim_balance.sh starts it (the
 PID tracking a circle, so the ball keeps moving). The page loads from the node alone (nothing
 from elsewhere), shows camera frames and the ball moving (values read from the page's DOM),
-sets a gain through the controller's parameters and answers at once when the robot manager is
-absent. With the robot manager (a graph started for it), the page's buttons configure and
-activate the arm, and its emergency stop button stops it as the joint states show.
+and sets a gain through the controller's parameters. By itself, with no robot manager, its
+emergency stop button answers at once that there is none. With the robot manager (a graph
+started for it), the page's buttons configure and activate the arm, and its emergency stop
+button stops it as the joint states show.
 
 Chromium comes from scripts/tools/install_test_browser.sh (scripts/test.sh runs it); without
 it the tests are skipped.
@@ -30,15 +31,7 @@ PAGE_TIMEOUT_S = 60.0        # the page connected, a frame and ball states shown
 ENGAGE_TIMEOUT_S = 480.0
 MOVING_TIMEOUT_S = 90.0      # the ball seen at places 10 mm apart (the simulation may run at 0.2x)
 REPLY_TIMEOUT_S = 30.0       # a button's reply shown
-STILL_RAD_S = 1e-3           # issue 37: every joint slower than this after the emergency stop
-
-
-def robot_manager_installed() -> bool:
-    try:
-        executable("robot_manager")
-    except FileNotFoundError:
-        return False
-    return True
+STILL_RAD_S = 1e-3           # every joint slower than this after the emergency stop
 
 
 def reply(browser) -> str:
@@ -107,10 +100,32 @@ def test_a_gain_set_on_the_page_reaches_the_controller(live):
     assert response.values[0].double_value == pytest.approx(0.8)
 
 
-def test_without_a_robot_manager_the_emergency_stop_button_says_so_at_once(live):
-    sim, graph, browser = live
-    if not browser.text("#rm-state").startswith("absent"):
-        pytest.skip("this graph has a robot manager")
+@pytest.fixture(scope="module")
+def alone(tmp_path_factory):
+    """The live view by itself on a domain of its own: no robot manager, no graph."""
+    lease = DomainLease()
+    logs = tmp_path_factory.mktemp("live_view_alone")
+    launcher, graph, browser = Launcher(lease.domain_id, logs), Graph(lease.domain_id), None
+    try:
+        view = launcher.start([executable("ball_balance_live_view"), "--ros-args", "-p", "port:=0"], name="live_view")
+        url = graph.wait_for_output(view, r"live view on (http://127\.0\.0\.1:\d+/)", START_TIMEOUT_S,
+                                    "the live view's start-up line")
+        browser = Browser(logs / "chromium.log")
+        browser.open(url)
+        yield browser
+    finally:
+        close_page(browser, logs)
+        launcher.stop_all()
+        graph.close()
+        lease.release()
+
+
+def test_without_a_robot_manager_the_emergency_stop_button_says_so_at_once(alone):
+    browser = alone
+    browser.wait_for("document.getElementById('connection').textContent === 'connected'", PAGE_TIMEOUT_S,
+                     "the page connected to the live view")
+    browser.wait_for("document.getElementById('rm-state').textContent.startsWith('absent')", PAGE_TIMEOUT_S,
+                     "the page showing no robot manager")
     started = time.monotonic()
     browser.click("#btn-estop")
     text = reply(browser)
@@ -183,9 +198,6 @@ def still(graph, what: str) -> None:
     assert moved < 1e-3, f"{what}: the arm moved {moved:.5f} rad"
 
 
-@pytest.mark.skipif(not robot_manager_installed(),
-                    reason="needs the robot manager (issue 37 items 1-2, branch robot-manager): no `robot_manager` "
-                           "executable is installed")
 def test_the_pages_buttons_bring_the_arm_up_and_its_emergency_stop_stops_it(managed):
     graph, browser = managed
     browser.wait_for("document.getElementById('rm-state').textContent === 'unconfigured'", START_TIMEOUT_S,

@@ -1,4 +1,5 @@
 """What the live view shows: the ball, its recent path, the error against the reference."""
+import json
 import math
 
 from ball_balance.live_view.model import SAMPLE_PERIOD_S, Ball, LiveModel
@@ -65,3 +66,11 @@ def test_the_arm_speed_is_the_fastest_joints():
     assert model.snapshot()["arm"]["speed_rad_s"] == 0.3
     model.on_joint_velocities([], 1.1)
     assert model.snapshot()["arm"]["speed_rad_s"] is None
+
+
+def test_before_anything_arrives_the_state_is_strict_json():
+    # a page parses it with JSON.parse, which takes no Infinity or NaN: nothing would show,
+    # not even that the robot manager and the controller are absent
+    snapshot = LiveModel().snapshot()
+    assert json.loads(json.dumps(snapshot, allow_nan=False)) == snapshot
+    assert snapshot["arm"] == {"speed_rad_s": None, "age_s": None}
