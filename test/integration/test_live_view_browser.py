@@ -107,11 +107,7 @@ def alone(tmp_path_factory):
     logs = tmp_path_factory.mktemp("live_view_alone")
     launcher, graph, browser = Launcher(lease.domain_id, logs), Graph(lease.domain_id), None
     try:
-        view = launcher.start([executable("ball_balance_live_view"), "--ros-args", "-p", "port:=0"], name="live_view")
-        url = graph.wait_for_output(view, r"live view on (http://127\.0\.0\.1:\d+/)", START_TIMEOUT_S,
-                                    "the live view's start-up line")
-        browser = Browser(logs / "chromium.log")
-        browser.open(url)
+        browser = open_live_view(launcher, graph, logs)
         yield browser
     finally:
         close_page(browser, logs)
@@ -151,17 +147,23 @@ def managed(tmp_path_factory):
                         "-p", "joint_states_timeout_s:=5.0"], name="controller")
         launcher.start([executable("robot_manager"), "--ros-args", "-p", "camera_required:=false"],
                        name="robot_manager")
-        view = launcher.start([executable("ball_balance_live_view"), "--ros-args", "-p", "port:=0"], name="live_view")
-        url = graph.wait_for_output(view, r"live view on (http://127\.0\.0\.1:\d+/)", START_TIMEOUT_S,
-                                    "the live view's start-up line")
-        browser = Browser(logs / "chromium.log")
-        browser.open(url)
+        browser = open_live_view(launcher, graph, logs)
         yield graph, browser
     finally:
         close_page(browser, logs)
         launcher.stop_all()
         graph.close()
         lease.release()
+
+
+def open_live_view(launcher, graph, logs) -> Browser:
+    """Start the live view on a free port beside the graph and open its page in Chromium."""
+    view = launcher.start([executable("ball_balance_live_view"), "--ros-args", "-p", "port:=0"], name="live_view")
+    url = graph.wait_for_output(view, r"live view on (http://127\.0\.0\.1:\d+/)", START_TIMEOUT_S,
+                                "the live view's start-up line")
+    browser = Browser(logs / "chromium.log")
+    browser.open(url)
+    return browser
 
 
 def close_page(browser, logs) -> None:
@@ -175,18 +177,22 @@ def close_page(browser, logs) -> None:
 
 
 def press(browser, button: str, label: str, expected_state: str) -> None:
-    """Press a lifecycle button until the robot manager takes it (it may still be starting)."""
+    """Press a lifecycle button until the robot manager takes it (it may still be starting and
+    refuse). A reply may be to an earlier press that was still under way, so a press whose
+    reply is not the one hoped for may yet have taken: the page's state says."""
+    shown = f"document.getElementById('rm-state').textContent === '{expected_state}'"
     deadline = time.monotonic() + START_TIMEOUT_S
-    while True:
+    text = ""
+    while not text.startswith(f"OK: {label}"):
+        if browser.evaluate(shown):
+            return
+        assert time.monotonic() < deadline, f"{label} not taken within {START_TIMEOUT_S:.0f} s: {text}"
         browser.evaluate("document.getElementById('status-line').textContent = '-'")
         browser.click(button)
         text = reply(browser)
-        if text.startswith(f"OK: {label}") or time.monotonic() > deadline:
-            break
-        time.sleep(2.0)
-    assert text.startswith(f"OK: {label}"), text
-    browser.wait_for(f"document.getElementById('rm-state').textContent === '{expected_state}'", PAGE_TIMEOUT_S,
-                     f"the robot manager {expected_state} on the page")
+        if not text.startswith(f"OK: {label}"):
+            time.sleep(2.0)
+    browser.wait_for(shown, PAGE_TIMEOUT_S, f"the robot manager {expected_state} on the page")
 
 
 def still(graph, what: str) -> None:
