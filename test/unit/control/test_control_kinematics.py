@@ -38,10 +38,8 @@ SYNTHETIC = """<robot name="synthetic">
 
 
 def _chains():
-    chains = [(Chain.from_urdf(SYNTHETIC, ["j1", "j2", "j3"], tip="tip"), ["j1", "j2", "j3"])]
-    if URDF.exists():
-        chains.append((Chain.from_urdf(URDF.read_text(), UR_JOINTS), UR_JOINTS[3:]))
-    return chains
+    return [(Chain.from_urdf(SYNTHETIC, ["j1", "j2", "j3"], tip="tip"), ["j1", "j2", "j3"]),
+            (Chain.from_urdf(URDF.read_text(), UR_JOINTS), UR_JOINTS[3:])]
 
 
 @pytest.mark.parametrize("chain, wrist", _chains())
@@ -88,7 +86,6 @@ def test_missing_joint_and_broken_chain_are_named():
         Chain.from_urdf(SYNTHETIC, ["j1"], tip="nowhere")
 
 
-@pytest.mark.skipif(not URDF.exists(), reason="robot description not in the tree yet")
 class TestPlateOnTheUrArm:
     def setup_method(self):
         self.kin = PlateKinematics(Chain.from_urdf(URDF.read_text(), UR_JOINTS), LEVEL_HOME,
@@ -147,7 +144,6 @@ def test_pose_and_jacobian_in_one_pass_equal_fk_and_the_rotational_jacobian(chai
     np.testing.assert_array_equal(J[:3], chain.rotational_jacobian(q, chain.joint_names))
 
 
-@pytest.mark.skipif(not URDF.exists(), reason="robot description not in the tree yet")
 def test_pivot_mode_tilts_the_plate_about_its_own_centre():
     kin = PlateKinematics(Chain.from_urdf(URDF.read_text(), UR_JOINTS), LEVEL_HOME, mode="pivot")
     wrist = PlateKinematics(kin.chain, LEVEL_HOME, mode="wrist")
@@ -159,7 +155,6 @@ def test_pivot_mode_tilts_the_plate_about_its_own_centre():
         assert np.linalg.norm(wrist.chain.fk(q_w)[1] - wrist.p_WP_home) > 0.005  # wrist mode moves it
 
 
-@pytest.mark.skipif(not URDF.exists(), reason="robot description not in the tree yet")
 def test_step_limit_keeps_the_ik_direction():
     kin = PlateKinematics(Chain.from_urdf(URDF.read_text(), UR_JOINTS), LEVEL_HOME, mode="pivot",
                           shaper=ShaperConfig(max_joint_step_rad=0.01))

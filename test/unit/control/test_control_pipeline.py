@@ -14,7 +14,6 @@ from ball_balance.control.pipeline import TILT_LAWS, ControlPipeline, PipelineCo
 from ball_balance.control.references import Circle, Stationary
 from ball_balance.control.safety import BallObservation, Mode
 
-pytestmark = pytest.mark.skipif(not URDF.exists(), reason="robot description not in the tree yet")
 DT = 0.02
 STEP = 0.03
 
