@@ -46,7 +46,7 @@ targets is the kernel's and the machine's (wake-up latency, a virtual CPU taken 
 Python loop can do better; its rel p99 column is how late its sleep returned.
 
 Tables:
-  acceptance   500 Hz with `--busy` busy processes, 1 kHz with none (the issue's targets)
+  acceptance   500 Hz with `--busy` busy processes, 1 kHz with none (the targets)
   causes       one knob changed at a time against the defaults, at 500 Hz under load, cases
                interleaved over `--rounds` so a change in the machine's load hits all alike
   tails        how the loop waits for its deadline (held lock, busy wait), at 500 Hz under
@@ -288,7 +288,7 @@ HEADER = (f"{'case':<42} {'rate':>5} {'achvd Hz':>8} {'per std Hz':>10} {'exec u
 
 
 def row(label: str, rate: int, r: dict) -> str:
-    # the issue's targets: ros2_control's WARN lines (5 Hz, 100 us) and no period beyond 2x nominal
+    # the targets: ros2_control's WARN lines (5 Hz, 100 us) and no period beyond 2x nominal
     met = r["period_std"] <= 5.0 and r["exec_std"] <= 100.0 and r["over_2"] == 0
     return (f"{label:<42} {rate:>5} {r['achieved']:>8.1f} {r['period_std']:>10.2f} {r['exec_mean']:>8.1f} "
             f"{r['exec_std']:>8.1f} {r['max_period']:>10.2f} {r['over_1_5']:>5} {r['over_2']:>4} "
@@ -398,7 +398,7 @@ def witness_was_late(stalls: tuple, deadline: float, start: float) -> bool:
 
 
 class Busy:
-    """`n` processes that each keep a core busy (the issue's load), stopped on exit.
+    """`n` processes that each keep a core busy (the stated load), stopped on exit.
     `own_sessions`: each in a session of its own, as a job started from another terminal; with
     the kernel's autogroup scheduling (the default on desktop and server distributions) every
     session then gets an equal share of the CPUs, however many threads it runs."""

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Fault injection on the live simulated graph: issue 9's broken cases replayed, one fresh
+"""Fault injection on the live simulated graph: the broken cases of faults.py replayed, one fresh
 graph per case, and a table of what happened (ball kept on the plate, controller mode
 changes after the fault, largest commanded tilt, fewest markers the tracker saw, what the
 controller logged). Cases: see ball_balance/benchmark/faults.py.

@@ -1,4 +1,4 @@
-"""Faults injected into the live simulated graph (issue 9's broken cases), and what they did.
+"""Faults injected into the live simulated graph, and what they did.
 
 A case runs against the whole graph (MuJoCo arm in ros2_control_node, robot_state_publisher,
 ball_tracker on the rendered camera, one balance controller), composed by `graph_commands`

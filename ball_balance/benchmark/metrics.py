@@ -1,4 +1,4 @@
-"""Episode metrics (docs/design.md section 7; issue 6):
+"""Episode metrics (docs/design.md section 7):
 
 - drop: 1 if the ball left the plate.
 - rmse_m: RMS distance between the true ball and the reference over the surviving steps.
@@ -14,7 +14,7 @@
   within 5 mm and stays there for RECOVER_HOLD_S (or until the next push); mean and worst.
   inf when it never does; absent without pushes.
 - pushes / pushes_late: how many pushes (or forces) there were, and how many of them took longer
-  than PUSH_GOAL_S to recover (issue 11's goal: back within 5 mm in at most 1 s).
+  than PUSH_GOAL_S to recover (the push goal: back within 5 mm in at most 1 s).
 - step_recover_s / step_recover_max_s / steps / steps_unrecovered: the same for each step of
   a held force (Force with step=True: its start, a change, its end), mean and worst, and how
   many steps were not back within 5 mm (for RECOVER_HOLD_S) before the next; absent without

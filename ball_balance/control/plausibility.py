@@ -1,5 +1,5 @@
 """Plausibility of the controllers' inputs, judged per message before anything is stored
-(issue 9: a bad message must never replace a good one, even for one tick). No ROS.
+(a bad message must never replace a good one, even for one tick). No ROS.
 
 `BallStateGate` decides whether one ball state may be used:
   - its stamp is neither in the future (beyond `max_stamp_ahead_s`: clocks of two processes

@@ -200,7 +200,7 @@ def test_decelerate_on_cancel_without_every_deceleration_holds_and_says_why(capl
 
 
 def test_unreachable_point_is_refused_and_the_controller_never_diverges_from_the_arm():
-    """Issue 9.2 replayed: 50 rad, then a valid trajectory home."""
+    """A goal of 50 rad, then a valid trajectory home."""
     cm = make_manager(rate=RATE)
     jtc = spawn_jtc(cm)
     with pytest.raises(TrajectoryError, match="outside its position limits"):

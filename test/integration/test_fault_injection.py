@@ -1,4 +1,4 @@
-"""Issue 9's rogue /ball_state publishers replayed on the simulated graph (MuJoCo arm in
+"""Rogue /ball_state publishers on the simulated graph (MuJoCo arm in
 ros2_control_node, a balance controller holding the ball at the centre; /ball_state from the simulation's true
 ball plus noise rather than the rendered camera and tracker, so a busy machine does not
 starve the tracker): the ball stays on the plate and the controller names the second

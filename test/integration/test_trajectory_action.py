@@ -1,7 +1,7 @@
 """FollowJointTrajectory on the simulated arm, as MoveIt or `ros2 action send_goal` use it:
 a goal reaches its points and succeeds, a goal whose tolerances cannot be met is aborted
 and the arm holds, a new goal preempts the running one, and a trajectory to an unreachable
-50 rad is refused so that the controller's state never leaves the arm's (issue 9.2)."""
+50 rad is refused so that the controller's state never leaves the arm's."""
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Duration, Time
@@ -141,7 +141,7 @@ def test_query_state_samples_the_goal_and_cancel_holds_the_arm(arm, graph):
 
 
 def test_unreachable_50_rad_is_refused_and_the_controller_state_stays_with_the_arm(arm, graph):
-    """Issue 9.2 replayed on the simulated arm: 50 rad, then a valid trajectory home."""
+    """A goal of 50 rad on the simulated arm, then a valid trajectory home."""
     away = HOME + np.array([0.2, 0.0, 0.0, 0.0, 0.0, 0.0])
     assert result_of(graph, send(graph, arm, FollowJointTrajectory.Goal(
         trajectory=trajectory([(1.0, away)]), goal_tolerance=tolerances(0.01),
