@@ -7,8 +7,9 @@
                    concurrent.futures.Future of the state dict; without `state` (or when it
                    does not answer within `reply_timeout_s`), the last state pushed
   GET /ws          WebSocket: the server sends the state as JSON text messages
-                   ({"type": "state", ...}) and camera frames as binary messages (JPEG); the
-                   page sends requests ({"id": n, "op": ...}, live_view.commands) and gets one
+                   ({"type": "state", ...}; strict JSON, a value that is not finite is null)
+                   and camera frames as binary messages (JPEG); the page sends requests
+                   ({"id": n, "op": ...}, live_view.commands) and gets one
                    {"type": "reply", "id": n, "ok": bool, "message": str} for each.
 
 Threads: the ROS side calls `push_state()` and `push_frame()` from its own threads; they hand
@@ -27,6 +28,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import json
+import math
 import threading
 from pathlib import Path
 from typing import Callable, Optional, Set
@@ -38,6 +40,23 @@ STATIC_DIR = Path(__file__).resolve().parent / "static"
 START_TIMEOUT_S = 10.0
 MAX_MESSAGE_BYTES = 4096    # a page's request is small; anything bigger closes its connection
 
+
+
+def state_json(snapshot: dict) -> str:
+    """The state message as strict JSON: a page parses it with JSON.parse, which refuses
+    Infinity and NaN and would then show nothing at all, so a value that is not finite (a
+    parameter set to .inf, an age before anything arrived) is sent as null."""
+    return json.dumps(_finite(dict(snapshot, type="state")), allow_nan=False)
+
+
+def _finite(value):
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return value
 
 class _Page:
     """One connected page: the newest state and frame waiting to be sent, and replies."""
@@ -141,7 +160,7 @@ class LiveViewServer:
             self._loop.call_soon_threadsafe(self._broadcast_frame, jpeg)
 
     def _broadcast_state(self, snapshot: dict) -> None:
-        self.latest_state = json.dumps(dict(snapshot, type="state"))
+        self.latest_state = state_json(snapshot)
         for page in self.pages:
             page.state = self.latest_state
             page.wake.set()
@@ -161,7 +180,7 @@ class LiveViewServer:
         if self.state is not None:
             try:
                 snapshot = await asyncio.wait_for(asyncio.wrap_future(self.state()), self.reply_timeout_s)
-                text = json.dumps(dict(snapshot, type="state"))
+                text = state_json(snapshot)
             except Exception as error:  # noqa: BLE001 - no answer in time, shutting down: the last state
                 self.log(f"GET /api/state: the newest state was not built ({type(error).__name__}: {error}); "
                          f"answered with the last one sent to the pages")

@@ -11,7 +11,7 @@ import aiohttp
 import pytest
 
 from ball_balance.live_view.commands import CommandError
-from ball_balance.live_view.server import LiveViewServer
+from ball_balance.live_view.server import LiveViewServer, state_json
 
 
 @pytest.fixture
@@ -140,3 +140,12 @@ def test_api_state_falls_back_to_the_last_state_sent_when_the_ros_side_does_not_
     finally:
         server.stop()
     assert "the newest state was not built" in logged[0]
+
+
+def test_the_state_is_strict_json_whatever_its_values():
+    # JSON.parse refuses Infinity and NaN, and a page would then show nothing at all
+    text = state_json({"controller": {"parameters": {"max_ball_speed_m_s": float("inf")}},
+                       "errors": [[0.0, float("nan"), 0.001]], "t": 1.5})
+    assert json.loads(text) == {"controller": {"parameters": {"max_ball_speed_m_s": None}},
+                                "errors": [[0.0, None, 0.001]], "t": 1.5, "type": "state"}
+    assert "Infinity" not in text and "NaN" not in text
