@@ -20,9 +20,13 @@ POLICY_PARAMS = [
           "any delay)", "s", 0.0, 1.0, read_only=True),
 ]
 
+DEFAULT_MODEL_RATE_HZ = 60.0   # the rate DEFAULT_MODEL was trained at (its metadata's rate_hz)
+
 # the policy node: a correction on top of the PID, so the PID's parameters plus the model's;
-# its history is per tick of the model's rate, so it steps on the timer only
-POLICY_SCHEMA = [p for p in PID_SCHEMA if p.name != "control_trigger"] + [
+# its history is per tick of the model's rate, so it steps on the timer only, at that rate
+POLICY_SCHEMA = [p for p in PID_SCHEMA if p.name not in ("control_trigger", "control_rate_hz")] + [
+    Param("control_rate_hz", DEFAULT_MODEL_RATE_HZ, "control tick rate: the model's (its metadata's rate_hz; "
+          "another is refused at start-up)", "Hz", 5.0, 500.0, read_only=True, user_facing=True),
     Param("control_trigger", "timer", "the policy steps every control_rate_hz tick (its history is per tick)",
           choices=("timer",), read_only=True)] + POLICY_PARAMS
 

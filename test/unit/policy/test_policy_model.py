@@ -14,7 +14,7 @@ from ball_balance.policy.observation import (
     flat_names,
     low_gain_share,
 )
-from ball_balance.policy.params import POLICY_SCHEMA
+from ball_balance.policy.params import DEFAULT_MODEL_RATE_HZ, POLICY_SCHEMA
 from ball_balance.policy.tilt_law import ACTION_KIND, base_pid_mismatch, delay_share, load_tilt_law
 from controller_manager_py.controllers.policy_model import PolicyModelError, PolicyRunner, read_model
 from controller_manager_py.parameters import validate
@@ -55,7 +55,7 @@ def test_shipped_model_metadata_says_how_it_was_made_and_how_to_run_it():
     assert len(md.observation.mean) == len(md.observation.std) == 2 * axis_size()
     assert md.action.kind == ACTION_KIND and md.action.size == 2
     assert all(s > 0 for s in md.action.scale) and md.action.low == [-0.15, -0.15]
-    assert md.rate_hz == configured_rate_hz()
+    assert md.rate_hz == configured_rate_hz() == DEFAULT_MODEL_RATE_HZ   # the node's default runs it
     training = md.training
     for key in ("seed", "commit", "domains", "method", "wall_time_s", "base_pid"):
         assert key in training, key
