@@ -103,6 +103,12 @@ while (($#)); do
     *) echo "sim_balance.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
+source "$ROOT/scripts/lib/args.sh"
+require_number sim_balance.sh --duration "$DURATION"
+require_number sim_balance.sh --video-s "$VIDEO_S"
+[[ -z "$RADIUS" ]] || require_number sim_balance.sh --radius "$RADIUS"
+[[ -z "$PERIOD" ]] || require_number sim_balance.sh --period "$PERIOD"
+[[ -z "$START_DELAY" ]] || require_number sim_balance.sh --start-delay "$START_DELAY"
 case "$CONTROLLER" in
   # the controller the balance node commands, and the one that levels the plate at deactivate;
   # the live view's gains (the PID's are set at run time, the MPC's are shown, read-only)

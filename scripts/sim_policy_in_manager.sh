@@ -67,6 +67,10 @@ while (($#)); do
     *) echo "sim_policy_in_manager.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
+source "$ROOT/scripts/lib/args.sh"
+require_number sim_policy_in_manager.sh --duration "$DURATION"
+[[ -z "$RADIUS" ]] || require_number sim_policy_in_manager.sh --radius "$RADIUS"
+[[ -z "$PERIOD" ]] || require_number sim_policy_in_manager.sh --period "$PERIOD"
 case "${TILT_LAW:-policy}" in
   policy|pid|mpc) ;;
   *) echo "sim_policy_in_manager.sh: --tilt-law must be policy, pid or mpc, got '$TILT_LAW'" >&2; exit 2 ;;

@@ -41,6 +41,18 @@ def graph_logs(output: str) -> str:
     return "".join(p.read_text(errors="replace") for p in Path(match.group(1)).glob("*.log")) if match else ""
 
 
+@pytest.mark.parametrize("script, args, line", [
+    ("sim_balance.sh", ["--duration", "-3"], "sim_balance.sh: --duration takes a number >= 0, got '-3'"),
+    ("sim_pid.sh", ["--radius", "0.1m"], "sim_balance.sh: --radius takes a number >= 0, got '0.1m'"),
+    ("sim_policy_in_manager.sh", ["--duration", "abc"],
+     "sim_policy_in_manager.sh: --duration takes a number >= 0, got 'abc'"),
+])
+def test_a_bad_value_is_refused_before_anything_starts(launcher, script, args, line):
+    # a negative --duration never ended; other values started the graph and then stopped it
+    result = launcher.run(["bash", str(ROOT / "scripts" / script), *args], timeout=60)
+    assert result.returncode == 2 and result.stderr.strip() == line, result.stderr[-2000:]
+
+
 def test_sim_balance_with_a_duration_ends_when_the_controller_manager_dies(launcher):
     graph = start_graph(launcher, "--duration", "300")
     wait_for(lambda: "[monitor] t" in graph.output(), 120, "the monitor's first progress line")
