@@ -2,11 +2,11 @@
 """MPC solve time per tick (both axes, one OSQP solve, vector updates included), in closed
 loop on the ideal double integrator, for three situations; prints p50 / p99 / max in us and
 the ticks that needed OSQP (the others' unconstrained optimum met every constraint).
-`--busy N` starts N processes that each keep a core busy while it runs (the load
-the figures are stated under: one other busy process); the load average at start is printed. By default the
-ticks run back to back (a process that never sleeps: the scheduler preempts it like any
-CPU hog, which shows in p99 when the machine is shared); `--pace-ms P` sleeps until the next
-multiple of P ms between ticks, as the controller node does between ball states.
+`--busy N` starts N processes that each keep a core busy while it runs (the load the
+figures are stated under: one other busy process); the load average at start is printed. By
+default the ticks run back to back (a process that never sleeps: the scheduler preempts it
+like any CPU hog, which shows in p99 when the machine is shared); `--pace-ms P` sleeps until
+the next multiple of P ms between ticks, as the controller node does between ball states.
 `--priority P` runs the ticks at SCHED_FIFO P, as the controller nodes' `thread_priority`
 does (needs CAP_SYS_NICE; says so when refused).
 

@@ -129,7 +129,7 @@ class LiveModel:
             "errors": [[round(t - now_s, 3), round(ex, 5), round(ey, 5)] for t, ex, ey in self.errors],
             "error_window_s": self.error_window_s,
             "arm": {"speed_rad_s": self.arm_speed_rad_s,
-                    "age_s": now_s - self.arm_time_s if self.arm_speed_rad_s is not None else None},
+                    "age_s": now_s - self.arm_time_s if math.isfinite(self.arm_time_s) else None},
             "controller": dict(self.controller, engaged=engaged),
             "robot_manager": {"present": manager.present, "lifecycle_state": manager.lifecycle_state,
                               "emergency_stop_active": manager.emergency_stop_active,

@@ -41,7 +41,6 @@ START_TIMEOUT_S = 10.0
 MAX_MESSAGE_BYTES = 4096    # a page's request is small; anything bigger closes its connection
 
 
-
 def state_json(snapshot: dict) -> str:
     """The state message as strict JSON: a page parses it with JSON.parse, which refuses
     Infinity and NaN and would then show nothing at all, so a value that is not finite (a
@@ -57,6 +56,7 @@ def _finite(value):
     if isinstance(value, (list, tuple)):
         return [_finite(v) for v in value]
     return value
+
 
 class _Page:
     """One connected page: the newest state and frame waiting to be sent, and replies."""
