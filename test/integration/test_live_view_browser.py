@@ -41,24 +41,52 @@ def reply(browser) -> str:
                             REPLY_TIMEOUT_S, "a reply on the page")
 
 
+class OwnDomain:
+    """A launcher and a graph on a ROS domain of their own, and the page a browser opens there;
+    `close()` closes the page (its last look kept for a failure) and stops every process."""
+
+    def __init__(self, tmp_path_factory, name: str):
+        self.lease = DomainLease()
+        self.logs = tmp_path_factory.mktemp(name)
+        self.launcher, self.graph = Launcher(self.lease.domain_id, self.logs), Graph(self.lease.domain_id)
+        self.browser = None
+
+    def open_page(self, url: str) -> Browser:
+        self.browser = Browser(self.logs / "chromium.log")
+        self.browser.open(url)
+        return self.browser
+
+    def open_live_view(self) -> Browser:
+        """Start the live view on a free port beside the graph and open its page."""
+        view = self.launcher.start([executable("ball_balance_live_view"), "--ros-args", "-p", "port:=0"],
+                                   name="live_view")
+        return self.open_page(self.graph.wait_for_output(view, r"live view on (http://127\.0\.0\.1:\d+/)",
+                                                         START_TIMEOUT_S, "the live view's start-up line"))
+
+    def close(self) -> None:
+        if self.browser is not None:
+            try:
+                self.browser.screenshot(self.logs / "page.png")   # what the page showed last, for a failure
+            except Exception:  # noqa: BLE001 - best effort
+                pass
+            self.browser.close()
+        self.launcher.stop_all()
+        self.graph.close()
+        self.lease.release()
+
+
 @pytest.fixture(scope="module")
 def live(tmp_path_factory):
-    lease = DomainLease()
-    logs = tmp_path_factory.mktemp("live_view")
-    launcher, graph, browser = Launcher(lease.domain_id, logs), Graph(lease.domain_id), None
+    domain = OwnDomain(tmp_path_factory, "live_view")
     try:
-        sim = launcher.start([str(ROOT / "scripts" / "sim_balance.sh"), "--controller", "pid", "--reference", "circle",
-                              "--radius", "0.06", "--period", "6", "--live-view-port", "0"], name="sim_balance")
-        url = graph.wait_for_output(sim, r"live view \(open it in a browser\): (http://127\.0\.0\.1:\d+/)",
-                                    START_TIMEOUT_S, "the live view's address from sim_balance.sh")
-        browser = Browser(logs / "chromium.log")
-        browser.open(url)
-        yield sim, graph, browser
+        sim = domain.launcher.start([str(ROOT / "scripts" / "sim_balance.sh"), "--controller", "pid", "--reference",
+                                     "circle", "--radius", "0.06", "--period", "6", "--live-view-port", "0"],
+                                    name="sim_balance")
+        url = domain.graph.wait_for_output(sim, r"live view \(open it in a browser\): (http://127\.0\.0\.1:\d+/)",
+                                           START_TIMEOUT_S, "the live view's address from sim_balance.sh")
+        yield sim, domain.graph, domain.open_page(url)
     finally:
-        close_page(browser, logs)
-        launcher.stop_all()
-        graph.close()
-        lease.release()
+        domain.close()
 
 
 def test_the_page_loads_and_shows_the_camera_and_the_ball_moving(live):
@@ -103,17 +131,11 @@ def test_a_gain_set_on_the_page_reaches_the_controller(live):
 @pytest.fixture(scope="module")
 def alone(tmp_path_factory):
     """The live view by itself on a domain of its own: no robot manager, no graph."""
-    lease = DomainLease()
-    logs = tmp_path_factory.mktemp("live_view_alone")
-    launcher, graph, browser = Launcher(lease.domain_id, logs), Graph(lease.domain_id), None
+    domain = OwnDomain(tmp_path_factory, "live_view_alone")
     try:
-        browser = open_live_view(launcher, graph, logs)
-        yield browser
+        yield domain.open_live_view()
     finally:
-        close_page(browser, logs)
-        launcher.stop_all()
-        graph.close()
-        lease.release()
+        domain.close()
 
 
 def test_without_a_robot_manager_the_emergency_stop_button_says_so_at_once(alone):
@@ -135,9 +157,8 @@ def managed(tmp_path_factory):
     """The arm started for the robot manager (scripts/sim_arm.sh --managed: nothing that moves
     the arm active), the PID, the robot manager and the live view; the ball's state from the
     simulation's truth (no camera: the robot manager is told not to require one)."""
-    lease = DomainLease()
-    logs = tmp_path_factory.mktemp("live_view_managed")
-    launcher, graph, browser = Launcher(lease.domain_id, logs), Graph(lease.domain_id), None
+    domain = OwnDomain(tmp_path_factory, "live_view_managed")
+    launcher = domain.launcher
     try:
         launcher.start([str(ROOT / "scripts" / "sim_arm.sh"), "--managed", "--sim-config",
                         str(ROOT / "config" / "sim_truth_fed.yaml"), "--param", "ball_x=0.05",
@@ -147,33 +168,9 @@ def managed(tmp_path_factory):
                         "-p", "joint_states_timeout_s:=5.0"], name="controller")
         launcher.start([executable("robot_manager"), "--ros-args", "-p", "camera_required:=false"],
                        name="robot_manager")
-        browser = open_live_view(launcher, graph, logs)
-        yield graph, browser
+        yield domain.graph, domain.open_live_view()
     finally:
-        close_page(browser, logs)
-        launcher.stop_all()
-        graph.close()
-        lease.release()
-
-
-def open_live_view(launcher, graph, logs) -> Browser:
-    """Start the live view on a free port beside the graph and open its page in Chromium."""
-    view = launcher.start([executable("ball_balance_live_view"), "--ros-args", "-p", "port:=0"], name="live_view")
-    url = graph.wait_for_output(view, r"live view on (http://127\.0\.0\.1:\d+/)", START_TIMEOUT_S,
-                                "the live view's start-up line")
-    browser = Browser(logs / "chromium.log")
-    browser.open(url)
-    return browser
-
-
-def close_page(browser, logs) -> None:
-    if browser is None:
-        return
-    try:
-        browser.screenshot(logs / "page.png")   # what the page showed last, for a failure
-    except Exception:  # noqa: BLE001 - best effort
-        pass
-    browser.close()
+        domain.close()
 
 
 def press(browser, button: str, label: str, expected_state: str) -> None:
