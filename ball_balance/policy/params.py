@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from pathlib import Path
 
 from ball_balance.control.config import PID_SCHEMA
@@ -22,13 +23,22 @@ POLICY_PARAMS = [
 
 DEFAULT_MODEL_RATE_HZ = 60.0   # the rate DEFAULT_MODEL was trained at (its metadata's rate_hz)
 
-# the policy node: a correction on top of the PID, so the PID's parameters plus the model's;
-# its history is per tick of the model's rate, so it steps on the timer only, at that rate
-POLICY_SCHEMA = [p for p in PID_SCHEMA if p.name not in ("control_trigger", "control_rate_hz")] + [
-    Param("control_rate_hz", DEFAULT_MODEL_RATE_HZ, "control tick rate: the model's (its metadata's rate_hz; "
-          "another is refused at start-up)", "Hz", 5.0, 500.0, read_only=True, user_facing=True),
-    Param("control_trigger", "timer", "the policy steps every control_rate_hz tick (its history is per tick)",
-          choices=("timer",), read_only=True)] + POLICY_PARAMS
+
+def _for_the_policy(param: Param) -> Param:
+    """The PID's parameter as the policy node declares it: its history is per tick of the
+    model's rate, so it steps on the timer only, at that rate."""
+    if param.name == "control_rate_hz":
+        return replace(param, default=DEFAULT_MODEL_RATE_HZ,
+                       description=f"{param.description}: the model's (its metadata's rate_hz; another is "
+                                   "refused at start-up)")
+    if param.name == "control_trigger":
+        return Param("control_trigger", "timer", "the policy steps every control_rate_hz tick (its history is "
+                     "per tick)", choices=("timer",), read_only=True)
+    return param
+
+
+# the policy node: a correction on top of the PID, so the PID's parameters plus the model's
+POLICY_SCHEMA = [_for_the_policy(p) for p in PID_SCHEMA] + POLICY_PARAMS
 
 
 def model_path(value: str) -> Path:
