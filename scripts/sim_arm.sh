@@ -59,9 +59,25 @@ python -m ball_balance.robot --hardware mujoco --param "sim_config=$SIM_CONFIG" 
 # bad parameters: one clear line before anything starts
 python -m ball_balance.hardware.mujoco_system --check "$URDF" || { rm -rf "$WORK"; exit 2; }
 # Another graph on this ROS domain (a second terminal, a bag played with --clock, an arm's
-# driver) would drive this arm and be driven by it: one clear line instead. Discovery gets
-# 3 s; a graph that answers later than that is not caught. The graph scripts check with
-# --check-params before they start anything and set SIM_ARM_DOMAIN_CHECKED=1.
+# driver) would drive this arm and be driven by it: one clear line instead. A simulation on
+# this machine holds a lock on its domain for as long as any of its processes runs (they
+# inherit it), so a second one is refused whatever the load. What is not ours is looked for
+# by discovery, which gets 3 s: a graph that answers later than that is not caught. The
+# graph scripts check with --check-params before they start anything and set
+# SIM_ARM_DOMAIN_CHECKED=1 (the lock is still taken).
+DOMAIN_ID="${ROS_DOMAIN_ID:-0}"
+refuse_domain() {
+  echo "sim_arm.sh: ROS_DOMAIN_ID=$DOMAIN_ID is taken: $1 (another" \
+    "simulation, a bag played with --clock or an arm's driver); stop it, or run this graph on a domain of" \
+    "its own (export ROS_DOMAIN_ID=$((DOMAIN_ID + 1)))" >&2
+  rm -rf "$WORK"
+  exit 2
+}
+DOMAIN_LOCK="/tmp/ball_balance-domain-$DOMAIN_ID-uid$(id -u).lock"
+exec {DOMAIN_LOCK_FD}>>"$DOMAIN_LOCK"
+flock -n "$DOMAIN_LOCK_FD" ||
+  refuse_domain "a simulation on this machine runs on it (sim_arm.sh pid $(cat "$DOMAIN_LOCK"), or a process it started)"
+echo "$$" >"$DOMAIN_LOCK"
 if [[ -z "${SIM_ARM_DOMAIN_CHECKED:-}" ]]; then
   (timeout -k 5 30 ros2py topic info /clock --spin-time 3 >"$WORK/clock.txt" 2>/dev/null || true) &
   (timeout -k 5 30 ros2py node list --spin-time 3 >"$WORK/nodes.txt" 2>/dev/null || true) &
@@ -70,14 +86,7 @@ if [[ -z "${SIM_ARM_DOMAIN_CHECKED:-}" ]]; then
   CLOCKS="$(sed -n 's/^Publisher count: //p' "$WORK/clock.txt")"
   ((${CLOCKS:-0} > 0)) && TAKEN="/clock has ${CLOCKS} publisher(s)"
   grep -qx /controller_manager "$WORK/nodes.txt" && TAKEN="${TAKEN:+$TAKEN and }/controller_manager is running"
-  if [[ -n "$TAKEN" ]]; then
-    DOMAIN_ID="${ROS_DOMAIN_ID:-0}"
-    echo "sim_arm.sh: ROS_DOMAIN_ID=$DOMAIN_ID is taken: $TAKEN (another" \
-      "simulation, a bag played with --clock or an arm's driver); stop it, or run this graph on a domain of" \
-      "its own (export ROS_DOMAIN_ID=$((DOMAIN_ID + 1)))" >&2
-    rm -rf "$WORK"
-    exit 2
-  fi
+  [[ -z "$TAKEN" ]] || refuse_domain "$TAKEN"
 fi
 
 ((CHECK_ONLY)) && { rm -rf "$WORK"; exit 0; }

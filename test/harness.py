@@ -114,10 +114,23 @@ class Launcher:
 
     def run(self, cmd: Sequence[str], timeout: float = 60.0, env: Optional[dict] = None,
             input: Optional[str] = None) -> subprocess.CompletedProcess:
-        """Run a command to completion on this domain (output captured as text)."""
-        return subprocess.run(list(cmd), capture_output=True, text=True, timeout=timeout,
-                              env=env or ros_env(self.domain_id), input=input,
-                              stdin=None if input is not None else subprocess.DEVNULL)
+        """Run a command to completion on this domain (output captured as text).
+
+        On a timeout the command's whole process group is stopped, not only the command: a
+        script's nodes left running on this domain would answer the tests that lease it next.
+        """
+        popen = subprocess.Popen(list(cmd), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                 env=env or ros_env(self.domain_id), start_new_session=True,
+                                 stdin=subprocess.PIPE if input is not None else subprocess.DEVNULL)
+        try:
+            stdout, stderr = popen.communicate(input, timeout=timeout)
+        except subprocess.TimeoutExpired:
+            stop_groups([popen])
+            stdout, stderr = popen.communicate()
+            raise subprocess.TimeoutExpired(popen.args, timeout, stdout, stderr) from None
+        finally:
+            _signal_group(popen, signal.SIGKILL)  # strays left in its group
+        return subprocess.CompletedProcess(popen.args, popen.returncode, stdout, stderr)
 
     def stop_all(self, grace_s: float = 5.0) -> None:
         stop_groups([process.popen for process in self.processes], grace_s)
