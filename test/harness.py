@@ -36,11 +36,18 @@ os.environ.update(DDS_ENV)
 
 
 class DomainLease:
-    """Exclusive use of one ROS_DOMAIN_ID while held (across processes on this machine)."""
+    """Exclusive use of one ROS_DOMAIN_ID while held (across processes on this machine).
+
+    Each lease of a process starts its search one domain further than the last: a process that a
+    test failed to stop then meets no other test of the run for a long while, not every one after it.
+    """
+
+    _leases = 0
 
     def __init__(self):
         LOCK_DIR.mkdir(exist_ok=True)
-        start = (os.getpid() * 7) % len(DOMAIN_RANGE)
+        start = (os.getpid() * 7 + DomainLease._leases) % len(DOMAIN_RANGE)
+        DomainLease._leases += 1
         for offset in range(len(DOMAIN_RANGE)):
             domain = DOMAIN_RANGE[(start + offset) % len(DOMAIN_RANGE)]
             handle = open(LOCK_DIR / f"{domain}.lock", "w")
