@@ -190,6 +190,9 @@ class BalanceControllerNode(Node):
         if priority > 0 and not set_process_realtime_priority(priority):
             self.get_logger().warning(f"could not give the node's threads SCHED_FIFO priority {priority} (needs "
                                       "CAP_SYS_NICE or an rtprio limit); running at normal priority")
+
+    def announce(self) -> None:
+        """The start-up line (controller_manager_py.ros.node_main.run_node)."""
         trigger = "each new ball state" if self._event_driven else f"{self.params['control_rate_hz']:.0f} Hz"
         self.get_logger().info(
             f"{self.CONTROLLER.upper()} balance controller, a step per {trigger} (watchdog "

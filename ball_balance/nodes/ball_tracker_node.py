@@ -204,7 +204,11 @@ class BallTrackerNode(Node):
             self.get_logger().warning(f"could not give the tracker's threads SCHED_FIFO priority "
                                       f"{p['thread_priority']} (needs CAP_SYS_NICE or an rtprio limit); running at "
                                       "normal priority, frames wait longer on a busy machine")
-        self.get_logger().info(f"tracking the ball from {where} -> /ball_state, /plate_pose")
+        self._frames_from = where
+
+    def announce(self) -> None:
+        """The start-up line (controller_manager_py.ros.node_main.run_node)."""
+        self.get_logger().info(f"tracking the ball from {self._frames_from} -> /ball_state, /plate_pose")
 
     # -- inputs ----------------------------------------------------------------------------------
     def match_image_qos(self) -> None:

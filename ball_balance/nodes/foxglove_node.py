@@ -182,10 +182,13 @@ class FoxgloveNode(Node):
         self.reader = Node("_ball_balance_foxglove_reader", context=self.context, use_global_arguments=False,
                            start_parameter_services=False, enable_rosout=False)
         self.taker = _Taker()
-        self.get_logger().info(f"Foxglove WebSocket server on ws://{host}:{self.server.port} "
-                               f"({len(self.topics)} topics, each once it has a publisher)")
         self.create_timer(self.params["graph_poll_s"], self.on_graph_poll)
         self.on_graph_poll()
+
+    def announce(self) -> None:
+        """The start-up line (controller_manager_py.ros.node_main.run_node)."""
+        self.get_logger().info(f"Foxglove WebSocket server on ws://{self.params['host']}:{self.server.port} "
+                               f"({len(self.topics)} topics, each once it has a publisher)")
 
     # ---- graph (executor thread) ----------------------------------------------------------------
     def on_graph_poll(self) -> None:

@@ -188,7 +188,11 @@ class LiveViewNode(Node):
         self.create_timer(1.0 / p["update_rate_hz"], self.on_update)
         self.create_timer(POLL_PERIOD_S, self.on_poll)
         self.create_timer(DEADLINE_CHECK_S, self.on_deadlines)
-        self.get_logger().info(f"live view on {self.server.url} (robot manager {manager}, controller {controller})")
+
+    def announce(self) -> None:
+        """The start-up line (controller_manager_py.ros.node_main.run_node)."""
+        self.get_logger().info(f"live view on {self.server.url} (robot manager {self.manager_name}, "
+                               f"controller {self.controller_name})")
 
     # ---- pages and requests: from the web thread ----------------------------------------------
     def on_pages(self, count: int) -> None:

@@ -34,12 +34,15 @@ class PolicyControllerNode(BalanceControllerNode):
     def __init__(self):
         super().__init__("ball_balance_policy")
         self.command_pub = self.create_publisher(Float64MultiArray, "/forward_position_controller/commands", 10)
+        self._inference_us = []
+        self.create_timer(10.0, self.log_policy)
+
+    def announce(self) -> None:
+        super().announce()
         law = self.pipeline.law
         training = law.runner.metadata.training
         self.get_logger().info(f"policy {law.runner.where} (seed {training.get('seed')}, commit "
                                f"{str(training.get('commit'))[:12]}, {training.get('method', '')})")
-        self._inference_us = []
-        self.create_timer(10.0, self.log_policy)
 
     def make_pipeline(self) -> ControlPipeline:
         try:

@@ -159,6 +159,10 @@ class RobotManagerNode(LifecycleNode):
         self.create_timer(1.0, self.publish_diagnostics, group, clock=self.steady)
         self._autostart_timer = (self.create_timer(0.1, self.on_autostart, group, clock=self.steady)
                                  if p["autostart"] else None)
+
+    def announce(self) -> None:
+        """The start-up line (controller_manager_py.ros.node_main.run_node)."""
+        p = self.params
         self.get_logger().info(f"unconfigured; controllers {names(p['controllers'])}, controller manager "
                                f"{self.cm.manager}{'; autostart' if p['autostart'] else ''}")
 

@@ -63,6 +63,7 @@ class RobotStatePublisherNode(Node):
                   for parent, child, T in self.kinematics.fixed_transforms()]
         if static:
             self.static_broadcaster.send_transform(static)
+        self.fixed_joints = len(static)
         # per moving joint: (parent, child, origin translation, origin quaternion, unit axis, kind),
         # so a joint state costs one quaternion product per joint
         self.joints = {}
@@ -72,7 +73,10 @@ class RobotStatePublisherNode(Node):
                                  matrix_to_transform(origin).rotation, axis / np.linalg.norm(axis), kind)
         self.broadcaster = TransformBroadcaster(self)
         self.create_subscription(JointState, "/joint_states", self.on_joint_states, 10)
-        self.get_logger().info(f"robot '{self.kinematics.robot_name}': {len(static)} fixed, "
+
+    def announce(self) -> None:
+        """The start-up line (controller_manager_py.ros.node_main.run_node)."""
+        self.get_logger().info(f"robot '{self.kinematics.robot_name}': {self.fixed_joints} fixed, "
                                f"{len(self.moving)} moving joints")
 
     def _load_description(self) -> str:

@@ -90,6 +90,12 @@ class VisualizerNode(Node):
         self.pub = self.create_publisher(MarkerArray, "/ball_balance_visualization", 10)
         self.create_timer(1.0 / self.params["rate_hz"], self.on_timer)
 
+    def announce(self) -> None:
+        """The start-up line (controller_manager_py.ros.node_main.run_node)."""
+        path = f"the {self.params['reference_kind']} reference" if self.fixed_path is not None else "/ball_reference"
+        self.get_logger().info(f"markers of /ball_state and {path} on /ball_balance_visualization "
+                               f"(frame {PLATE_FRAME}) at {self.params['rate_hz']:g} Hz")
+
     def on_ball_state(self, msg: BallState) -> None:
         if all(v == v and abs(v) < 1.0 for v in (msg.x, msg.y, msg.vx, msg.vy)):  # finite, sane
             self.ball = msg

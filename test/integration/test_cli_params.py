@@ -37,6 +37,25 @@ def test_unknown_parameters_error_refuses_to_start_with_one_line(launcher, tmp_p
     assert "rate_hzz" in lines[0]
 
 
+# every node that runs until stopped (camera_snapshot refuses to start without a file to write),
+# with what it needs beside the tests that run at the same time
+NODES = {"ball_tracker": [], "ball_balance_controller": [], "ball_balance_mpc": [], "ball_balance_policy": [],
+         "robot_manager": [], "robot_state_publisher": [], "ros2_control_node": [],
+         "ball_balance_live_view": ["-p", "port:=0"], "ball_balance_foxglove": ["-p", "port:=0"],
+         "ball_balance_visualizer": []}
+
+
+@pytest.mark.parametrize("name", NODES)
+def test_a_refused_node_says_only_why_and_a_started_one_what_it_does(launcher, name):
+    command = [executable(name), "--ros-args", *NODES[name]]
+    refused = launcher.run([*command, "-p", "frobnicate:=1", "-p", "unknown_parameters:=error"], timeout=60)
+    lines = refused.stdout.strip().splitlines() + refused.stderr.strip().splitlines()
+    assert refused.returncode == 2 and len(lines) == 1, lines
+    assert lines[0].startswith(f"{name}: cannot start: ") and "frobnicate" in lines[0]
+    started = launcher.start(command)
+    wait_for_output(started, "[INFO]", timeout=60)
+
+
 def test_param_set_of_an_undeclared_name_names_it(launcher, graph):
     launcher.start([executable("ball_balance_visualizer")])
     graph.wait_for_service("/ball_balance_visualizer/set_parameters", timeout=30)

@@ -160,9 +160,13 @@ class ControllerManagerNode(Node):
             self._load_hardware(urdf, at_startup=True)
         else:
             topic = self.params["robot_description_topic"]
-            self.get_logger().info(f"waiting for the robot description on {topic}")
             self._description_sub = self.create_subscription(String, topic, self.on_robot_description, latched)
         self._start_timer = self.create_timer(0.01, self.on_start, clock=steady)
+
+    def announce(self) -> None:
+        """The start-up line, once the parameters are checked (ros/node_main.py run_node)."""
+        if self._description_sub is not None:
+            self.get_logger().info(f"waiting for the robot description on {self.params['robot_description_topic']}")
 
     # ---- configuration -------------------------------------------------------------------
     def _controller_config(self):

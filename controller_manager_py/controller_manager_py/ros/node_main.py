@@ -3,7 +3,9 @@
 A node that cannot start (a malformed parameter file, a bad parameter value, a missing
 resource) prints one line naming the problem and exits non-zero, instead of a traceback.
 Values given for parameters the node does not declare are reported once it is built
-(controller_manager_py.parameters.report_unknown_parameters).
+(controller_manager_py.parameters.report_unknown_parameters). A node's line saying what it
+does (`announce()`, if it has one) comes after that check, so a node that is refused says
+only why.
 """
 from __future__ import annotations
 
@@ -43,6 +45,8 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
     try:
         node = make_node()
         report_unknown_parameters(node)  # a typo in a parameter file: one line, not silence
+        if hasattr(node, "announce"):
+            node.announce()
         executor = MultiThreadedExecutor() if multithreaded else SingleThreadedExecutor()
         executor.add_node(node)
         interrupts.spinning = True
