@@ -134,9 +134,21 @@ SIM_CONFIG="$ROOT/config/sim.yaml"
 ((TRUTH_FED)) && SIM_CONFIG="$ROOT/config/sim_truth_fed.yaml"
 SIM_ARGS=(--sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y"
           --param start_paused=true --managed ${SIM_PARAMS[@]+"${SIM_PARAMS[@]}"})
-# a bad simulation parameter (--force 20, --sim-param ...) or another graph on this ROS domain:
-# its one line, before anything starts
-"$ROOT/scripts/sim_arm.sh" --check-params "${SIM_ARGS[@]}" || exit 2
+# a bad controller, tracker or simulation parameter (--param kp:=abc, --force 20, ...) or another
+# graph on this ROS domain: its one line, before anything starts (the checks run side by side)
+CHECKS=()
+check_node_params "$EXE" --params-file "$YAML" -p use_sim_time:=true ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"} &
+CHECKS+=($!)
+if ((! TRUTH_FED)); then
+  check_node_params ball_tracker --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
+    ${TRACKER_PARAMS[@]+"${TRACKER_PARAMS[@]}"} &
+  CHECKS+=($!)
+fi
+"$ROOT/scripts/sim_arm.sh" --check-params "${SIM_ARGS[@]}" &
+CHECKS+=($!)
+CHECKED=0
+for pid in "${CHECKS[@]}"; do wait "$pid" || CHECKED=2; done
+((CHECKED == 0)) || exit 2
 export SIM_ARM_DOMAIN_CHECKED=1
 LOGS="$(mktemp -d "${TMPDIR:-/tmp}/ball_balance_graph.XXXXXX")"
 source "$ROOT/scripts/lib/stop_all.sh"

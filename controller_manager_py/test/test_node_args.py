@@ -8,3 +8,13 @@ def test_params_files_and_remaps_are_forwarded_but_not_node_renames_or_manager_p
             "--params-file", "not_ros.yaml"]
     assert forwarded_ros_args(argv) == ["--params-file", "ctrl.yaml", "-r", "/joint_states:=/arm/joint_states",
                                         "--log-level", "warn"]
+
+
+def test_check_params_is_taken_before_ros_args_only():
+    from controller_manager_py.ros.node_main import _without_check_flag
+
+    assert _without_check_flag(["node", "--check-params", "--ros-args", "-p", "a:=1"]) == \
+        (["node", "--ros-args", "-p", "a:=1"], True)
+    assert _without_check_flag(["node", "--ros-args", "-p", "a:=1", "--check-params"]) == \
+        (["node", "--ros-args", "-p", "a:=1", "--check-params"], False)
+    assert _without_check_flag(["node"]) == (["node"], False)

@@ -111,3 +111,21 @@ def test_ros2_control_node_moves_the_mock_arm_along_a_trajectory(domain_id, tmp_
             node_process.wait()
         log.close()
     assert node_process.returncode == 0, (tmp_path / "ros2_control_node.log").read_text()
+
+
+@pytest.mark.parametrize("extra, code", [([], 0), (["-p", "update_rate:=0"], 2)])
+def test_check_params_builds_the_node_and_ends_without_spinning(tmp_path, extra, code):
+    params = tmp_path / "controllers.yaml"
+    params.write_text(PARAMS)
+    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"}  # seen by no one: no domain needed
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    result = subprocess.run(
+        [sys.executable, "-m", "controller_manager_py.ros2_control_node", "--check-params", "--ros-args",
+         "--params-file", str(params), "-p", f"robot_description_file:={HERE / 'mock_ur.urdf'}", *extra],
+        capture_output=True, text=True, env=env, timeout=60)
+    assert result.returncode == code, result.stderr
+    lines = result.stderr.strip().splitlines()
+    if code:
+        assert len(lines) == 1 and "cannot start: " in lines[0] and "update_rate" in lines[0], lines
+    else:
+        assert "update loop running" not in result.stderr, result.stderr

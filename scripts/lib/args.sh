@@ -2,6 +2,15 @@
 # value that is not what an option takes ends the script with one line and exit code 2,
 # instead of a graph that starts and then stops (or, for a negative --duration, never ends).
 
+# check_node_params EXE ROS_ARGS...: EXE built with `--ros-args ROS_ARGS...` and its parameters
+# checked, without spinning and unseen by any other participant (node_main's --check-params);
+# 0, or the node's one line and 2. At normal priority: only the check runs.
+check_node_params() {
+  local exe="$1"; shift
+  env -u ROS_LOCALHOST_ONLY ROS_AUTOMATIC_DISCOVERY_RANGE=OFF "$exe" --check-params --ros-args "$@" \
+    -p thread_priority:=0
+}
+
 # require_number SCRIPT OPTION VALUE: VALUE is a plain number >= 0 (12, 0.5, .5, 1e-3)
 require_number() {
   [[ "$3" =~ ^([0-9]+[.]?[0-9]*|[.][0-9]+)([eE][-+]?[0-9]+)?$ ]] \

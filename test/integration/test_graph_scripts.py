@@ -53,6 +53,18 @@ def test_a_bad_value_is_refused_before_anything_starts(launcher, script, args, l
     assert result.returncode == 2 and result.stderr.strip() == line, result.stderr[-2000:]
 
 
+@pytest.mark.parametrize("script, args, line", [
+    ("sim_mpc.sh", ["--param", "mpc_horizon:=0"], "ball_balance_mpc: cannot start: parameter 'mpc_horizon'"),
+    ("sim_pid.sh", ["--reference", "nonsense"], "ball_balance_controller: cannot start: parameter 'reference_kind'"),
+    ("sim_balance.sh", ["--tracker-param", "source:=webcam"], "ball_tracker: cannot start: parameter 'source'"),
+])
+def test_a_bad_node_parameter_is_refused_before_anything_starts(launcher, script, args, line):
+    # found by the node itself, built but not started, before the graph starts
+    result = launcher.run(["bash", str(ROOT / "scripts" / script), *args], timeout=120)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and lines[0].startswith(line), result.stderr[-2000:]
+
+
 def test_sim_balance_with_a_duration_ends_when_the_controller_manager_dies(launcher):
     graph = start_graph(launcher, "--duration", "300")
     wait_for(lambda: "[monitor] t" in graph.output(), 120, "the monitor's first progress line")

@@ -6,14 +6,20 @@ Values given for parameters the node does not declare are reported once it is bu
 (controller_manager_py.parameters.report_unknown_parameters). A node's line saying what it
 does (`announce()`, if it has one) comes after that check, so a node that is refused says
 only why.
+
+`--check-params` before `--ros-args` builds the node, checks what it was given and exits (0,
+or 2 with the one line) without spinning: a script checks a node's parameters before it
+starts a graph (run it with ROS_AUTOMATIC_DISCOVERY_RANGE=OFF, and nothing else sees it).
 """
 from __future__ import annotations
 
 import os
 import sys
-from typing import Any, Callable, Optional, Sequence
+from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 from controller_manager_py.parameters import ParameterError, report_unknown_parameters
+
+CHECK_PARAMS_FLAG = "--check-params"
 
 
 class StartupError(RuntimeError):
@@ -29,8 +35,9 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
     from controller_manager_py.ros.params_files import ParamsFileError, check_params_files
 
     name = os.path.basename(sys.argv[0]) or getattr(make_node, "__name__", "node")
+    args, check_only = _without_check_flag(list(sys.argv if args is None else args))
     try:  # before rcl, which would log its own error line for a malformed file
-        check_params_files(list(sys.argv[1:] if args is None else args))
+        check_params_files(args[1:])
     except ParamsFileError as error:
         print(f"{name}: cannot start: {error}", file=sys.stderr)
         return 2
@@ -45,6 +52,8 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
     try:
         node = make_node()
         report_unknown_parameters(node)  # a typo in a parameter file: one line, not silence
+        if check_only:
+            return 0
         if hasattr(node, "announce"):
             node.announce()
         executor = MultiThreadedExecutor() if multithreaded else SingleThreadedExecutor()
@@ -115,6 +124,15 @@ def main_for(make_node, multithreaded: bool = False) -> Callable[[], None]:
         sys.exit(run_node(make_node, args, multithreaded))
 
     return main
+
+
+def _without_check_flag(argv: List[str]) -> Tuple[List[str], bool]:
+    """argv without --check-params (looked for before --ros-args only), and whether it was there."""
+    end = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
+    if CHECK_PARAMS_FLAG not in argv[:end]:
+        return argv, False
+    at = argv.index(CHECK_PARAMS_FLAG)
+    return argv[:at] + argv[at + 1:], True
 
 
 def _first_line(error: BaseException) -> str:
