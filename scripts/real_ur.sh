@@ -59,6 +59,8 @@ case "$CONTROLLER" in
 esac
 if command -v ros2 >/dev/null 2>&1; then CTL=(ros2 control); else CTL=(ros2py control); fi
 
+source "$ROOT/scripts/lib/args.sh"
+require_ros_domain real_ur.sh
 if ((DRY_RUN)); then
   cat <<STEPS
 real_ur.sh --dry-run ($CONTROLLER): would

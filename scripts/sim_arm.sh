@@ -49,6 +49,8 @@ while (($#)); do
   esac
 done
 [[ -f "$SIM_CONFIG" ]] || { echo "sim_arm.sh: no such sim config: $SIM_CONFIG" >&2; exit 2; }
+source "$ROOT/scripts/lib/args.sh"
+require_ros_domain sim_arm.sh
 
 WORK="$(mktemp -d "${TMPDIR:-/tmp}/ball_balance_sim.XXXXXX")"
 URDF="$WORK/ur5e_ball_balance_sim.urdf"
@@ -69,7 +71,7 @@ DOMAIN_ID="${ROS_DOMAIN_ID:-0}"
 refuse_domain() {
   echo "sim_arm.sh: ROS_DOMAIN_ID=$DOMAIN_ID is taken: $1 (another" \
     "simulation, a bag played with --clock or an arm's driver); stop it, or run this graph on a domain of" \
-    "its own (export ROS_DOMAIN_ID=$((DOMAIN_ID + 1)))" >&2
+    "its own (export ROS_DOMAIN_ID=$(((DOMAIN_ID + 1) % 233)))" >&2
   rm -rf "$WORK"
   exit 2
 }

@@ -104,6 +104,7 @@ while (($#)); do
   esac
 done
 source "$ROOT/scripts/lib/args.sh"
+require_ros_domain sim_balance.sh
 require_number sim_balance.sh --duration "$DURATION"
 require_number sim_balance.sh --video-s "$VIDEO_S"
 [[ -z "$RADIUS" ]] || require_number sim_balance.sh --radius "$RADIUS"

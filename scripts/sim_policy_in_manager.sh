@@ -68,6 +68,7 @@ while (($#)); do
   esac
 done
 source "$ROOT/scripts/lib/args.sh"
+require_ros_domain sim_policy_in_manager.sh
 require_number sim_policy_in_manager.sh --duration "$DURATION"
 [[ -z "$RADIUS" ]] || require_number sim_policy_in_manager.sh --radius "$RADIUS"
 [[ -z "$PERIOD" ]] || require_number sim_policy_in_manager.sh --period "$PERIOD"

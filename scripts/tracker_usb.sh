@@ -39,6 +39,8 @@ while (($#)); do
     *) echo "tracker_usb.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
+source "$ROOT/scripts/lib/args.sh"
+require_ros_domain tracker_usb.sh
 if [[ ! "$SIZE" =~ ^[0-9]+x[0-9]+$ ]]; then
   echo "tracker_usb.sh: --size '$SIZE' must be WIDTHxHEIGHT" >&2; exit 2
 fi

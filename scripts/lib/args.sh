@@ -11,6 +11,16 @@ check_node_params() {
     -p thread_priority:=0
 }
 
+# require_ros_domain SCRIPT: ROS_DOMAIN_ID (0 when unset) is one DDS can use: DDS derives its
+# ports from it, and past 232 they do not exist (each process would print a transport error)
+require_ros_domain() {
+  local id="${ROS_DOMAIN_ID:-0}"
+  [[ "$id" =~ ^[0-9]+$ ]] && ((10#$id <= 232)) && return 0
+  echo "$1: ROS_DOMAIN_ID=$id is not a ROS domain: take 0-232 (0-101 keep clear of Linux's" \
+    "ephemeral ports)" >&2
+  exit 2
+}
+
 # require_number SCRIPT OPTION VALUE: VALUE is a plain number >= 0 (12, 0.5, .5, 1e-3)
 require_number() {
   [[ "$3" =~ ^([0-9]+[.]?[0-9]*|[.][0-9]+)([eE][-+]?[0-9]+)?$ ]] \

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from harness import ROOT
+from harness import ROOT, ros_env
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
@@ -63,6 +63,17 @@ def test_a_bad_node_parameter_is_refused_before_anything_starts(launcher, script
     result = launcher.run(["bash", str(ROOT / "scripts" / script), *args], timeout=120)
     lines = result.stderr.strip().splitlines()
     assert result.returncode == 2 and len(lines) == 1 and lines[0].startswith(line), result.stderr[-2000:]
+
+
+@pytest.mark.parametrize("script", ["sim_arm.sh", "sim_pid.sh", "tracker_usb.sh"])
+def test_a_domain_dds_cannot_use_is_refused_with_one_line(launcher, script):
+    # DDS derives its ports from the domain: past 232 every process printed a transport error
+    env = {**ros_env(launcher.domain_id), "ROS_DOMAIN_ID": "233"}
+    result = launcher.run(["bash", str(ROOT / "scripts" / script)], timeout=60, env=env)
+    assert result.returncode == 2, result.stderr[-2000:]
+    assert result.stderr.strip().splitlines() == [
+        f"{script.replace('sim_pid', 'sim_balance')}: ROS_DOMAIN_ID=233 is not a ROS domain: take 0-232 "
+        "(0-101 keep clear of Linux's ephemeral ports)"], result.stderr
 
 
 def test_sim_balance_with_a_duration_ends_when_the_controller_manager_dies(launcher):

@@ -167,6 +167,8 @@ class ControllerManagerNode(Node):
         """The start-up line, once the parameters are checked (ros/node_main.py run_node)."""
         if self._description_sub is not None:
             self.get_logger().info(f"waiting for the robot description on {self.params['robot_description_topic']}")
+        else:
+            self._log_hardware_loaded()
 
     # ---- configuration -------------------------------------------------------------------
     def _controller_config(self):
@@ -210,9 +212,13 @@ class ControllerManagerNode(Node):
                 raise ParameterError(f"robot description: {error}") from None
             self.get_logger().error(f"robot description: {error}; waiting for another one")
             return False
+        if not at_startup:
+            self._log_hardware_loaded()
+        return True
+
+    def _log_hardware_loaded(self) -> None:
         names = ", ".join(f"{c.name} ({c.info.plugin})" for c in self.cm.rm.components.values())
         self.get_logger().info(f"hardware loaded: {names}")
-        return True
 
     def on_robot_description(self, msg: String) -> None:
         if self.cm.rm.components:
