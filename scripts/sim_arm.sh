@@ -69,9 +69,8 @@ python -m ball_balance.hardware.mujoco_system --check "$URDF" || { rm -rf "$WORK
 # SIM_ARM_DOMAIN_CHECKED=1 (the lock is still taken).
 DOMAIN_ID="${ROS_DOMAIN_ID:-0}"
 refuse_domain() {
-  echo "sim_arm.sh: ROS_DOMAIN_ID=$DOMAIN_ID is taken: $1 (another" \
-    "simulation, a bag played with --clock or an arm's driver); stop it, or run this graph on a domain of" \
-    "its own (export ROS_DOMAIN_ID=$(((DOMAIN_ID + 1) % 233)))" >&2
+  echo "sim_arm.sh: ROS_DOMAIN_ID=$DOMAIN_ID is taken: $1; stop it, or run this graph on a domain" \
+    "of its own (export ROS_DOMAIN_ID=$(((DOMAIN_ID + 1) % 233)))" >&2
   rm -rf "$WORK"
   exit 2
 }
@@ -88,7 +87,7 @@ if [[ -z "${SIM_ARM_DOMAIN_CHECKED:-}" ]]; then
   CLOCKS="$(sed -n 's/^Publisher count: //p' "$WORK/clock.txt")"
   ((${CLOCKS:-0} > 0)) && TAKEN="/clock has ${CLOCKS} publisher(s)"
   grep -qx /controller_manager "$WORK/nodes.txt" && TAKEN="${TAKEN:+$TAKEN and }/controller_manager is running"
-  [[ -z "$TAKEN" ]] || refuse_domain "$TAKEN"
+  [[ -z "$TAKEN" ]] || refuse_domain "$TAKEN (another simulation, a bag played with --clock or an arm's driver)"
 fi
 
 ((CHECK_ONLY)) && { rm -rf "$WORK"; exit 0; }
