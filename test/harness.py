@@ -133,7 +133,10 @@ class Launcher:
             stdout, stderr = popen.communicate(input, timeout=timeout)
         except subprocess.TimeoutExpired:
             stop_groups([popen])
-            stdout, stderr = popen.communicate()
+            try:
+                stdout, stderr = popen.communicate(timeout=10)
+            except subprocess.TimeoutExpired:  # a process that left the group still holds a pipe
+                stdout, stderr = "", ""
             raise subprocess.TimeoutExpired(popen.args, timeout, stdout, stderr) from None
         finally:
             _signal_group(popen, signal.SIGKILL)  # strays left in its group
