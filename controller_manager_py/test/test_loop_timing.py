@@ -167,6 +167,30 @@ def test_a_loop_that_keeps_overrunning_still_does_its_idle_work():
     assert len(budgets) >= loop.cycles - 1 and budgets.count(0.0) >= loop.cycles - 3
 
 
+def test_idle_work_failing_after_the_context_ends_stops_the_loop_quietly():
+    # Ctrl-C shuts the ROS context down under the running loop: the idle hook's next publish
+    # fails, which is the end of the process, not a fault to log
+    cm = make_manager(rate=200)
+    alive = [True]
+    cm.alive = lambda: alive[0]
+    errors = []
+    loop = ControlLoop(cm)
+    loop.throttle.error = lambda key, text: errors.append(text)
+
+    def publish(budget):
+        if not alive[0]:
+            raise RuntimeError("publisher's context is invalid")
+    loop.idle_hook = publish
+    loop.start()
+    try:
+        assert wait_for(lambda: loop.cycles >= 5)
+        alive[0] = False
+        assert wait_for(lambda: cm.stopping)
+    finally:
+        loop.stop()
+    assert errors == []
+
+
 def test_unknown_gc_mode_is_refused():
     with pytest.raises(ValueError, match="gc_mode must be one of"):
         ControlLoop(make_manager(), gc_mode="sometimes")
