@@ -137,12 +137,15 @@ SIM_ARGS=(--sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" --param "
           --param start_paused=true --managed ${SIM_PARAMS[@]+"${SIM_PARAMS[@]}"})
 # a bad controller, tracker or simulation parameter (--param kp:=abc, --force 20, ...) or another
 # graph on this ROS domain: its one line, before anything starts (the checks run side by side)
+# joint_states_timeout_s 5 s (1 s for a real arm): on a loaded 2-core machine the controller saw
+# /joint_states gaps of 1.0-2.3 s wall time from a live manager
+CONTROLLER_ARGS=(--params-file "$YAML" -p use_sim_time:=true -p joint_states_timeout_s:=5.0)
+TRACKER_ARGS=(--params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true -p "publish_debug_image:=$DEBUG_IMAGE")
 CHECKS=()
-check_node_params "$EXE" --params-file "$YAML" -p use_sim_time:=true ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"} &
+check_node_params "$EXE" "${CONTROLLER_ARGS[@]}" ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"} &
 CHECKS+=($!)
 if ((! TRUTH_FED)); then
-  check_node_params ball_tracker --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
-    ${TRACKER_PARAMS[@]+"${TRACKER_PARAMS[@]}"} &
+  check_node_params ball_tracker "${TRACKER_ARGS[@]}" ${TRACKER_PARAMS[@]+"${TRACKER_PARAMS[@]}"} &
   CHECKS+=($!)
 fi
 "$ROOT/scripts/sim_arm.sh" --check-params "${SIM_ARGS[@]}" &
@@ -164,13 +167,10 @@ trap stop_all INT TERM EXIT
 echo "sim_balance.sh: $CONTROLLER controller, domain $DOMAIN seed $SEED, ball released at ($BALL_X, $BALL_Y) m; logs in $LOGS" >&2
 start sim "$ROOT/scripts/sim_arm.sh" "${SIM_ARGS[@]}"
 if ((! TRUTH_FED)); then
-  start tracker ball_tracker --ros-args --params-file "$ROOT/config/ball_tracker.yaml" -p use_sim_time:=true \
-    -p "publish_debug_image:=$DEBUG_IMAGE" ${RT_OFF[@]+"${RT_OFF[@]}"} ${TRACKER_PARAMS[@]+"${TRACKER_PARAMS[@]}"}
+  start tracker ball_tracker --ros-args "${TRACKER_ARGS[@]}" ${RT_OFF[@]+"${RT_OFF[@]}"} \
+    ${TRACKER_PARAMS[@]+"${TRACKER_PARAMS[@]}"}
 fi
-# joint_states_timeout_s 5 s (1 s for a real arm): on a loaded 2-core machine the controller saw
-# /joint_states gaps of 1.0-2.3 s wall time from a live manager
-start controller "$EXE" --ros-args --params-file "$YAML" -p use_sim_time:=true -p joint_states_timeout_s:=5.0 \
-  ${RT_OFF[@]+"${RT_OFF[@]}"} ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"}
+start controller "$EXE" --ros-args "${CONTROLLER_ARGS[@]}" ${RT_OFF[@]+"${RT_OFF[@]}"} ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"}
 start visualizer ball_balance_visualizer --ros-args -p use_sim_time:=true ${VIS_PARAMS[@]+"${VIS_PARAMS[@]}"}
 # the arm moves once the robot manager is active: resume_when configures and activates it
 ROBOT_MANAGER=1
