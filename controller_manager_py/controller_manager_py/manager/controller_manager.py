@@ -426,6 +426,14 @@ class ControllerManager:
         self.loop_stats.add(start, end)
         self._cycle += 1
 
+    def stop_if_shut_down(self) -> bool:
+        """After an error in the loop: when the process is shutting down (a publish after Ctrl-C
+        shut the context down), the end rather than a fault; the loop is told to stop."""
+        if self.alive():
+            return False
+        self.stopping = True
+        return True
+
     def _update(self, time: float, period: float) -> None:
         cycle, failures = self._cycle, self._failed_controllers
         for spec in self.ordered:
@@ -434,8 +442,7 @@ class ControllerManager:
             try:
                 result = spec.run(time, period * spec.divisor)
             except Exception as error:  # noqa: BLE001 - the loop survives a controller bug
-                if not self.alive():  # e.g. a publish after Ctrl-C shut the context down: not a fault
-                    self.stopping = True
+                if self.stop_if_shut_down():
                     return
                 self.throttle.error(spec.name, f"controller '{spec.name}': update raised {error!r}; deactivating")
                 result = return_type.ERROR

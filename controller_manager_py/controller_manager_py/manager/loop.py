@@ -245,8 +245,7 @@ class ControlLoop:
             try:
                 self.idle_hook(max(0.0, until - _time.monotonic()))
             except Exception as error:  # noqa: BLE001 - idle work never stops the loop
-                if not self.cm.alive():  # a publish after Ctrl-C shut the context down: the end, not a fault
-                    self.cm.stopping = True
+                if self.cm.stop_if_shut_down():
                     return
                 self.throttle.error("idle", f"idle work failed: {error!r}")
 
