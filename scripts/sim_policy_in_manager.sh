@@ -81,7 +81,7 @@ SIM_CONFIG="$ROOT/config/sim.yaml"
 ((TRUTH_FED)) && SIM_CONFIG="$ROOT/config/sim_truth_fed.yaml"
 LOGS="$(mktemp -d "${TMPDIR:-/tmp}/ball_balance_graph.XXXXXX")"
 source "$ROOT/scripts/lib/realtime.sh"
-realtime_for 3   # the manager's loop (the controller's step worker shares its CPU), executor, tracker
+realtime_for 3 --later   # the manager's loop (the controller's step worker shares its CPU), executor, tracker
 RT_OFF=()
 STEP_PRIORITY=""
 ((REALTIME)) || { RT_OFF=(-p thread_priority:=0); STEP_PRIORITY=0; }
@@ -105,8 +105,18 @@ EOF
 fi
 SIM_ARGS=(--sim-config "$SIM_CONFIG" --domain "$DOMAIN" --seed "$SEED" --param "ball_x=$BALL_X" --param "ball_y=$BALL_Y"
           --param start_paused=true --managed)
-# a bad simulation parameter or another graph on this ROS domain: its one line, before anything starts
-"$ROOT/scripts/sim_arm.sh" --check-params "${SIM_ARGS[@]}" || exit 2
+# a bad simulation or controller parameter, or another graph on this ROS domain: its one line,
+# before anything starts. The controller is loaded and configured as the start will (its
+# parameters, its model, the interfaces it claims) in a manager of its own on the mock arm.
+python -m ball_balance.robot --hardware mock >"$LOGS/check_arm.urdf"
+check_node_params ros2_control_node --params-file "$ROOT/config/ur_controllers.yaml" \
+  -p "robot_description_file:=$LOGS/check_arm.urdf" -p "activate_controllers:=[joint_state_broadcaster]" \
+  -p "inactive_controllers:=[forward_position_controller, scaled_joint_trajectory_controller, $CONTROLLER]" \
+  -p "$CONTROLLER.type:=ball_balance_controllers/BallBalanceController" -p "$CONTROLLER.params_file:=$PARAMS_FILE" &
+CONTROLLER_CHECK=$!
+"$ROOT/scripts/sim_arm.sh" --check-params "${SIM_ARGS[@]}" || { wait "$CONTROLLER_CHECK" || true; exit 2; }
+wait "$CONTROLLER_CHECK" || exit 2
+echo "$REALTIME_NOTE" >&2
 export SIM_ARM_DOMAIN_CHECKED=1
 source "$ROOT/scripts/lib/stop_all.sh"
 source "$ROOT/scripts/lib/graph.sh"

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 import rclpy
+import yaml
 from builtin_interfaces.msg import Duration
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -113,10 +114,19 @@ def test_ros2_control_node_moves_the_mock_arm_along_a_trajectory(domain_id, tmp_
     assert node_process.returncode == 0, (tmp_path / "ros2_control_node.log").read_text()
 
 
-@pytest.mark.parametrize("extra, code", [([], 0), (["-p", "update_rate:=0"], 2)])
-def test_check_params_builds_the_node_and_ends_without_spinning(tmp_path, extra, code):
+@pytest.mark.parametrize("extra, controller_values, code, named", [
+    ([], {}, 0, ""),
+    (["-p", "update_rate:=0"], {}, 2, "update_rate"),
+    # the controllers it would start are configured too: a bad value, an interface it cannot claim,
+    # a misspelt name (with unknown_parameters: error)
+    ([], {"state_publish_rate": -1.0}, 2, "state_publish_rate"),
+    ([], {"joints": ["nonsense_joint"]}, 2, "nonsense_joint"),
+    ([], {"unknown_parameters": "error", "goal_tolerance": 0.1}, 2, "goal_tolerance")])
+def test_check_params_builds_the_node_and_ends_without_spinning(tmp_path, extra, controller_values, code, named):
+    values = yaml.safe_load(PARAMS)
+    values["joint_trajectory_controller"]["ros__parameters"].update(controller_values)
     params = tmp_path / "controllers.yaml"
-    params.write_text(PARAMS)
+    params.write_text(yaml.safe_dump(values))
     env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"}  # seen by no one: no domain needed
     env.pop("ROS_LOCALHOST_ONLY", None)
     result = subprocess.run(
@@ -126,6 +136,6 @@ def test_check_params_builds_the_node_and_ends_without_spinning(tmp_path, extra,
     assert result.returncode == code, result.stderr
     lines = result.stderr.strip().splitlines()
     if code:
-        assert len(lines) == 1 and "cannot start: " in lines[0] and "update_rate" in lines[0], lines
+        assert "cannot start: " in lines[-1] and named in result.stderr, lines
     else:
         assert "update loop running" not in result.stderr, result.stderr

@@ -57,6 +57,9 @@ def test_a_bad_value_is_refused_before_anything_starts(launcher, script, args, l
     ("sim_mpc.sh", ["--param", "mpc_horizon:=0"], "ball_balance_mpc: cannot start: parameter 'mpc_horizon'"),
     ("sim_pid.sh", ["--reference", "nonsense"], "ball_balance_controller: cannot start: parameter 'reference_kind'"),
     ("sim_balance.sh", ["--tracker-param", "source:=webcam"], "ball_tracker: cannot start: parameter 'source'"),
+    # the controller inside the manager: loaded and configured by a manager of its own on the mock arm
+    ("sim_policy_in_manager.sh", ["--reference", "nonsense"],
+     "ros2_control_node: cannot start: controller 'ball_balance_controller': parameter 'reference_kind'"),
 ])
 def test_a_bad_node_parameter_is_refused_before_anything_starts(launcher, script, args, line):
     # found by the node itself, built but not started, before the graph starts

@@ -324,6 +324,27 @@ class ControllerManagerNode(Node):
         self.cm.load_controller(name, self.controller_type(name))
         self.cm.configure_controller(name)
 
+    def check(self) -> None:
+        """`--check-params`: every controller the start would spawn is loaded and configured as
+        it would be (its parameters, its own checks, the interfaces it claims), then unloaded.
+        Without the hardware (a description still to come on the topic) only its parameters
+        are checked. Raises StartupError with the first controller's reason."""
+        from .node_main import StartupError
+
+        for name in [n for n in (*self.params["activate_controllers"], *self.params["inactive_controllers"]) if n]:
+            try:
+                if self.cm.rm.components:
+                    self.spawn(name)
+                else:
+                    spec = self.cm.load_controller(name, self.controller_type(name))
+                    spec.c.load_params(spec.param_values)
+            except (ControllerError, ParameterError) as error:
+                raise StartupError(str(error) if str(error).startswith("controller '")
+                                   else f"controller '{name}': {error}") from None
+            finally:
+                if name in self.cm.controllers:
+                    self.cm.unload_controller(name)
+
     # ---- publishers -------------------------------------------------------------------------
     def on_registry_change(self) -> None:
         """Executor, after the manager's `on_change` (any thread): the statistics names and an

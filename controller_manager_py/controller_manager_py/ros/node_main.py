@@ -7,9 +7,11 @@ Values given for parameters the node does not declare are reported once it is bu
 does (`announce()`, if it has one) comes after that check, so a node that is refused says
 only why.
 
-`--check-params` before `--ros-args` builds the node, checks what it was given and exits (0,
-or 2 with the one line) without spinning: a script checks a node's parameters before it
-starts a graph (run it with ROS_AUTOMATIC_DISCOVERY_RANGE=OFF, and nothing else sees it).
+`--check-params` before `--ros-args` builds the node, checks what it was given (and runs the
+node's `check()`, if it has one: the controller manager checks the controllers it would
+start) and exits (0, or 2 with the one line) without spinning: a script checks a node's
+parameters before it starts a graph (run it with ROS_AUTOMATIC_DISCOVERY_RANGE=OFF, and
+nothing else sees it).
 """
 from __future__ import annotations
 
@@ -53,6 +55,8 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
         node = make_node()
         report_unknown_parameters(node)  # a typo in a parameter file: one line, not silence
         if check_only:
+            if hasattr(node, "check"):
+                node.check()
             return 0
         if hasattr(node, "announce"):
             node.announce()
