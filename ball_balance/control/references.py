@@ -15,6 +15,8 @@ from typing import Sequence, Tuple
 
 import numpy as np
 
+from controller_manager_py.text_files import TextFileError, read_text_file
+
 KINDS = ("stationary", "circle", "figure_eight", "square", "step", "csv")
 
 
@@ -251,9 +253,9 @@ def load_csv_path(path: str | Path, loop: bool = True, max_abs_m: float = 0.2) -
     """
     path = Path(path)
     try:
-        text = path.read_text()
-    except OSError as error:
-        raise ReferenceError(f"reference CSV {path}: cannot read: {error.strerror}") from None
+        text = read_text_file(path, "reference CSV")
+    except TextFileError as error:
+        raise ReferenceError(str(error)) from None
     times, points = [], []
     for row_no, row in enumerate(csv.reader(text.splitlines()), start=1):
         if not row or not "".join(row).strip() or row[0].lstrip().startswith("#"):

@@ -71,6 +71,8 @@ from ball_balance.sim.lockstep import FrameAnswerGate
 from ball_balance.sim.world import CommandError, SimulationError, SimWorld
 from controller_manager_py.hardware_interface import CallbackReturn, HardwareInfo, State, SystemInterface, return_type
 from controller_manager_py.parameters import Param, ParameterError, validate
+from controller_manager_py.ros.params_files import ParamsFileError, load_yaml_text
+from controller_manager_py.text_files import TextFileError, read_text_file
 
 _KNOB = "domain knob; empty = the domain's value"
 SCHEMA = (
@@ -142,13 +144,11 @@ def parse_hardware_params(raw: Mapping[str, str]) -> Mapping[str, object]:
     values: Dict[str, object] = {}
     path = raw.get("sim_config", "")
     if path:
-        import yaml
 
         try:
-            with open(path) as handle:
-                loaded = yaml.safe_load(handle) or {}
-        except (OSError, yaml.YAMLError) as error:
-            raise ParameterError(f"parameter 'sim_config': cannot read {path}: {error}") from None
+            loaded = load_yaml_text(read_text_file(path, "sim config"), f"the values in '{path}'")
+        except (TextFileError, ParamsFileError) as error:
+            raise ParameterError(f"parameter 'sim_config': {error}") from None
         if not isinstance(loaded, dict):
             raise ParameterError(f"parameter 'sim_config': {path} must hold a mapping")
         values.update(loaded)
@@ -204,9 +204,9 @@ def _full_description(info: HardwareInfo, path: str) -> str:
     if text:
         return text
     try:
-        return open(path).read() if path else robot.robot_description_path().read_text()
-    except OSError as error:
-        raise robot.RobotDescriptionError(f"robot_description_file: cannot read {path}: {error}") from None
+        return read_text_file(path or robot.robot_description_path(), "robot description")
+    except TextFileError as error:
+        raise robot.RobotDescriptionError(f"robot_description_file: {error}") from None
 
 
 class _InjectedError(Exception):
@@ -665,9 +665,8 @@ def main(argv=None) -> int:
     parser.add_argument("--check", required=True, metavar="URDF")
     args = parser.parse_args(argv)
     try:
-        with open(args.check) as handle:
-            check_description_params(handle.read())
-    except (OSError, ParameterError, SimConfigError, robot.RobotDescriptionError) as error:
+        check_description_params(read_text_file(args.check, "robot description"))
+    except (TextFileError, ParameterError, SimConfigError, robot.RobotDescriptionError) as error:
         print(f"ball_balance/MujocoSystem: {error}", file=sys.stderr)
         return 2
     return 0

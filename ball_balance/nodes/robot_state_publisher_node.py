@@ -27,6 +27,7 @@ from ball_balance.tf.ros import StaticTransformBroadcaster, TransformBroadcaster
 from ball_balance.tf.transform import Transform, quat_multiply
 from controller_manager_py.parameters import Param, declare_parameters
 from controller_manager_py.ros.node_main import StartupError, main_for
+from controller_manager_py.text_files import TextFileError, read_text_file
 
 SCHEMA = [
     Param("robot_description", "", "URDF text (empty: read robot_description_file)", read_only=True, user_facing=True),
@@ -85,8 +86,8 @@ class RobotStatePublisherNode(Node):
             return text
         path = self.params["robot_description_file"]
         try:
-            return open(path).read() if path else robot.robot_description_path().read_text()
-        except (OSError, robot.RobotDescriptionError) as error:
+            return read_text_file(path or robot.robot_description_path(), "robot description")
+        except (TextFileError, robot.RobotDescriptionError) as error:
             raise StartupError(f"robot_description_file: {error}") from None
 
     def on_joint_states(self, msg: JointState) -> None:

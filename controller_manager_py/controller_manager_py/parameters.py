@@ -126,6 +126,9 @@ def declare_parameters(node, schema: Iterable[Param]) -> Mapping[str, Any]:
         try:
             value = node.declare_parameter(p.name, default, descriptor).value
         except Exception as error:  # rclpy raises several types for a bad override
+            given = getattr(node, "_parameter_overrides", {}).get(p.name)
+            if given is not None:
+                p.validate(given.value)  # our own words for it (range, type), when they find it
             raise ParameterError(f"parameter '{p.name}': {error}") from None
         values[p.name] = p.validate(value)
     return MappingProxyType(values)

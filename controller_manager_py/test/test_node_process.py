@@ -139,3 +139,42 @@ def test_check_params_builds_the_node_and_ends_without_spinning(tmp_path, extra,
         assert "cannot start: " in lines[-1] and named in result.stderr, lines
     else:
         assert "update loop running" not in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize("args, named", [
+    (["--check-param", "--ros-args"], "unexpected argument(s) --check-param"),   # a typo: it would have run
+    (["--check-params", "-p", "update_rate:=0"], "unexpected argument(s) -p update_rate:=0"),  # no --ros-args
+    (["--check-params", "--ros-args", "-p", "update_rate"], "Couldn't parse parameter override rule"),
+    (["--check-params", "--ros-args", "-p", "use_sim_time:=abc"], "'use_sim_time'"),
+    (["--check-params", "--ros-args", "--bogus"], "unknown ROS argument(s) ['--bogus']"),
+])
+def test_arguments_rcl_or_rclpy_refuse_give_one_line(args, named):
+    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"}
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    result = subprocess.run([sys.executable, "-m", "controller_manager_py.ros2_control_node", *args],
+                            capture_output=True, text=True, env=env, timeout=60)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and "cannot start: " in lines[0] and named in lines[0], lines
+
+
+@pytest.mark.parametrize("content, named", [
+    (None, "No such file or directory"),
+    (b"\x89PNG\x00", "not a UTF-8 text file"),
+    (b"a: [1, 'x']\n", "Couldn't parse params file"),
+])
+def test_a_controller_params_file_it_cannot_use_is_one_line(tmp_path, content, named):
+    controller_file = tmp_path / "controller.yaml"
+    if content is not None:
+        controller_file.write_bytes(content)
+    params = tmp_path / "controllers.yaml"
+    params.write_text(PARAMS)
+    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"}
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    result = subprocess.run(
+        [sys.executable, "-m", "controller_manager_py.ros2_control_node", "--check-params", "--ros-args",
+         "--params-file", str(params), "-p", f"robot_description_file:={HERE / 'mock_ur.urdf'}",
+         "-p", f"joint_trajectory_controller.params_file:={controller_file}"],
+        capture_output=True, text=True, env=env, timeout=60)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1, lines
+    assert "controller 'joint_trajectory_controller'" in lines[0] and named in lines[0], lines

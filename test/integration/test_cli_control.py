@@ -196,6 +196,14 @@ def test_verbs_against_our_ros2_control_node(launcher, graph):
     assert "state interfaces\n" in interfaces
     types = ros2py(launcher, "control", "list_controller_types").stdout
     assert "joint_state_broadcaster/JointStateBroadcaster" in types
+    # the manager allows undeclared names for a spawner's <controller>.type and .params_file only
+    typo = ros2py(launcher, "param", "set", "/controller_manager", "update_rat", "100")
+    assert typo.returncode == 1 and typo.stderr.strip() == (
+        "ros2py: Setting parameter failed: 'update_rat' is not a parameter of /controller_manager (did you mean "
+        "update_rate?); a controller's own parameters are set on its node"), typo.stderr
+    spawner_key = ros2py(launcher, "param", "set", "/controller_manager", "my_controller.type",
+                         "position_controllers/JointGroupPositionController")
+    assert spawner_key.returncode == 0, spawner_key.stderr
     hardware = ros2py(launcher, "control", "set_hardware_component_state", "mock_ur", "inactive")
     assert (hardware.returncode, hardware.stdout) == (0, "Successfully set mock_ur to state inactive\n")
     components = ros2py(launcher, "control", "list_hardware_components").stdout

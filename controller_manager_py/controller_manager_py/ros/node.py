@@ -34,11 +34,12 @@ import sys
 import threading
 import time
 import warnings
-from pathlib import Path
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from std_msgs.msg import String
@@ -50,8 +51,11 @@ from ..manager.introspection import introspection_entries, statistics_entries
 from ..manager.loop import WAKE_TAIL_MAX_FRACTION, ControlLoop
 from ..manager.resource_manager import ResourceError
 from ..manager.switching import STRICT, SwitchError
-from ..parameters import Param, ParameterError, declare_parameters
+from ..parameters import UNKNOWN_PARAMETERS, Param, ParameterError, closest_name, declare_parameters
 from ..realtime import lock_memory, set_cpu_affinity, set_process_realtime_priority
+from ..text_files import TextFileError, read_text_file
+from .node_main import StartupError, one_line
+from .params_files import ParamsFileError, check_params_file
 from .services import ControllerManagerServices
 from .statistics_publisher import StatisticsRegistry
 
@@ -134,6 +138,7 @@ class ControllerManagerNode(Node):
         self.cm.alive = self.context.ok
         self.loop = None
         self._unattached = []
+        self._checking = False  # check(): controllers are configured only to be checked
         self.cm_services = ControllerManagerServices(self, self.cm, self.controller_type)
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         from controller_manager_msgs.msg import ControllerManagerActivity
@@ -162,6 +167,23 @@ class ControllerManagerNode(Node):
             topic = self.params["robot_description_topic"]
             self._description_sub = self.create_subscription(String, topic, self.on_robot_description, latched)
         self._start_timer = self.create_timer(0.01, self.on_start, clock=steady)
+        self.add_on_set_parameters_callback(self._refuse_unknown_names)
+
+    def _refuse_unknown_names(self, parameters) -> SetParametersResult:
+        """The manager takes any `<controller>.type|params_file|fallback_controllers` (a spawner
+        sets them), so it allows undeclared parameters; any other name it does not declare is
+        refused (`param set /controller_manager update_rat 100` would succeed and do nothing)."""
+        for parameter in parameters:
+            owner, _, leaf = parameter.name.rpartition(".")
+            if self.has_parameter(parameter.name) or parameter.name == UNKNOWN_PARAMETERS.name or \
+                    (owner and leaf in CONTROLLER_KEYS):
+                continue
+            close = closest_name(parameter.name, self._parameters)
+            return SetParametersResult(successful=False, reason=(
+                f"'{parameter.name}' is not a parameter of {self.get_fully_qualified_name()}"
+                + (f" (did you mean {close}?)" if close else "")
+                + "; a controller's own parameters are set on its node"))
+        return SetParametersResult(successful=True)
 
     def announce(self) -> None:
         """The start-up line, once the parameters are checked (ros/node_main.py run_node)."""
@@ -188,10 +210,9 @@ class ControllerManagerNode(Node):
             return urdf
         if path:
             try:
-                return Path(path).read_text()
-            except OSError as error:
-                raise ParameterError(f"parameter 'robot_description_file': cannot read {path}: "
-                                     f"{error.strerror}") from None
+                return read_text_file(path, "robot description")
+            except TextFileError as error:
+                raise ParameterError(f"parameter 'robot_description_file': {error}") from None
         return ""
 
     def _initial_states(self):
@@ -240,9 +261,18 @@ class ControllerManagerNode(Node):
         use_sim_time = bool(self.get_parameter("use_sim_time").value)
         cli_args = ["--ros-args", *forwarded_ros_args(sys.argv), "-p", f"use_sim_time:={str(use_sim_time).lower()}"]
         if params_file:
+            try:  # rcl's own error for it would name neither the file nor the controller
+                check_params_file(str(params_file))
+            except ParamsFileError as error:
+                raise ControllerError(f"controller '{name}': {error}") from None
             cli_args += ["--params-file", str(params_file)]
-        node = rclpy.create_node(name, namespace=self.get_namespace(), context=self.context, cli_args=cli_args,
-                                 use_global_arguments=False)
+        try:
+            node = rclpy.create_node(name, namespace=self.get_namespace(), context=self.context, cli_args=cli_args,
+                                     use_global_arguments=False)
+        except Exception as error:  # noqa: BLE001 - rcl refuses the file's content (a mixed-type list, ...)
+            raise ControllerError(f"controller '{name}': {one_line(error)}") from None
+        if self._checking:
+            node.get_logger().set_level(LoggingSeverity.WARN)
         if self.executor is not None:
             self.executor.add_node(node)
         else:
@@ -328,9 +358,9 @@ class ControllerManagerNode(Node):
         """`--check-params`: every controller the start would spawn is loaded and configured as
         it would be (its parameters, its own checks, the interfaces it claims), then unloaded.
         Without the hardware (a description still to come on the topic) only its parameters
-        are checked. Raises StartupError with the first controller's reason."""
-        from .node_main import StartupError
-
+        are checked. Raises StartupError with the first controller's reason. What a controller
+        logs below a warning (its start-up line) is not shown: nothing runs."""
+        self._checking = True
         for name in [n for n in (*self.params["activate_controllers"], *self.params["inactive_controllers"]) if n]:
             try:
                 if self.cm.rm.components:

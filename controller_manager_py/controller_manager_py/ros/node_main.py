@@ -38,6 +38,11 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
 
     name = os.path.basename(sys.argv[0]) or getattr(make_node, "__name__", "node")
     args, check_only = _without_check_flag(list(sys.argv if args is None else args))
+    unexpected = _not_ros_arguments(args[1:])
+    if unexpected:
+        print(f"{name}: cannot start: unexpected argument(s) {' '.join(unexpected)}: it takes ROS arguments "
+              f"after --ros-args ({name} [{CHECK_PARAMS_FLAG}] --ros-args -p NAME:=VALUE ...)", file=sys.stderr)
+        return 2
     try:  # before rcl, which would log its own error line for a malformed file
         check_params_files(args[1:])
     except ParamsFileError as error:
@@ -46,9 +51,12 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
     interrupts = _InterruptWhileSpinning()
     interrupts.install()  # before rclpy.init, whose own handler then runs first and calls ours
     try:
-        rclpy.init(args=args)
-    except Exception as error:  # rcl reports a malformed --params-file here
-        print(f"{name}: cannot start: {_first_line(error)}", file=sys.stderr)
+        _init_without_rcl_error_line(rclpy, args)
+    except Exception as error:  # rcl reports a malformed argument here
+        text = one_line(error)
+        if type(error).__name__ == "UnknownROSArgsError":  # its message is only the list
+            text = f"unknown ROS argument(s) {text} (ROS's are -p, -r, --params-file, --log-level, ...)"
+        print(f"{name}: cannot start: {text}", file=sys.stderr)
         return 2
     node = None
     try:
@@ -69,7 +77,12 @@ def run_node(make_node: Callable[[], Any], args: Optional[Sequence[str]] = None,
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except Exception:
+    except Exception as error:
+        if node is None and _raised_by_rclpy(error):
+            # rclpy refusing what the node was given: a name that is not a ROS name, a value
+            # of the wrong type for a parameter rclpy declares itself (use_sim_time)
+            print(f"{name}: cannot start: {one_line(error)}", file=sys.stderr)
+            return 2
         # A SIGINT/SIGTERM shuts the context down under the executor, which may then raise
         # "context is not valid" instead of ExternalShutdownException: that is a clean exit.
         if rclpy.ok():
@@ -139,7 +152,60 @@ def _without_check_flag(argv: List[str]) -> Tuple[List[str], bool]:
     return argv[:at] + argv[at + 1:], True
 
 
-def _first_line(error: BaseException) -> str:
-    text = str(error).strip() or type(error).__name__
+def _not_ros_arguments(args: List[str]) -> List[str]:
+    """What a node that takes only ROS arguments would ignore: anything before --ros-args, or
+    after the `--` that ends a --ros-args section (a typo such as `--check-param`, or `-p` given
+    without --ros-args)."""
+    unexpected, in_ros_args = [], False
+    for arg in args:
+        if arg == "--ros-args":
+            in_ros_args = True
+        elif in_ros_args and arg == "--":
+            in_ros_args = False
+        elif not in_ros_args:
+            unexpected.append(arg)
+    return unexpected
+
+
+def _init_without_rcl_error_line(rclpy, args: List[str]) -> None:
+    """rclpy.init, with what rcl logs meanwhile held back: rcl logs "Failed to parse global
+    arguments" for an argument it cannot parse and then raises with the reason, which is
+    the one line shown. Anything else it logged is passed on once init succeeded."""
+    import tempfile
+
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        try:
+            rclpy.init(args=args)
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        held.seek(0)
+        logged = held.read()
+    if logged:
+        sys.stderr.write(logged.decode(errors="replace"))
+
+
+def _raised_by_rclpy(error: BaseException) -> bool:
+    from rclpy.exceptions import InvalidParameterTypeException, NameValidationException
+
+    if isinstance(error, (NameValidationException, InvalidParameterTypeException)):
+        return True
+    frames = error.__traceback__
+    while frames is not None and frames.tb_next is not None:
+        frames = frames.tb_next
+    return isinstance(error, ValueError) and frames is not None and \
+        f"{os.sep}rclpy{os.sep}" in frames.tb_frame.f_code.co_filename
+
+
+def one_line(error: BaseException) -> str:
+    """An rclpy or rcl error as one line: its reason (and the name it is about), without the C
+    source location rcl appends."""
+    lines = [line.strip() for line in str(error).strip().splitlines()] or [type(error).__name__]
+    text = lines[0]
+    if text.endswith(":") and len(lines) > 1:  # rclpy's name errors: the reason, then the name
+        text = f"{text[:-1]}: {lines[1]}"
     # rcl appends the C source location (", at /project/src/...") to its messages
-    return text.splitlines()[0].split(", at /")[0]
+    return text.split(", at /")[0]

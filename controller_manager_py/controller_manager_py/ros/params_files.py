@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from typing import Any, List
 
+from ..text_files import TextFileError, read_text_file
+
 
 class ParamsFileError(ValueError):
     """A parameter file cannot be read or is not a ROS parameter file (one-line message)."""
@@ -49,10 +51,9 @@ def params_files_in(argv: List[str]) -> List[str]:
 def check_params_file(path: str) -> dict:
     """Read one parameter file: its top-level mapping, or ParamsFileError naming the file."""
     try:
-        with open(path, encoding="utf-8") as handle:
-            text = handle.read()
-    except OSError as error:
-        raise ParamsFileError(f"cannot read parameter file '{path}': {error.strerror}") from None
+        text = read_text_file(path, "parameter file")
+    except TextFileError as error:
+        raise ParamsFileError(str(error)) from None
     data = load_yaml_text(text, what=f"the parameters in '{path}'")
     if not isinstance(data, dict):
         raise ParamsFileError(f"parameter file '{path}' must map node names to {{ros__parameters: {{...}}}}")

@@ -209,6 +209,18 @@ def test_csv_bad_row_is_named(tmp_path, rows, row_no, why):
         load_csv_path(f)
 
 
+def test_a_csv_it_cannot_read_is_a_reference_error(tmp_path):
+    # a node refuses a ReferenceError at `param set`; anything else ended the node
+    binary = tmp_path / "image.csv"
+    binary.write_bytes(b"\x89PNG\r\n\x1a\n")
+    with pytest.raises(ReferenceError, match="not a UTF-8 text file"):
+        load_csv_path(binary)
+    with pytest.raises(ReferenceError, match="No such file"):
+        load_csv_path(tmp_path / "missing.csv")
+    with pytest.raises(ReferenceError, match="Is a directory"):
+        load_csv_path(tmp_path)
+
+
 def test_make_reference_rejects_unknown_kind_and_bad_radius():
     with pytest.raises(ReferenceError, match="unknown reference kind"):
         make_reference("spiral")
