@@ -38,14 +38,15 @@ MAX_HOME_DISTANCE=0.3
 TRACKER_ARGS=()
 CTRL_PARAMS=()
 usage() { sed -n '2,/^[^#]/{/^#/p}' "$0" | sed 's/^# \{0,1\}//'; }   # the header comment
+source "$ROOT/scripts/lib/args.sh"   # needs, require_*
 while (($#)); do
   case "$1" in
-    --controller) CONTROLLER="$2"; shift 2 ;;
+    --controller) needs 1 "$@"; CONTROLLER="$2"; shift 2 ;;
     --i-know-the-arm-will-move) CONFIRMED=1; shift ;;
     --dry-run) DRY_RUN=1; shift ;;
-    --max-home-distance) MAX_HOME_DISTANCE="$2"; shift 2 ;;
-    --device|--size|--fps|--calibration) TRACKER_ARGS+=("$1" "$2"); shift 2 ;;
-    --param) CTRL_PARAMS+=(-p "$2"); shift 2 ;;
+    --max-home-distance) needs 1 "$@"; MAX_HOME_DISTANCE="$2"; shift 2 ;;
+    --device|--size|--fps|--calibration) needs 1 "$@"; TRACKER_ARGS+=("$1" "$2"); shift 2 ;;
+    --param) needs 1 "$@"; CTRL_PARAMS+=(-p "$2"); shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "real_ur.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
@@ -59,8 +60,8 @@ case "$CONTROLLER" in
 esac
 if command -v ros2 >/dev/null 2>&1; then CTL=(ros2 control); else CTL=(ros2py control); fi
 
-source "$ROOT/scripts/lib/args.sh"
 require_ros_domain real_ur.sh
+require_number real_ur.sh --max-home-distance "$MAX_HOME_DISTANCE"
 if ((DRY_RUN)); then
   cat <<STEPS
 real_ur.sh --dry-run ($CONTROLLER): would
@@ -120,4 +121,4 @@ PIDS+=($!)
 echo "real_ur.sh: [4/4] $EXE (homes first, then balances); Ctrl-C stops" >&2
 "$EXE" --ros-args --params-file "$YAML" ${CTRL_PARAMS[@]+"${CTRL_PARAMS[@]}"} &
 PIDS+=($!)
-wait -n "${PIDS[@]}"
+wait_any

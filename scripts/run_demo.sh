@@ -22,17 +22,26 @@ DURATION=30
 OUT="$ROOT/artifacts/demo"
 LIVE_VIEW=(--live-view-port "${BALL_BALANCE_LIVE_VIEW_PORT:-8080}")
 usage() { sed -n '2,/^[^#]/{/^#/p}' "$0" | sed 's/^# \{0,1\}//'; }   # the header comment
+source "$ROOT/scripts/lib/args.sh"   # needs, require_*
 while (($#)); do
   case "$1" in
-    --controller) CONTROLLER="$2"; shift 2 ;;
-    --duration) DURATION="$2"; shift 2 ;;
-    --out) OUT="$2"; shift 2 ;;
-    --live-view-port) LIVE_VIEW=(--live-view-port "$2"); shift 2 ;;
+    --controller) needs 1 "$@"; CONTROLLER="$2"; shift 2 ;;
+    --duration) needs 1 "$@"; DURATION="$2"; shift 2 ;;
+    --out) needs 1 "$@"; OUT="$2"; shift 2 ;;
+    --live-view-port) needs 1 "$@"; LIVE_VIEW=(--live-view-port "$2"); shift 2 ;;
     --no-live-view) LIVE_VIEW=(--no-live-view); shift ;;
     -h|--help) usage; exit 0 ;;
     *) echo "run_demo.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
+# bad values: one line before the set-up (sim_balance.sh checks the rest)
+case "$CONTROLLER" in
+  pid|mpc|policy) ;;
+  *) echo "run_demo.sh: --controller must be pid, mpc or policy, got '$CONTROLLER'" >&2; exit 2 ;;
+esac
+require_number run_demo.sh --duration "$DURATION"
+[[ "${LIVE_VIEW[0]}" == --no-live-view ]] || require_port run_demo.sh --live-view-port "${LIVE_VIEW[1]}"
+require_out_dir run_demo.sh --out "$OUT"
 
 echo "run_demo.sh: [1/3] set-up (scripts/setup.sh)" >&2
 "$ROOT/scripts/setup.sh"
@@ -43,7 +52,6 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST
 
 echo "run_demo.sh: [2/3] simulated graph: ball released at (0.08, -0.05) m, balanced at the centre for 6 s," \
      "then a circle r = 0.10 m, T = 10 s; ${DURATION} s of simulated time" >&2
-mkdir -p "$OUT"
 STARTED="$(mktemp)"   # files in $OUT newer than this are this run's
 set +e
 "$ROOT/scripts/sim_balance.sh" --controller "$CONTROLLER" --ball 0.08 -0.05 \

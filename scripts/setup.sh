@@ -8,6 +8,7 @@
 #
 #   scripts/setup.sh            set up (or bring up to date)
 #   scripts/setup.sh --force    redo every step
+#   scripts/setup.sh --help     this text (and nothing else)
 #   BALL_BALANCE_PYTHON=python3.12 scripts/setup.sh   choose the interpreter (3.11 or 3.12)
 #
 # Afterwards `source env.sh` gives a shell where our nodes, `ros2py` and pytest work.
@@ -17,7 +18,14 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 VENV="$ROOT/.venv"
 STAMPS="$VENV/.ball_balance_stamps"
 FORCE=0
-[[ "${1:-}" == "--force" ]] && FORCE=1
+usage() { sed -n '2,/^[^#]/{/^#/p}' "$0" | sed 's/^# \{0,1\}//'; }   # the header comment
+for arg; do
+  case "$arg" in
+    --force) FORCE=1 ;;
+    -h|--help) usage; exit 0 ;;
+    *) echo "setup.sh: unknown argument '$arg' (see --help)" >&2; exit 2 ;;
+  esac
+done
 
 # One set-up at a time per checkout (parallel runs would race in colcon's build folder); the
 # lock lives in the checkout, so runs with different TMPDIRs still exclude each other.

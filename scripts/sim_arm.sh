@@ -34,13 +34,14 @@ TRAJECTORY=0
 CHECK_ONLY=0
 MANAGED=0
 usage() { sed -n '2,21p' "$0" | sed 's/^# \{0,1\}//'; }
+source "$ROOT/scripts/lib/args.sh"   # needs, require_*
 while (($#)); do
   case "$1" in
-    --sim-config) SIM_CONFIG="$(realpath "$2")"; shift 2 ;;
-    --controllers) CONTROLLERS="$(realpath "$2")"; shift 2 ;;
-    --domain) PARAMS+=(--param "domain=$2"); shift 2 ;;
-    --seed) PARAMS+=(--param "seed=$2"); shift 2 ;;
-    --param) PARAMS+=(--param "$2"); shift 2 ;;
+    --sim-config) needs 1 "$@"; SIM_CONFIG="$(realpath -m -- "$2")"; shift 2 ;;
+    --controllers) needs 1 "$@"; CONTROLLERS="$(realpath -m -- "$2")"; shift 2 ;;
+    --domain) needs 1 "$@"; PARAMS+=(--param "domain=$2"); shift 2 ;;
+    --seed) needs 1 "$@"; PARAMS+=(--param "seed=$2"); shift 2 ;;
+    --param) needs 1 "$@"; PARAMS+=(--param "$2"); shift 2 ;;
     --trajectory) TRAJECTORY=1; shift ;;
     --managed) MANAGED=1; shift ;;
     --check-params) CHECK_ONLY=1; shift ;;
@@ -49,8 +50,8 @@ while (($#)); do
   esac
 done
 [[ -f "$SIM_CONFIG" ]] || { echo "sim_arm.sh: no such sim config: $SIM_CONFIG" >&2; exit 2; }
-source "$ROOT/scripts/lib/args.sh"
 require_ros_domain sim_arm.sh
+require_params_file sim_arm.sh --controllers "$CONTROLLERS"
 
 WORK="$(mktemp -d "${TMPDIR:-/tmp}/ball_balance_sim.XXXXXX")"
 URDF="$WORK/ur5e_ball_balance_sim.urdf"
@@ -125,4 +126,4 @@ ros2_control_node --ros-args --params-file "$CONTROLLERS" --params-file "$ROOT/c
 PIDS+=($!)
 echo "sim_arm.sh: running (robot_state_publisher ${PIDS[0]}, ros2_control_node ${PIDS[1]}); Ctrl-C stops" >&2
 # exit when either process ends (then stop the other)
-wait -n "${PIDS[@]}"
+wait_any

@@ -70,32 +70,32 @@ LIVE_VIEW_PORT="${BALL_BALANCE_LIVE_VIEW_PORT:-8080}"
 usage() { sed -n '2,42p' "$0" | sed 's/^# \{0,1\}//'; }
 # the optional second number of --force and --plate-offset (a negative angle is a number, not an option)
 optional_number() { [[ -n "${1:-}" && "$1" != --* ]]; }
-needs() { (($1 >= 2)) || { echo "sim_balance.sh: $2 needs a value (see --help)" >&2; exit 2; }; }
+source "$ROOT/scripts/lib/args.sh"   # needs, require_*
 while (($#)); do
   case "$1" in
-    --controller) CONTROLLER="$2"; shift 2 ;;
-    --reference) REFERENCE="$2"; shift 2 ;;
-    --radius) RADIUS="$2"; shift 2 ;;
-    --period) PERIOD="$2"; shift 2 ;;
-    --start-delay) START_DELAY="$2"; shift 2 ;;
-    --ball) BALL_X="$2"; BALL_Y="$3"; shift 3 ;;
-    --domain) DOMAIN="$2"; shift 2 ;;
-    --seed) SEED="$2"; shift 2 ;;
-    --duration) DURATION="$2"; shift 2 ;;
-    --out) OUT="$2"; shift 2 ;;
-    --video-s) VIDEO_S="$2"; shift 2 ;;
+    --controller) needs 1 "$@"; CONTROLLER="$2"; shift 2 ;;
+    --reference) needs 1 "$@"; REFERENCE="$2"; shift 2 ;;
+    --radius) needs 1 "$@"; RADIUS="$2"; shift 2 ;;
+    --period) needs 1 "$@"; PERIOD="$2"; shift 2 ;;
+    --start-delay) needs 1 "$@"; START_DELAY="$2"; shift 2 ;;
+    --ball) needs 2 "$@"; BALL_X="$2"; BALL_Y="$3"; shift 3 ;;
+    --domain) needs 1 "$@"; DOMAIN="$2"; shift 2 ;;
+    --seed) needs 1 "$@"; SEED="$2"; shift 2 ;;
+    --duration) needs 1 "$@"; DURATION="$2"; shift 2 ;;
+    --out) needs 1 "$@"; OUT="$2"; shift 2 ;;
+    --video-s) needs 1 "$@"; VIDEO_S="$2"; shift 2 ;;
     --truth-fed) TRUTH_FED=1; shift ;;
     --debug-image) DEBUG_IMAGE=true; shift ;;
-    --param) CTRL_PARAMS+=(-p "$2"); shift 2 ;;
-    --tracker-param) needs $# "$1"; TRACKER_PARAMS+=(-p "$2"); shift 2 ;;
-    --sim-param) SIM_PARAMS+=(--param "$2"); shift 2 ;;
-    --live-view-port) needs $# "$1"; LIVE_VIEW_PORT="$2"; shift 2 ;;
+    --param) needs 1 "$@"; CTRL_PARAMS+=(-p "$2"); shift 2 ;;
+    --tracker-param) needs 1 "$@"; TRACKER_PARAMS+=(-p "$2"); shift 2 ;;
+    --sim-param) needs 1 "$@"; SIM_PARAMS+=(--param "$2"); shift 2 ;;
+    --live-view-port) needs 1 "$@"; LIVE_VIEW_PORT="$2"; shift 2 ;;
     --no-live-view) LIVE_VIEW=0; shift ;;
     --force)
-      needs $# "$1"; SIM_PARAMS+=(--param "ball_force_deg=$2"); shift 2
+      needs 1 "$@"; SIM_PARAMS+=(--param "ball_force_deg=$2"); shift 2
       if optional_number "${1:-}"; then SIM_PARAMS+=(--param "ball_force_dir_deg=$1"); shift; fi ;;
     --plate-offset)
-      needs $# "$1"; SIM_PARAMS+=(--param "plate_mount_tilt_deg=$2"); shift 2
+      needs 1 "$@"; SIM_PARAMS+=(--param "plate_mount_tilt_deg=$2"); shift 2
       AXIS=0
       if optional_number "${1:-}"; then AXIS="$1"; shift; fi
       SIM_PARAMS+=(--param "plate_mount_axis_deg=$AXIS") ;;
@@ -103,13 +103,14 @@ while (($#)); do
     *) echo "sim_balance.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
-source "$ROOT/scripts/lib/args.sh"
 require_ros_domain sim_balance.sh
 require_number sim_balance.sh --duration "$DURATION"
 require_number sim_balance.sh --video-s "$VIDEO_S"
 [[ -z "$RADIUS" ]] || require_number sim_balance.sh --radius "$RADIUS"
 [[ -z "$PERIOD" ]] || require_number sim_balance.sh --period "$PERIOD"
 [[ -z "$START_DELAY" ]] || require_number sim_balance.sh --start-delay "$START_DELAY"
+require_port sim_balance.sh --live-view-port "$LIVE_VIEW_PORT"
+[[ -z "$OUT" ]] || require_out_dir sim_balance.sh --out "$OUT"
 case "$CONTROLLER" in
   # the controller the balance node commands, and the one that levels the plate at deactivate;
   # the live view's gains (the PID's are set at run time, the MPC's are shown, read-only)

@@ -47,31 +47,34 @@ RADIUS=""
 PERIOD=""
 TRACKER_PARAMS=()
 usage() { sed -n '2,24p' "$0" | sed 's/^# \{0,1\}//'; }
+source "$ROOT/scripts/lib/args.sh"   # needs, require_*
 while (($#)); do
   case "$1" in
-    --tilt-law) TILT_LAW="$2"; shift 2 ;;
-    --params-file) PARAMS_FILE="$(realpath "$2")"; shift 2 ;;
-    --reference) REFERENCE="$2"; shift 2 ;;
-    --radius) RADIUS="$2"; shift 2 ;;
-    --period) PERIOD="$2"; shift 2 ;;
-    --ball) BALL_X="$2"; BALL_Y="$3"; shift 3 ;;
-    --domain) DOMAIN="$2"; shift 2 ;;
-    --seed) SEED="$2"; shift 2 ;;
-    --duration) DURATION="$2"; shift 2 ;;
-    --out) OUT="$2"; shift 2 ;;
+    --tilt-law) needs 1 "$@"; TILT_LAW="$2"; shift 2 ;;
+    --params-file) needs 1 "$@"; PARAMS_FILE="$(realpath -m -- "$2")"; shift 2 ;;
+    --reference) needs 1 "$@"; REFERENCE="$2"; shift 2 ;;
+    --radius) needs 1 "$@"; RADIUS="$2"; shift 2 ;;
+    --period) needs 1 "$@"; PERIOD="$2"; shift 2 ;;
+    --ball) needs 2 "$@"; BALL_X="$2"; BALL_Y="$3"; shift 3 ;;
+    --domain) needs 1 "$@"; DOMAIN="$2"; shift 2 ;;
+    --seed) needs 1 "$@"; SEED="$2"; shift 2 ;;
+    --duration) needs 1 "$@"; DURATION="$2"; shift 2 ;;
+    --out) needs 1 "$@"; OUT="$2"; shift 2 ;;
     --truth-fed) TRUTH_FED=1; shift ;;
-    --tracker-param) TRACKER_PARAMS+=(-p "$2"); shift 2 ;;
-    --live-view-port) LIVE_VIEW_PORT="$2"; shift 2 ;;
+    --tracker-param) needs 1 "$@"; TRACKER_PARAMS+=(-p "$2"); shift 2 ;;
+    --live-view-port) needs 1 "$@"; LIVE_VIEW_PORT="$2"; shift 2 ;;
     --no-live-view) LIVE_VIEW=0; shift ;;
     -h|--help) usage; exit 0 ;;
     *) echo "sim_policy_in_manager.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
-source "$ROOT/scripts/lib/args.sh"
 require_ros_domain sim_policy_in_manager.sh
 require_number sim_policy_in_manager.sh --duration "$DURATION"
 [[ -z "$RADIUS" ]] || require_number sim_policy_in_manager.sh --radius "$RADIUS"
 [[ -z "$PERIOD" ]] || require_number sim_policy_in_manager.sh --period "$PERIOD"
+require_port sim_policy_in_manager.sh --live-view-port "$LIVE_VIEW_PORT"
+[[ -z "$OUT" ]] || require_out_dir sim_policy_in_manager.sh --out "$OUT"
+require_params_file sim_policy_in_manager.sh --params-file "$PARAMS_FILE"
 case "${TILT_LAW:-policy}" in
   policy|pid|mpc) ;;
   *) echo "sim_policy_in_manager.sh: --tilt-law must be policy, pid or mpc, got '$TILT_LAW'" >&2; exit 2 ;;
@@ -90,15 +93,18 @@ if [[ -n "$TILT_LAW$REFERENCE$RADIUS$PERIOD$STEP_PRIORITY" ]]; then
   # (checked by the controller's schema at configure)
   python - "$PARAMS_FILE" "$CONTROLLER" "tilt_law=$TILT_LAW" "reference_kind=$REFERENCE" \
     "reference_radius_m=$RADIUS" "reference_period_s=$PERIOD" "step_thread_priority=$STEP_PRIORITY" \
-    >"$LOGS/controller_params.yaml" <<'EOF'
+    >"$LOGS/controller_params.yaml" <<'EOF' || exit 2
 import sys, yaml
 path, name, *changes = sys.argv[1:]
-values = yaml.safe_load(open(path))
+values = yaml.safe_load(open(path))   # a mapping: checked above
+section = values.setdefault(name, {})
+if not isinstance(section, dict) or not isinstance(section.setdefault("ros__parameters", {}), dict):
+    sys.exit(f"sim_policy_in_manager.sh: --params-file: '{path}': {name} must be {{ros__parameters: {{...}}}}")
 for change in changes:
     key, _, text = change.partition("=")
     if text:
-        values[name]["ros__parameters"][key] = (text if key in ("tilt_law", "reference_kind")
-                                                else int(text) if key == "step_thread_priority" else float(text))
+        section["ros__parameters"][key] = (text if key in ("tilt_law", "reference_kind")
+                                           else int(text) if key == "step_thread_priority" else float(text))
 yaml.safe_dump(values, sys.stdout)
 EOF
   PARAMS_FILE="$LOGS/controller_params.yaml"
@@ -136,6 +142,7 @@ fi
 # load and configure (the model is checked here: a misfit fails with one line)
 if ! spawner "$CONTROLLER" -t ball_balance_controllers/BallBalanceController -p "$PARAMS_FILE" --inactive \
     --controller-manager-timeout 120 --service-call-timeout 60 >"$LOGS/spawner.log" 2>&1; then
+  ((STOPPING)) && exit 130   # Ctrl-C: the spawner was stopped with the graph
   echo "sim_policy_in_manager.sh: could not load $CONTROLLER:" >&2
   tail -n 5 "$LOGS/spawner.log" >&2
   grep -h "$CONTROLLER" "$LOGS/sim.log" | tail -n 5 >&2 || true

@@ -27,20 +27,21 @@ CALIBRATION=""
 DEBUG=false
 PARAMS=()
 usage() { sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//'; }
+source "$ROOT/scripts/lib/args.sh"   # needs, require_*
 while (($#)); do
   case "$1" in
-    --device) DEVICE="$2"; shift 2 ;;
-    --size) SIZE="$2"; shift 2 ;;
-    --fps) FPS="$2"; shift 2 ;;
-    --calibration) CALIBRATION="$2"; shift 2 ;;
+    --device) needs 1 "$@"; DEVICE="$2"; shift 2 ;;
+    --size) needs 1 "$@"; SIZE="$2"; shift 2 ;;
+    --fps) needs 1 "$@"; FPS="$2"; shift 2 ;;
+    --calibration) needs 1 "$@"; CALIBRATION="$2"; shift 2 ;;
     --debug) DEBUG=true; shift ;;
-    --param) PARAMS+=(-p "$2"); shift 2 ;;
+    --param) needs 1 "$@"; PARAMS+=(-p "$2"); shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "tracker_usb.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
-source "$ROOT/scripts/lib/args.sh"
 require_ros_domain tracker_usb.sh
+require_number tracker_usb.sh --fps "$FPS"
 if [[ ! "$SIZE" =~ ^[0-9]+x[0-9]+$ ]]; then
   echo "tracker_usb.sh: --size '$SIZE' must be WIDTHxHEIGHT" >&2; exit 2
 fi

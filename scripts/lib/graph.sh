@@ -4,6 +4,9 @@
 NAMES=()
 
 start() {  # start NAME CMD...: in the background, output to $LOGS/NAME.log
+  # a Ctrl-C during the start-up: stop_all has stopped what had started, and the script goes on
+  # after it (a trap returns): nothing more is started, the script ends there
+  ((STOPPING)) && exit 130
   local name="$1"; shift
   "$@" >"$LOGS/$name.log" 2>&1 &
   PIDS+=($!)
@@ -21,19 +24,21 @@ optional() {
   exec sleep infinity
 }
 
-# announce_url LOG WHAT: print the first http:// address LOG names, once it does (up to 120 s),
-# so the user learns where the live view listens (its port may be chosen at start-up).
+# `start NAME announce_url LOG WHAT`: print the first http:// address LOG names, once it does
+# (up to 120 s), so the user learns where the live view listens (its port may be chosen at
+# start-up); then idle as a process of the graph, which stop_all ends with the script (a loop
+# left in the background would outlive it, holding the script's stderr open).
 announce_url() {
   local log="$1" what="$2" i url
   for ((i = 0; i < 1200; i++)); do
     url="$(grep -o -m1 'http://[^ ]*' "$log" 2>/dev/null || true)"
     if [[ -n "$url" ]]; then
       echo "$(basename "$0"): $what: $url" >&3
-      return 0
+      break
     fi
     sleep 0.1
   done
-  return 1
+  exec sleep infinity
 }
 
 # start_live_view PORT ARGS...: the live view in the browser (docs/live_view.md) as an optional
@@ -41,7 +46,7 @@ announce_url() {
 start_live_view() {
   local port="$1"; shift
   start live_view optional ball_balance_live_view --ros-args -p "port:=$port" "$@"
-  announce_url "$LOGS/live_view.log" "live view (open it in a browser)" &
+  start live_view_url announce_url "$LOGS/live_view.log" "live view (open it in a browser)"
 }
 
 # fd 3: the script's own stderr, for lines from helper processes (`start` sends their output
@@ -135,14 +140,15 @@ show_events() {
 # Ctrl-C exits with 130 (stop_all has already stopped everything).
 run_monitor() {  # run_monitor CMD...: never returns
   set +e
+  ((STOPPING)) && exit 130
   "$@" &
   local monitor=$!
   PIDS+=("$monitor")
-  local ended code
-  wait -n -p ended "${PIDS[@]}"   # until Ctrl-C or a process ends
+  local code
+  wait_any   # until Ctrl-C or a process ends
   code=$?
   ((STOPPING)) && exit 130
-  if [[ "${ended:-}" != "$monitor" ]]; then
+  if [[ "$ENDED" != "$monitor" ]]; then
     code=3
     local i
     for i in "${!NAMES[@]}"; do

@@ -27,6 +27,20 @@ terminate() {  # terminate PID...: SIGTERM to each, up to 6 s for each to end, t
     kill -KILL "$pid" 2>/dev/null || true
   done
 }
+# wait_any: until a process of PIDS has ended; ENDED is its pid, the status its exit status.
+# `wait -n PIDS` would miss one that ended before it was called (bash has already reaped it:
+# "no such job") and wait for the next, for ever when the others run on.
+wait_any() {
+  local pid
+  ENDED=""
+  while [[ -z "$ENDED" ]]; do
+    for pid in "${PIDS[@]}"; do
+      kill -0 "$pid" 2>/dev/null || { ENDED="$pid"; break; }
+    done
+    [[ -n "$ENDED" ]] || sleep 0.2
+  done
+  wait "$ENDED"
+}
 stop_all() {
   trap - EXIT
   trap 'echo "$(basename "$0"): already stopping (a process still running after 6 s is killed)" >&2' INT TERM
