@@ -16,7 +16,7 @@ import time
 from typing import Dict, List, Tuple
 
 from ball_balance.cli.errors import CliError
-from ball_balance.cli.session import Session, absolute_name, is_hidden, node_names
+from ball_balance.cli.session import Session, is_hidden, node_names, valid_name
 
 STATUS_NAMES = {0: "UNKNOWN", 1: "ACCEPTED", 2: "EXECUTING", 3: "CANCELING", 4: "SUCCEEDED", 5: "CANCELED",
                 6: "ABORTED"}  # action_msgs/msg/GoalStatus
@@ -85,7 +85,7 @@ def cmd_list(args) -> int:
 
 
 def cmd_info(args) -> int:
-    action = absolute_name(args.action_name)
+    action = valid_name(args.action_name, "action")
     with Session() as session:
         session.discover(args.spin_time)
         found = {}
@@ -117,7 +117,7 @@ def cmd_send_goal(args) -> int:
 
     from ball_balance.cli.messages import parse_yaml_values, set_message_fields
 
-    action = absolute_name(args.action_name)
+    action = valid_name(args.action_name, "action")
     action_cls = get_action(args.action_type)
     goal = set_message_fields(action_cls.Goal(), parse_yaml_values(args.goal, "goal values"))
     with Session(args.spin_time) as session:

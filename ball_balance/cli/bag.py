@@ -32,17 +32,17 @@ from typing import Dict, List, Optional, Set
 
 from ball_balance.cli.bag_format import (
     bag_metadata,
-    bag_ros_distro,
     dump_yaml,
     mcap_files,
     message_definition,
     qos_profile,
-    read_summaries,
+    ros_distro_of,
 )
+from ball_balance.cli.bag_read import BagFile
 from ball_balance.cli.errors import CliError
 from ball_balance.cli.mcap_write import McapWriter
 from ball_balance.cli.messages import get_interface
-from ball_balance.cli.session import Session, StopRequest, absolute_name, is_hidden
+from ball_balance.cli.session import Session, StopRequest, absolute_name, is_hidden, valid_name
 from controller_manager_py.realtime import reuse_freed_memory
 
 # Keep-last depth of the recording subscriptions: how long the taker may stall before a
@@ -150,7 +150,8 @@ class _Topic:
 
 
 class Recorder:
-    """Subscribes to the selected topics as their publishers appear; one MCAP file."""
+    """Subscribes to the selected topics as their publishers appear; one MCAP file in `folder`
+    (made by cmd_record)."""
 
     def __init__(self, session: Session, folder: str, topics: List[str], record_all: bool,
                  include_unpublished: bool, max_cache_bytes: int):
@@ -158,7 +159,6 @@ class Recorder:
         self.include_unpublished = include_unpublished
         self.wanted = [absolute_name(t) for t in topics]
         self.file_name = f"{os.path.basename(os.path.normpath(folder))}_0.mcap"
-        os.makedirs(folder)
         self._stream = open(os.path.join(folder, self.file_name), "wb")
         # The MCAP writer (mcap_write.py: no copies of the messages' bytes), its schemas and
         # channels belong to the writer thread; the main thread touches them only after that
@@ -372,9 +372,14 @@ def progress_line(recorder: Recorder, elapsed_s: float, rates: Dict[str, float])
 def cmd_record(args) -> int:
     if not args.topics and not args.all:
         raise CliError("no topics to record: name them or use -a/--all")
+    topics = [valid_name(t) for t in args.topics]
     folder = args.output or time.strftime("rosbag2_%Y_%m_%d-%H_%M_%S")
     if os.path.exists(folder):
         raise CliError(f"output folder '{folder}' already exists: choose another name with -o")
+    try:  # before any node: a parent that is a file, no permission, a full disk
+        os.makedirs(folder)
+    except OSError as error:
+        raise CliError(f"cannot create the bag folder {folder}: {error.strerror}") from None
     stop = StopRequest()
     tty = sys.stderr.isatty()
     sys.setswitchinterval(SWITCH_INTERVAL_S)
@@ -382,7 +387,7 @@ def cmd_record(args) -> int:
     # mapping per frame (about 30 us less CPU per 640x480 frame's take)
     reuse_freed_memory()
     with Session(args.spin_time) as session:
-        recorder = Recorder(session, folder, args.topics, args.all, args.include_unpublished_topics,
+        recorder = Recorder(session, folder, topics, args.all, args.include_unpublished_topics,
                             args.max_cache_size)
         print(f"Recording to '{folder}/{recorder.file_name}' (Ctrl-C to stop)", file=sys.stderr, flush=True)
         start = last_print = time.monotonic()
@@ -423,9 +428,15 @@ def _stamp(ns: int) -> str:
 def cmd_info(args) -> int:
     """Summary of an MCAP bag (folder or file), laid out like `ros2 bag info`."""
     files = mcap_files(args.bag_path)
+    summaries, distro = [], ""
+    for path in files:  # every record checked before anything is printed: a damaged file is one line
+        with BagFile(path) as bag:
+            metadata = bag.check()
+        summaries.append(bag.summary)
+        distro = distro or ros_distro_of(metadata)
     topics: Dict[str, list] = {}  # topic -> [type, count, encoding]
     start, end, total = None, None, 0
-    for path, summary in zip(files, read_summaries(files)):
+    for path, summary in zip(files, summaries, strict=True):
         stats = summary.statistics
         if stats is None:
             raise CliError(f"'{path}' has no statistics in its summary (not written by a complete recording?)")
@@ -442,7 +453,7 @@ def cmd_info(args) -> int:
     print(f"Files:             {', '.join(os.path.basename(p) for p in files)}")
     print(f"Bag size:          {size / 2 ** 20:.1f} MiB")
     print("Storage id:        mcap")
-    print(f"ROS Distro:        {bag_ros_distro(files) or 'unknown'}")
+    print(f"ROS Distro:        {distro or 'unknown'}")
     print(f"Duration:          {duration:.9f}s")
     if start is not None:
         print(f"Start:             {_stamp(start)}")

@@ -1,5 +1,5 @@
 """What rosbag2 (Jazzy, metadata version 9) writes into an MCAP bag, without ROS: schema text,
-QoS profiles, the bag's metadata, and reading them back.
+QoS profiles, the bag's metadata, and reading them back (the files' records: bag_read.py).
 
 - profile `ros2`; one schema per type, named `pkg/msg/Type`, encoding `ros2msg`, holding the
   .msg text followed by every nested type's text after a line of 80 '=' and `MSG: pkg/Type`;
@@ -16,11 +16,9 @@ from __future__ import annotations
 
 import os
 import re
-import struct
 from typing import Dict, List, Optional
 
 from ball_balance.cli.errors import CliError
-from ball_balance.cli.mcap_write import MAGIC
 from ball_balance.cli.messages import split_type_name
 from ball_balance.cli.run import prefixes
 
@@ -165,51 +163,6 @@ def mcap_files(path: str) -> List[str]:
     if not os.path.isfile(path):
         raise CliError(f"bag '{path}' does not exist")
     return [path]
-
-
-def read_summaries(paths: List[str]) -> list:
-    """The summary section of each of the bag's files (one clear error for an unreadable file)."""
-    from mcap.exceptions import McapError
-    from mcap.reader import make_reader
-
-    summaries = []
-    for path in paths:
-        try:
-            with open(path, "rb") as stream:
-                _check_magic(path, stream)
-                summary = make_reader(stream).get_summary()
-        except (McapError, struct.error, ValueError, EOFError) as error:
-            raise CliError(f"'{path}' is not a readable MCAP file: {error or type(error).__name__}") from None
-        if summary is None:
-            raise CliError(f"'{path}' has no summary section (recording interrupted?)")
-        summaries.append(summary)
-    return summaries
-
-
-def _check_magic(path: str, stream) -> None:
-    """An MCAP file starts and ends with the magic bytes; one that only starts with them was cut
-    short (the recorder was killed, or the disk filled) and has no summary to read."""
-    if stream.read(len(MAGIC)) != MAGIC:
-        raise CliError(f"'{path}' is not an MCAP file (it does not start with the MCAP magic bytes)")
-    size_bytes = stream.seek(0, os.SEEK_END)
-    stream.seek(max(0, size_bytes - len(MAGIC)))
-    if size_bytes < 2 * len(MAGIC) or stream.read() != MAGIC:
-        raise CliError(f"'{path}' ends before its footer: the recording was cut short (killed, or the "
-                       "disk filled) and the file has no summary or index (the MCAP tool's `mcap recover` "
-                       "rebuilds them)")
-    stream.seek(0)
-
-
-def bag_ros_distro(paths: List[str]) -> str:
-    """The ROS distribution the bag's files say they were recorded with ('' when none says)."""
-    from mcap.reader import make_reader
-
-    for path in paths:
-        with open(path, "rb") as stream:
-            distro = ros_distro_of(make_reader(stream).iter_metadata())
-        if distro:
-            return distro
-    return ""
 
 
 def ros_distro_of(metadata_records) -> str:

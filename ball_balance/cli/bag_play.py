@@ -7,9 +7,14 @@ the recorded CDR bytes are published as they are (no decoding). Messages go out 
 (log) time order, at their recorded spacing divided by --rate. --clock publishes /clock with
 the bag's time at HZ (default 40), for nodes with use_sim_time; without it, a recorded
 /clock topic is played like any other.
+
+Every chunk is checked as it is read (bag_read.py): a damaged file ends the play with one line
+naming the file, where it is damaged and how many messages were played of how many, and exit
+code 1.
 """
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from typing import Dict, List, Optional
@@ -20,10 +25,10 @@ from ball_balance.cli.bag_format import (
     mcap_files,
     parse_offered_qos,
     policy_name,
-    read_summaries,
 )
+from ball_balance.cli.bag_read import BagDamaged, BagFile
 from ball_balance.cli.errors import CliError
-from ball_balance.cli.session import Session, StopRequest, absolute_name
+from ball_balance.cli.session import Session, StopRequest, valid_name
 
 
 def publisher_qos(profiles: List[dict]):
@@ -66,34 +71,34 @@ def read_channels(summaries: list, selected: Optional[List[str]]) -> Dict[int, _
     return channels
 
 
-def bag_start_ns(summaries: list) -> int:
-    """The log time of the bag's first message (of any topic), as --start-offset counts from it."""
-    return min((s.statistics.message_start_time for s in summaries
-                if s.statistics is not None and s.statistics.message_count), default=0)
+def bag_time_range(summaries: list) -> tuple:
+    """(first, last) log time of the bag's messages (of any topic); --start-offset counts from the first."""
+    counted = [s.statistics for s in summaries if s.statistics is not None and s.statistics.message_count]
+    return (min((s.message_start_time for s in counted), default=0),
+            max((s.message_end_time for s in counted), default=0))
 
 
-def _messages(paths: List[str], topics: List[str], first_ns: Optional[int] = None):
-    """(file index, channel id, log time ns, data) of every message from log time first_ns on,
-    in log time order per file."""
-    from mcap.reader import make_reader
-
-    for index, path in enumerate(paths):
-        with open(path, "rb") as stream:
-            for _, channel, message in make_reader(stream).iter_messages(topics=topics, starting_at=first_ns,
-                                                                         log_time_order=True):
-                yield index, channel.id, message.log_time, message.data
+def _messages(bags: List[BagFile], channels: Dict[tuple, _Channel], first_ns: Optional[int] = None):
+    """(file index, channel id, log time ns, data) of the messages of `channels` from log time
+    first_ns on, in log time order per file; BagDamaged when a file is damaged."""
+    for index, bag in enumerate(bags):
+        wanted = {channel_id for file_index, channel_id in channels if file_index == index}
+        if wanted:
+            for channel_id, log_ns, data in bag.messages(wanted, first_ns):
+                yield index, channel_id, log_ns, data
 
 
 def cmd_play(args) -> int:
+    with contextlib.ExitStack() as files:
+        bags = [files.enter_context(BagFile(path)) for path in mcap_files(args.bag_path)]
+        return _play(args, bags)
+
+
+def _play(args, bags: List[BagFile]) -> int:
     from ball_balance.cli.messages import get_interface
 
-    if args.rate <= 0:
-        raise CliError(f"--rate must be > 0, got {args.rate}")
-    if args.start_offset < 0:
-        raise CliError(f"--start-offset must be >= 0, got {args.start_offset}")
-    paths = mcap_files(args.bag_path)
-    summaries = read_summaries(paths)
-    selected = [absolute_name(t) for t in args.topics] if args.topics else None
+    summaries = [bag.summary for bag in bags]
+    selected = [valid_name(t) for t in args.topics] if args.topics else None
     channels = read_channels(summaries, selected)
     if not channels:
         wanted = f" among {', '.join(selected)}" if selected else ""
@@ -104,7 +109,13 @@ def cmd_play(args) -> int:
         if missing:
             raise CliError(f"not in the bag: {', '.join(missing)} (it holds: "
                            f"{', '.join(sorted({c.topic for c in read_channels(summaries, None).values()}))})")
-    first_ns = bag_start_ns(summaries) + int(args.start_offset * 1e9) if args.start_offset else None
+    start_ns, end_ns = bag_time_range(summaries)
+    if args.start_offset * 1e9 > end_ns - start_ns:
+        raise CliError(f"--start-offset {args.start_offset:g} s is past the end of the bag: '{args.bag_path}' is "
+                       f"{(end_ns - start_ns) / 1e9:.3f} s long")
+    first_ns = start_ns + int(args.start_offset * 1e9) if args.start_offset else None
+    expected = sum(bag.message_counts.get(channel_id, 0) for index, bag in enumerate(bags)
+                   for file_index, channel_id in channels if file_index == index)
     stop = StopRequest()
     with Session(args.spin_time, name="ros2py_bag_play") as session:
         node = session.node
@@ -120,12 +131,15 @@ def cmd_play(args) -> int:
               f"{' (looping)' if args.loop else ''}; Ctrl-C to stop", file=sys.stderr, flush=True)
         if args.delay > 0:  # let subscribers be discovered before the first message
             session.spin_until(lambda: stop.requested, args.delay)
-        played = 0
-        while not stop.requested:
-            played += _play_once(stop, paths, topics, channels, args.rate, clock, args.playback_duration, first_ns)
-            if not args.loop:
-                break
-    print(f"Played {played} messages", file=sys.stderr, flush=True)
+        played = [0]
+        try:
+            while not stop.requested:
+                _play_once(stop, bags, channels, args.rate, clock, played, args.playback_duration, first_ns)
+                if not args.loop:
+                    break
+        except BagDamaged as error:  # what was played must not look like the whole bag
+            raise CliError(f"{error}; played {played[0]} of {expected} messages") from None
+    print(f"Played {played[0]} messages", file=sys.stderr, flush=True)
     return 0
 
 
@@ -146,14 +160,13 @@ class _ClockPublisher:
         self.publisher.publish(self.msg)
 
 
-def _play_once(stop: StopRequest, paths, topics, channels, rate: float, clock: Optional[_ClockPublisher],
-               duration_s: Optional[float] = None, first_ns: Optional[int] = None) -> int:
+def _play_once(stop: StopRequest, bags: List[BagFile], channels, rate: float, clock: Optional[_ClockPublisher],
+               played: List[int], duration_s: Optional[float] = None, first_ns: Optional[int] = None) -> None:
     """Publish the bag once from log time first_ns (None: its first message), for duration_s
     seconds of it (None: to its end), or until a stop is asked for; the bag's time runs at
-    `rate` times the wall clock."""
+    `rate` times the wall clock. Counts the messages published in played[0]."""
     start_wall = time.monotonic_ns()
     start_bag = first_ns
-    played = 0
     if clock is not None:
         clock.next_ns = None  # the bag's time starts again (--loop)
 
@@ -175,7 +188,7 @@ def _play_once(stop: StopRequest, paths, topics, channels, rate: float, clock: O
             stop.sleep_until(time.monotonic() + (target - now) / rate / 1e9)
         return True
 
-    for index, channel_id, log_ns, data in _messages(paths, topics, first_ns):
+    for index, channel_id, log_ns, data in _messages(bags, channels, first_ns):
         channel = channels.get((index, channel_id))
         if channel is None:
             continue
@@ -186,5 +199,4 @@ def _play_once(stop: StopRequest, paths, topics, channels, rate: float, clock: O
         if wait_until(log_ns):
             break
         channel.publisher.publish(data)
-        played += 1
-    return played
+        played[0] += 1

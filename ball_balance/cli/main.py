@@ -8,7 +8,8 @@
                    switch_controllers|load_controller|set_controller_state|unload_controller
 
 Only argparse is imported up front; each verb imports rclpy and its modules when it runs,
-so `ros2py topic echo` starts quickly. Failures print one line and exit 1 (Ctrl-C exits 0).
+so `ros2py topic echo` starts quickly. Failures print one line and exit 1 (Ctrl-C exits 0); bad
+arguments (argparse's refusals, invalid names) print one line and exit 2.
 rclpy's teardown comes after the output and may take TEARDOWN_DEADLINE_S: a command that has
 done its work ends then with its own exit code, even when the teardown never returns.
 """
@@ -17,6 +18,7 @@ from __future__ import annotations
 import argparse
 import gc
 import importlib
+import math
 import os
 import signal
 import sys
@@ -38,6 +40,45 @@ CLOCK_MONOTONIC = 1  # <time.h>
 SIGEV_THREAD = 2  # <signal.h>: on expiry, call a function in a new thread
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's refusals as one line `ros2py: <what is wrong>` (exit code 2), like every other failure."""
+
+    def error(self, message: str):
+        self.exit(2, f"{PROG}: {message} (see `{self.prog} -h`)\n")
+
+
+def _number(convert, text: str, fits, expected: str):
+    try:
+        value = convert(text)
+    except ValueError:
+        value = None
+    if value is None or not math.isfinite(value) or not fits(value):
+        raise argparse.ArgumentTypeError(f"expected {expected}, got '{text}'")
+    return value
+
+
+# argparse types of every numeric option: a negative timeout, count or duration is refused
+# before the verb runs, instead of being waited, counted or recorded as if it meant something
+def positive_float(text: str) -> float:
+    """Seconds, rates: a finite number > 0."""
+    return _number(float, text, lambda v: v > 0, "a number > 0")
+
+
+def non_negative_float(text: str) -> float:
+    """Delays, offsets: a finite number >= 0."""
+    return _number(float, text, lambda v: v >= 0, "a number >= 0")
+
+
+def positive_int(text: str) -> int:
+    """Counts of at least one (window, queue depth, times to print)."""
+    return _number(int, text, lambda v: v > 0, "an integer > 0")
+
+
+def non_negative_int(text: str) -> int:
+    """Counts where 0 means none or no limit (times, byte sizes)."""
+    return _number(int, text, lambda v: v >= 0, "an integer >= 0")
+
+
 def _verb(subparsers, name: str, target: str, help: str):
     """A sub-command whose handler is `module:function` in ball_balance.cli (imported lazily)."""
     parser = subparsers.add_parser(name, help=help, description=help)
@@ -46,14 +87,15 @@ def _verb(subparsers, name: str, target: str, help: str):
 
 
 def _spin_time(parser, default: float = 3.0) -> None:
-    parser.add_argument("--spin-time", type=float, default=default,
+    parser.add_argument("--spin-time", type=non_negative_float, default=default,
                         help="seconds to wait for discovery (default: %(default)s)")
 
 
 def _qos(parser, depth_default: int = 10) -> None:
     parser.add_argument("--qos-reliability", choices=QOS_RELIABILITY, help="override the QoS reliability")
     parser.add_argument("--qos-durability", choices=QOS_DURABILITY, help="override the QoS durability")
-    parser.add_argument("--qos-depth", type=int, default=depth_default, help="queue depth (default: %(default)s)")
+    parser.add_argument("--qos-depth", type=positive_int, default=depth_default,
+                        help="queue depth (default: %(default)s)")
 
 
 def _list_options(p, noun: str) -> None:
@@ -67,9 +109,10 @@ def _list_options(p, noun: str) -> None:
 def _watch_options(p, window_default: int) -> None:
     """What `topic hz` and `topic bw` take: a topic, a window, a duration, the QoS."""
     p.add_argument("topic_name")
-    p.add_argument("--window", "-w", type=int, default=window_default,
+    p.add_argument("--window", "-w", type=positive_int, default=window_default,
                    help="window size in messages (default: %(default)s)")
-    p.add_argument("--duration", type=float, default=None, help="ros2py extension: stop after this many seconds")
+    p.add_argument("--duration", type=positive_float, default=None,
+                   help="ros2py extension: stop after this many seconds")
     _qos(p)
     _spin_time(p, WAIT_FOR_NODE_S)
 
@@ -83,11 +126,12 @@ def _topic_parsers(sub) -> None:
     p.add_argument("message_type", nargs="?", help="type of the message (default: from the graph)")
     p.add_argument("--once", action="store_true", help="print the first message received and exit")
     p.add_argument("--field", help="echo only this field, e.g. header.stamp")
-    p.add_argument("--truncate-length", type=int, default=128, help="truncate arrays/strings (default: 128)")
+    p.add_argument("--truncate-length", type=non_negative_int, default=128,
+                   help="truncate arrays/strings (default: 128)")
     p.add_argument("--full-length", "-f", action="store_true", help="do not truncate arrays or strings")
     p.add_argument("--no-arr", action="store_true", help="do not print array fields")
     p.add_argument("--no-str", action="store_true", help="do not print string fields")
-    p.add_argument("--timeout", type=float, default=None,
+    p.add_argument("--timeout", type=positive_float, default=None,
                    help="ros2py extension: give up after this many seconds without a message")
     _qos(p)
     _spin_time(p, WAIT_FOR_NODE_S)
@@ -104,14 +148,16 @@ def _topic_parsers(sub) -> None:
     p.add_argument("topic_name")
     p.add_argument("message_type", help="e.g. std_msgs/msg/String")
     p.add_argument("values", nargs="?", default="{}", help="message values in YAML, e.g. \"{data: hi}\"")
-    p.add_argument("-r", "--rate", type=float, default=1.0, help="publishing rate in Hz (default: 1)")
+    p.add_argument("-r", "--rate", type=positive_float, default=1.0, help="publishing rate in Hz (default: 1)")
     p.add_argument("-1", "--once", action="store_true", help="publish one message and exit")
-    p.add_argument("-t", "--times", type=int, default=0, help="publish this many messages and exit")
-    p.add_argument("-w", "--wait-matching-subscriptions", type=int, default=None,
+    p.add_argument("-t", "--times", type=non_negative_int, default=0, help="publish this many messages and exit")
+    p.add_argument("-w", "--wait-matching-subscriptions", type=non_negative_int, default=None,
                    help="wait for this many matching subscriptions first (default: 1 with --once/--times)")
-    p.add_argument("--max-wait-time-secs", type=float, default=None, help="give up waiting after this long")
-    p.add_argument("--keep-alive", type=float, default=0.1, help="seconds to stay alive after the last message")
-    p.add_argument("-p", "--print", type=int, default=1, dest="print_nth", help="print every N-th message (0: never)")
+    p.add_argument("--max-wait-time-secs", type=positive_float, default=None, help="give up waiting after this long")
+    p.add_argument("--keep-alive", type=non_negative_float, default=0.1,
+                   help="seconds to stay alive after the last message")
+    p.add_argument("-p", "--print", type=non_negative_int, default=1, dest="print_nth",
+                   help="print every N-th message (0: never)")
     _qos(p, depth_default=1)
 
 
@@ -133,8 +179,8 @@ def _simple_parsers(sub) -> None:
     p.add_argument("service_name", help="name of the service to call (e.g. /sim/set_pause)")
     p.add_argument("service_type", help="type of the service (e.g. std_srvs/srv/SetBool)")
     p.add_argument("values", nargs="?", default="{}", help="the request's values in YAML (default: {})")
-    p.add_argument("-r", "--rate", type=float, default=None, help="repeat the call at this rate in Hz")
-    p.add_argument("--timeout", type=float, default=None,
+    p.add_argument("-r", "--rate", type=positive_float, default=None, help="repeat the call at this rate in Hz")
+    p.add_argument("--timeout", type=positive_float, default=None,
                    help="give up after this many seconds waiting for the service or a response (default: wait)")
 
     param = sub.add_parser("param", help="node parameters").add_subparsers(dest="verb", required=True)
@@ -171,8 +217,9 @@ def _simple_parsers(sub) -> None:
     p.add_argument("-a", "--all", action="store_true", help="record every topic")
     p.add_argument("--include-unpublished-topics", action="store_true",
                    help="also subscribe to selected topics that have no publisher yet")
-    p.add_argument("--duration", type=float, default=None, help="ros2py extension: stop after this many seconds")
-    p.add_argument("--max-cache-size", type=int, default=MAX_CACHE_BYTES, metavar="BYTES",
+    p.add_argument("--duration", type=positive_float, default=None,
+                   help="ros2py extension: stop after this many seconds")
+    p.add_argument("--max-cache-size", type=non_negative_int, default=MAX_CACHE_BYTES, metavar="BYTES",
                    help="messages taken but not yet written, at most (0: one message at a time); when the "
                         "writer falls behind, newer ones are dropped and counted (default: %(default)s)")
     _spin_time(p)
@@ -180,16 +227,16 @@ def _simple_parsers(sub) -> None:
     p.add_argument("bag_path")
     p = _verb(bag, "play", "bag_play:cmd_play", "publish the messages of an MCAP bag (folder or .mcap file)")
     p.add_argument("bag_path")
-    p.add_argument("-r", "--rate", type=float, default=1.0, help="rate at which to play back (default: 1)")
+    p.add_argument("-r", "--rate", type=positive_float, default=1.0, help="rate at which to play back (default: 1)")
     p.add_argument("-l", "--loop", action="store_true", help="play again from the start when done")
     p.add_argument("--topics", nargs="+", default=None, help="play only these topics")
-    p.add_argument("--clock", type=float, nargs="?", const=40.0, default=0.0, metavar="HZ",
+    p.add_argument("--clock", type=positive_float, nargs="?", const=40.0, default=0.0, metavar="HZ",
                    help="publish /clock with the bag's time at HZ (default when given: 40)")
-    p.add_argument("-d", "--delay", type=float, default=0.0,
+    p.add_argument("-d", "--delay", type=non_negative_float, default=0.0,
                    help="seconds to wait before playing (lets subscribers be discovered)")
-    p.add_argument("--playback-duration", type=float, default=None,
+    p.add_argument("--playback-duration", type=positive_float, default=None,
                    help="play only the first this many seconds of the bag (from --start-offset)")
-    p.add_argument("--start-offset", type=float, default=0.0, metavar="S",
+    p.add_argument("--start-offset", type=non_negative_float, default=0.0, metavar="S",
                    help="start playing this many seconds into the bag (default: 0)")
     _spin_time(p)
 
@@ -202,9 +249,9 @@ def _simple_parsers(sub) -> None:
     p = _verb(tf, "echo", "tf:cmd_echo", "print the transform from SOURCE into TARGET (like tf2_echo)")
     p.add_argument("target_frame")
     p.add_argument("source_frame")
-    p.add_argument("--count", type=int, default=None, help="print this many times and exit (default: forever)")
-    p.add_argument("--rate", type=float, default=1.0, help="printing rate in Hz (default: 1)")
-    p.add_argument("--timeout", type=float, default=5.0, help="wait this long for the transform (default: 5)")
+    p.add_argument("--count", type=positive_int, default=None, help="print this many times and exit (default: forever)")
+    p.add_argument("--rate", type=positive_float, default=1.0, help="printing rate in Hz (default: 1)")
+    p.add_argument("--timeout", type=positive_float, default=5.0, help="wait this long for the transform (default: 5)")
     _spin_time(p)
 
     p = sub.add_parser("run", help="run an executable of a package", description="run an executable of a package")
@@ -242,7 +289,7 @@ def _control_parsers(sub) -> None:
     strict.add_argument("--strict", action="store_true", help="fail the whole switch if one part fails")
     strict.add_argument("--best-effort", action="store_true", help="switch what can be switched")
     p.add_argument("--activate-asap", action="store_true", help="activate as soon as interfaces are ready")
-    p.add_argument("--switch-timeout", type=float, default=5.0, help="timeout in seconds (default: 5)")
+    p.add_argument("--switch-timeout", type=positive_float, default=5.0, help="timeout in seconds (default: 5)")
     p = verb("load_controller", "cmd_load_controller", "load a controller")
     p.add_argument("controller_name")
     p.add_argument("--set-state", choices=["inactive", "active"], help="then configure (and activate) it")
@@ -275,7 +322,7 @@ def _lifecycle_parsers(sub) -> None:
     p = _verb(lifecycle, "set", "lifecycle:cmd_set", "trigger lifecycle state transition")
     p.add_argument("node_name", help="name of the ROS node")
     p.add_argument("transition", help="the label or the id of the transition (e.g. configure)")
-    p.add_argument("--timeout", type=float, default=120.0,
+    p.add_argument("--timeout", type=positive_float, default=120.0,
                    help="ros2py extension: wait this long for the answer, then ask get_state (default: %(default)s)")
     _spin_time(p, WAIT_FOR_NODE_S)
 
@@ -296,13 +343,13 @@ def _action_parsers(sub) -> None:
     p.add_argument("action_type", help="e.g. control_msgs/action/FollowJointTrajectory")
     p.add_argument("goal", help="goal values in YAML, e.g. \"{trajectory: {joint_names: [...], points: [...]}}\"")
     p.add_argument("-f", "--feedback", action="store_true", help="echo feedback messages for the goal")
-    p.add_argument("--server-timeout", type=float, default=10.0,
+    p.add_argument("--server-timeout", type=positive_float, default=10.0,
                    help="ros2py extension: seconds to wait for the server (default: %(default)s)")
     _spin_time(p, WAIT_FOR_NODE_S)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    parser = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     _topic_parsers(sub)
     _simple_parsers(sub)
@@ -338,7 +385,7 @@ def _run_verb(args) -> int:
         code = 0
     except CliError as error:
         print(f"{PROG}: {error}", file=sys.stderr)
-        code = 1
+        code = error.exit_code
     except BrokenPipeError:  # `ros2py topic echo ... | head`
         _discard_stdout()
         code = 0

@@ -5,6 +5,7 @@ from typing import Any, Dict, List
 
 from ball_balance.cli.errors import CliError
 from ball_balance.cli.session import Session, full_node_name
+from controller_manager_py.text_files import TextFileError, read_text_file
 
 # ParameterType constants (rcl_interfaces/msg/ParameterType) -> (ParameterValue field, ros2 label)
 _TYPES = {
@@ -236,14 +237,18 @@ def parameters_from_file(text: str, node: str, path: str = "parameter file") -> 
     return params
 
 
+def read_parameter_file(path: str) -> str:
+    """The text of a parameter file a user names; a CliError naming it when it cannot be read
+    or is not text (a binary file: no UnicodeDecodeError from deep inside the YAML parser)."""
+    try:
+        return read_text_file(path, "parameter file")
+    except TextFileError as error:
+        raise CliError(str(error)) from None
+
+
 def cmd_load(args) -> int:
     node = full_node_name(args.node_name)
-    try:
-        with open(args.parameter_file, encoding="utf-8") as handle:
-            text = handle.read()
-    except OSError as error:
-        raise CliError(f"cannot read parameter file '{args.parameter_file}': {error.strerror}") from None
-    params = parameters_from_file(text, node, args.parameter_file)
+    params = parameters_from_file(read_parameter_file(args.parameter_file), node, args.parameter_file)
     with _open(args) as session:
         results = set_values(session, node, params)
     failed = 0
@@ -252,5 +257,5 @@ def cmd_load(args) -> int:
             print(f"Set parameter {name} successful")
         else:
             failed += 1
-            print(f"Set parameter {name} failed: {result.reason}")
+            print(f"Set parameter {name} failed: {result.reason or 'refused by the node'}")
     return 1 if failed else 0

@@ -5,7 +5,8 @@ import os
 from typing import List, Optional
 
 from ball_balance.cli.errors import CliError
-from controller_manager_py.ros.params_files import ParamsFileError, check_params_files
+from ball_balance.cli.param import read_parameter_file
+from controller_manager_py.ros.params_files import ParamsFileError, check_params_files, params_files_in
 
 
 def prefixes() -> List[str]:
@@ -40,7 +41,9 @@ def cmd_run(args) -> int:
     argv = list(args.argv)
     if argv[:1] == ["--"]:
         argv = argv[1:]
-    try:  # one line naming the file, before rcl would log its own
+    for params_file in params_files_in(argv):  # missing, unreadable or binary: one line naming it
+        read_parameter_file(params_file)
+    try:  # malformed: one line naming the file, before rcl would log its own
         check_params_files(argv)
     except ParamsFileError as error:
         raise CliError(str(error)) from None

@@ -12,7 +12,7 @@ import signal
 import time
 from typing import Callable, Dict, Iterator, List, Optional, Tuple
 
-from ball_balance.cli.errors import CliError
+from ball_balance.cli.errors import BadArgument, CliError
 
 # Fast DDS sends 5 participant announcements at start, then one every 3 s, so a new
 # participant often learns of the others only from their next periodic announcement (0-3 s
@@ -252,6 +252,29 @@ def absolute_name(name: str) -> str:
 
 
 full_node_name = absolute_name
+
+
+def valid_name(name: str, kind: str = "topic") -> str:
+    """The absolute form of a topic, service or action name (kind), checked as rcl checks it
+    before anything is created with it; else a BadArgument naming it and what is wrong (rcl's
+    own error, raised later, ends with its C source location, and rclpy's spans three lines)."""
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+
+    full = absolute_name(name)
+    problem = rclpy_implementation.rclpy_get_validation_error_for_topic_name(name)
+    if problem is None:
+        problem = rclpy_implementation.rclpy_get_validation_error_for_full_topic_name(full)
+        if problem is None:
+            return full
+        if "~" in name or "{" in name:
+            problem = ("'~' and '{...}' substitutions are not expanded by ros2py: give the full name", None)
+        else:  # the place in `full`, which may have a '/' more in front
+            problem = (problem[0], problem[1] - (len(full) - len(name)))
+    why, index = problem
+    # rcl says "topic name ..." of every kind of name
+    why = why.replace("topic name token", "a token").replace("topic name", "it")
+    at = f" (character {index + 1}: {name[index]!r})" if index is not None and 0 <= index < len(name) else ""
+    raise BadArgument(f"'{name}' is not a valid {kind} name: {why}{at}")
 
 
 def is_hidden(name: str) -> bool:

@@ -6,7 +6,7 @@ import sys
 import time
 
 from ball_balance.cli.errors import CliError
-from ball_balance.cli.session import Session, absolute_name, name_type_pairs, print_name_type_pairs
+from ball_balance.cli.session import Session, name_type_pairs, print_name_type_pairs, valid_name
 
 
 def _session_discovered(args) -> Session:
@@ -35,7 +35,7 @@ def cmd_list(args) -> int:
 def cmd_echo(args) -> int:
     from ball_balance.cli.messages import echo_text, get_field, get_interface
 
-    topic = absolute_name(args.topic_name)
+    topic = valid_name(args.topic_name)
     truncate = None if args.full_length else args.truncate_length
     with Session() as session:
         type_name = resolve_type(session, topic, args.message_type, args.spin_time)
@@ -126,7 +126,7 @@ def cmd_hz(args) -> int:
             print(f"average rate: {rate:.3f}\n\tmin: {lo:.3f}s max: {hi:.3f}s "
                   f"std dev: {std:.5f}s window: {len(samples)}", flush=True)
 
-    _watch_raw(args, absolute_name(args.topic_name), on_message, report)
+    _watch_raw(args, valid_name(args.topic_name), on_message, report)
     return 0
 
 
@@ -158,14 +158,14 @@ def cmd_bw(args) -> int:
             print(bandwidth_text(sum(sizes) / span_s, len(sizes), sum(sizes) / len(sizes), min(sizes), max(sizes)),
                   flush=True)
 
-    topic = absolute_name(args.topic_name)
+    topic = valid_name(args.topic_name)
     print(f"Subscribed to [{topic}]", flush=True)
     _watch_raw(args, topic, on_message, report)
     return 0
 
 
 def cmd_info(args) -> int:
-    topic = absolute_name(args.topic_name)
+    topic = valid_name(args.topic_name)
     with Session() as session:
         type_name = resolve_type(session, topic, None, args.spin_time)
         session.discover(min(args.spin_time, 1.0), settle_s=0.3)
@@ -193,12 +193,10 @@ def cmd_pub(args) -> int:
 
     from ball_balance.cli.messages import get_interface, parse_yaml_values, set_message_fields, type_name_of
 
-    topic = absolute_name(args.topic_name)
+    topic = valid_name(args.topic_name)
     msg_cls = get_interface(args.message_type)
     values = parse_yaml_values(args.values)
     set_message_fields(msg_cls(), values)  # refuse bad values before touching the network
-    if args.rate <= 0 and not args.once:
-        raise CliError(f"--rate must be positive, got {args.rate}")
     times = 1 if args.once else args.times
     wait_count = args.wait_matching_subscriptions
     if wait_count is None:
@@ -226,7 +224,7 @@ def cmd_pub(args) -> int:
         if graph_type_conflict():
             raise CliError(f"topic '{topic}' has type {', '.join(other_types())} on the graph, not {wanted}")
         print("publisher: beginning loop")
-        count, period = 0, 1.0 / args.rate if args.rate > 0 else 0.0
+        count, period = 0, 1.0 / args.rate
         next_time = time.monotonic()
         while True:
             msg = set_message_fields(msg_cls(), values)

@@ -2,6 +2,7 @@
 import os
 import re
 import signal
+import struct
 import textwrap
 import time
 from pathlib import Path
@@ -171,6 +172,76 @@ def test_bad_input_gives_one_line_and_nonzero_exit(launcher, ros_domain, tmp_pat
     # a malformed parameter file given to a node started the ros2 way
     one_line_error(ros2py(launcher, "run", "ball_balance", "ball_tracker", "--ros-args", "--params-file",
                           str(bad_file)), "not valid YAML", str(bad_file))
+
+
+def test_bad_names_and_numbers_are_one_line_and_exit_2(launcher):
+    for args, fragment in [
+        (("topic", "pub", "bad name", "std_msgs/msg/String", "{data: hi}", "--once"),
+         "'bad name' is not a valid topic name: it must not"),
+        (("topic", "echo", "bad name", "std_msgs/msg/String"), "'bad name' is not a valid topic name: it must not"),
+        (("service", "call", "bad name", "std_srvs/srv/Trigger"), "'bad name' is not a valid service name: it must"),
+        (("action", "send_goal", "bad name", "control_msgs/action/FollowJointTrajectory", "{}"),
+         "'bad name' is not a valid action name: it must not contain"),
+        (("service", "call", "/x", "std_srvs/srv/Trigger", "--timeout", "-5"),
+         "argument --timeout: expected a number > 0, got '-5'"),
+        (("tf", "echo", "a", "b", "--count", "-1"), "argument --count: expected an integer > 0, got '-1'"),
+        (("bag", "record", "/x", "--duration", "-1"), "argument --duration: expected a number > 0, got '-1'"),
+    ]:
+        result = ros2py(launcher, *args)
+        one_line_error(result, fragment)
+        assert result.returncode == 2 and "c:" not in result.stderr, result.stderr  # no rcl C source location
+
+
+def write_chatter_bag(folder: Path, count: int = 79) -> Path:
+    """A bag as `bag record` writes it, without a recording: /chatter, `count` messages 10 ms apart, in
+    chunks of 4 KiB."""
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from ball_balance.cli.bag_format import message_definition
+    from ball_balance.cli.mcap_write import McapWriter
+
+    folder.mkdir()
+    path = folder / f"{folder.name}_0.mcap"
+    with open(path, "wb") as stream:
+        writer = McapWriter(stream, chunk_size_bytes=4096)
+        writer.start(profile="ros2", library="test")
+        schema = writer.register_schema("std_msgs/msg/String", "ros2msg",
+                                        message_definition("std_msgs/msg/String").encode())
+        channel = writer.register_channel("/chatter", "cdr", schema, {"offered_qos_profiles": ""})
+        for i in range(count):
+            stamp_ns = 1_700_000_000_000_000_000 + i * 10_000_000
+            writer.add_message(channel, log_time=stamp_ns, publish_time=stamp_ns,
+                               data=serialize_message(String(data=f"message {i} " * 4)), sequence=i)
+        writer.finish()
+    return path
+
+
+def test_bag_play_of_a_damaged_bag_says_where_and_how_much_it_played(launcher, tmp_path):
+    """One changed byte in the length of a message in the bag's second chunk: play publishes the
+    first chunk, then one line names the file and the byte, and the exit code is 1."""
+    intact = write_chatter_bag(tmp_path / "run1")
+    data = bytearray(intact.read_bytes())
+    chunks, offset = [], 8  # after the magic bytes: records of opcode, length, body
+    while len(chunks) < 2:
+        opcode, length = struct.unpack_from("<BQ", data, offset)
+        chunks += [offset] if opcode == 0x06 else []
+        offset += 9 + length
+    first_message = chunks[1] + 9 + 40  # the second chunk's record head, fields and empty compression name
+    data[first_message + 3] ^= 0x10
+    damaged = tmp_path / "damaged" / "damaged_0.mcap"
+    damaged.parent.mkdir()
+    damaged.write_bytes(data)
+    result = ros2py(launcher, "bag", "play", str(damaged.parent), "--rate", "20", timeout=90)
+    assert result.returncode == 1 and result.stdout == "", result.stderr
+    playing, error = result.stderr.strip().splitlines()
+    assert playing.startswith("Playing /chatter from "), result.stderr
+    match = re.fullmatch(rf"ros2py: {re.escape(str(damaged))}: damaged at byte {first_message} \(a record's length "
+                         r"runs past the end of its chunk\); played (\d+) of 79 messages", error)
+    assert match and 0 < int(match.group(1)) < 79, error
+    one_line_error(ros2py(launcher, "bag", "info", str(damaged.parent)), f"{damaged}: damaged at byte {first_message}")
+    one_line_error(ros2py(launcher, "bag", "play", str(intact.parent), "--start-offset", "1000"),
+                   "--start-offset 1000 s is past the end of the bag", "is 0.780 s long")
 
 
 def test_run_execs_an_installed_executable(launcher, ball_state_source):

@@ -144,3 +144,42 @@ def test_a_stop_signal_only_raises_the_flag_and_ends_the_nap():
     finally:
         for sig, handler in saved.items():
             signal.signal(sig, handler)
+
+
+def test_a_binary_parameter_file_is_named_as_not_a_text_yaml_file(tmp_path, capsys, monkeypatch):
+    from ball_balance.cli import main as cli_main
+    from ball_balance.cli.session import Session
+
+    binary = tmp_path / "params.yaml"
+    binary.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(range(256)))
+    monkeypatch.setattr(Session, "__init__", lambda *a, **k: pytest.fail("a node was made"))
+    assert cli_main.main(["param", "load", "/tracker", str(binary)]) == 1
+    assert capsys.readouterr().err == (f"ros2py: cannot read parameter file '{binary}': not a UTF-8 text file "
+                                       "(byte 0x89 at offset 0)\n")
+    monkeypatch.setattr("os.execv", lambda *a: pytest.fail("started the node"))
+    assert cli_main.main(["run", "ball_balance", "ball_tracker", "--ros-args", "--params-file", str(binary)]) == 1
+    assert capsys.readouterr().err == (f"ros2py: cannot read parameter file '{binary}': not a UTF-8 text file "
+                                       "(byte 0x89 at offset 0)\n")
+
+
+@pytest.mark.parametrize("reason, shown", [
+    ("update_rate must be between 1 and 10000 Hz", "update_rate must be between 1 and 10000 Hz"),
+    ("", "refused by the node"),
+])
+def test_param_set_and_load_print_the_nodes_reason_when_it_refuses(tmp_path, capsys, monkeypatch, reason, shown):
+    import contextlib
+
+    from rcl_interfaces.msg import SetParametersResult
+
+    from ball_balance.cli import main as cli_main
+    from ball_balance.cli import param
+
+    monkeypatch.setattr(param, "_open", lambda args: contextlib.nullcontext())
+    monkeypatch.setattr(param, "set_values", lambda session, node, values: [
+        SetParametersResult(successful=False, reason=reason) for _ in values])
+    assert cli_main.main(["param", "set", "/controller_manager", "update_rate", "0"]) == 1
+    assert capsys.readouterr() == ("", f"ros2py: Setting parameter failed: {shown}\n")
+    params = tmp_path / "cm.yaml"
+    params.write_text("controller_manager:\n  ros__parameters:\n    update_rate: 0\n")
+    assert cli_main.main(["param", "load", "/controller_manager", str(params)]) == 1
+    assert capsys.readouterr().out == f"Set parameter update_rate failed: {shown}\n"
