@@ -296,7 +296,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         help="a <hardware> <param> (repeatable)")
     args = parser.parse_args(argv)
     try:
-        params = dict(item.split("=", 1) for item in args.param)
+        params = {}
+        for item in args.param:
+            name, equals, value = item.partition("=")
+            if not name or not equals:
+                raise ValueError(f"--param takes NAME=VALUE, got '{item}'")
+            params[name] = value
         print(robot_description(args.hardware, params))
     except (RobotDescriptionError, ValueError) as error:
         print(f"robot: {error}", file=sys.stderr)

@@ -45,7 +45,10 @@ while (($#)); do
     --i-know-the-arm-will-move) CONFIRMED=1; shift ;;
     --dry-run) DRY_RUN=1; shift ;;
     --max-home-distance) needs 1 "$@"; MAX_HOME_DISTANCE="$2"; shift 2 ;;
-    --device|--size|--fps|--calibration) needs 1 "$@"; TRACKER_ARGS+=("$1" "$2"); shift 2 ;;
+    --device|--calibration) needs 1 "$@"; TRACKER_ARGS+=("$1" "$2"); shift 2 ;;
+    # checked here too: scripts/tracker_usb.sh starts after the controllers are switched
+    --size) needs 1 "$@"; require_size real_ur.sh "$1" "$2"; TRACKER_ARGS+=("$1" "$2"); shift 2 ;;
+    --fps) needs 1 "$@"; require_number real_ur.sh "$1" "$2"; TRACKER_ARGS+=("$1" "$2"); shift 2 ;;
     --param) needs 1 "$@"; CTRL_PARAMS+=(-p "$2"); shift 2 ;;
     -h|--help) usage; exit 0 ;;
     *) echo "real_ur.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;

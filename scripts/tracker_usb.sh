@@ -42,9 +42,7 @@ while (($#)); do
 done
 require_ros_domain tracker_usb.sh
 require_number tracker_usb.sh --fps "$FPS"
-if [[ ! "$SIZE" =~ ^[0-9]+x[0-9]+$ ]]; then
-  echo "tracker_usb.sh: --size '$SIZE' must be WIDTHxHEIGHT" >&2; exit 2
-fi
+require_size tracker_usb.sh --size "$SIZE"
 
 [[ "$FPS" == *.* ]] || FPS="$FPS.0"          # a float parameter
 if [[ -n "$CALIBRATION" ]]; then

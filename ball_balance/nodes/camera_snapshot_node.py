@@ -7,6 +7,8 @@ at `fps`, then exits. For a machine without a display: look at the files instead
 """
 from __future__ import annotations
 
+import os
+
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
@@ -15,9 +17,16 @@ from ball_balance.ros.images import decode_image
 from controller_manager_py.parameters import Param, declare_parameters
 from controller_manager_py.ros.node_main import StartupError, main_for
 
+
+def _in_a_folder(path: str):
+    folder = os.path.dirname(os.path.abspath(path))
+    return None if not path or os.path.isdir(folder) else f"names a folder that does not exist ({folder})"
+
+
 SCHEMA = [
-    Param("png", "", "write the first frame here (empty: no still)", read_only=True, user_facing=True),
-    Param("mp4", "", "record a video here (empty: no video)", read_only=True, user_facing=True),
+    Param("png", "", "write the first frame here (empty: no still)", read_only=True, user_facing=True,
+          check=_in_a_folder),
+    Param("mp4", "", "record a video here (empty: no video)", read_only=True, user_facing=True, check=_in_a_folder),
     Param("duration_s", 5.0, "video length (by image stamps)", "s", 0.1, 3600.0, read_only=True, user_facing=True),
     Param("fps", 30.0, "video frame rate", "Hz", 1.0, 240.0, read_only=True, user_facing=True),
     Param("topic", "/camera/image_raw", "sensor_msgs/Image topic (bgr8 or rgb8)", read_only=True, user_facing=True),

@@ -71,7 +71,9 @@ SCHEMA = (
     Param("level_controller", "scaled_joint_trajectory_controller",
           "controller that levels the plate at deactivate: a joint trajectory controller (one trajectory) or a "
           "forward position controller (positions streamed); empty: no levelling", user_facing=True),
-    Param("level_positions", list(robot.HOME_POSITIONS_RAD), "joint positions of the level plate", unit="rad"),
+    Param("level_positions", list(robot.HOME_POSITIONS_RAD), "joint positions of the level plate", unit="rad",
+          check=lambda q: None if len(q) == len(robot.HOME_POSITIONS_RAD) else
+          f"must hold {len(robot.HOME_POSITIONS_RAD)} positions, one per arm joint"),
     Param("level_min_duration_s", 2.0, "shortest levelling motion", unit="s", min=0.1, max=60.0),
     Param("level_tolerance_rad", 1e-3, "deactivate waits until every joint is this close to level_positions",
           unit="rad", min=1e-5, max=0.5),

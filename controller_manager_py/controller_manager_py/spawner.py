@@ -33,6 +33,8 @@ from controller_manager_msgs.srv import (
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 
+from controller_manager_py.ros.params_files import ParamsFileError, check_params_file
+
 
 class SpawnError(RuntimeError):
     pass
@@ -177,6 +179,12 @@ class Spawner:
 def main(args=None):
     argv = rclpy.utilities.remove_ros_args(args if args is not None else sys.argv)[1:]
     options = parse_args(argv)
+    if options.param_file:
+        try:  # the manager would only log rcl's error for it, at load
+            check_params_file(options.param_file)
+        except ParamsFileError as error:
+            print(f"spawner: {error}", file=sys.stderr)
+            sys.exit(1)
     # no rclpy signal handler: Ctrl-C must leave the context usable for --unload-on-kill
     rclpy.init(args=args, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     node = rclpy.create_node("spawner_" + options.controller_names[0].replace("/", "_"))

@@ -27,6 +27,11 @@ require_number() {
     || { echo "$1: $2 takes a number >= 0, got '$3'" >&2; exit 2; }
 }
 
+# require_size SCRIPT OPTION VALUE: VALUE is a camera image size WIDTHxHEIGHT (640x480)
+require_size() {
+  [[ "$3" =~ ^[1-9][0-9]*x[1-9][0-9]*$ ]] || { echo "$1: $2 '$3' must be WIDTHxHEIGHT" >&2; exit 2; }
+}
+
 # needs COUNT OPTION ARGS...: OPTION (the option being parsed, "$@" of the option loop) has its
 # COUNT values after it; else one line and exit 2 (an option given last without its value ended
 # the script on bash's `$2: unbound variable`). A value cannot start with `--`: that is the next

@@ -15,12 +15,15 @@ start() {  # start NAME CMD...: in the background, output to $LOGS/NAME.log
 }
 
 # `start NAME optional CMD...`: a node the graph can do without (the live view). When it exits
-# (its port taken, say), one line says so and the graph goes on: the process left in its place
-# idles, so that run_monitor does not take it for a dead core node.
+# (its port taken, say), one line says so, with the last line of its log (its reason), and the
+# graph goes on: the process left in its place idles, so that run_monitor does not take it for
+# a dead core node.
 optional() {
-  local status=0
+  local status=0 why
   "$@" || status=$?
-  ((STOPPING)) || echo "$(basename "$0"): $(basename "$1") exited (status $status); the graph goes on without it" >&3
+  why="$(tail -n 1 "$(readlink "/proc/$BASHPID/fd/2")" 2>/dev/null || true)"
+  ((STOPPING)) || echo "$(basename "$0"): $(basename "$1") exited (status $status${why:+: $why});" \
+    "the graph goes on without it" >&3
   exec sleep infinity
 }
 
