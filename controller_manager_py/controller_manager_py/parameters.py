@@ -90,6 +90,9 @@ def _coerce(param: Param, value: Any) -> Any:
     except (TypeError, ValueError):
         pass
     expected = type(default).__name__ if not isinstance(default, (list, tuple)) else "list"
+    if value is None and isinstance(default, (list, tuple)):  # what rcl makes of `-p name:=[]`
+        raise ParameterError(f"parameter '{param.name}' = [] has no type in ROS (an empty list is not a "
+                             f"parameter value): give it at least one element")
     raise ParameterError(f"parameter '{param.name}' = {value!r} must be of type {expected}")
 
 

@@ -81,3 +81,12 @@ def test_an_array_set_at_run_time_is_accepted_as_a_list():
 
     centre = Param("centre_m", [0.0, 0.0], "a point")
     assert centre.validate(array.array("d", [0.02, -0.01])) == (0.02, -0.01)
+
+
+def test_a_value_of_the_wrong_kind_is_named_in_the_schemas_words():
+    topics = Param("topics", ["/a"], "topics")
+    with pytest.raises(ParameterError, match=r"'topics' = \[\] has no type in ROS"):
+        topics.validate(None)   # rcl's value for `-p topics:=[]`
+    with pytest.raises(ParameterError, match="'rate_hz' = 'fast' must be of type float"):
+        Param("rate_hz", 1.0, "rate").validate("fast")
+    assert topics.validate(["/b"]) == ("/b",)
