@@ -36,6 +36,26 @@ def _transitions(session: Session, node: str, timeout_s: float, graph: bool = Fa
                              timeout_s).available_transitions)
 
 
+class _NodeWarnings:
+    """The warnings and errors a node logs on /rosout, from now on."""
+
+    def __init__(self, session: Session, node: str):
+        from rcl_interfaces.msg import Log
+
+        self.logger = node.lstrip("/").replace("/", ".")
+        self.lines = []
+        self.level = Log.WARN
+        session.node.create_subscription(Log, "/rosout", self.on_log, 100)
+
+    def on_log(self, msg) -> None:
+        if msg.name == self.logger and msg.level >= self.level:
+            self.lines.append(msg.msg.splitlines()[0] if msg.msg else "")
+
+    def latest(self) -> str:
+        """': <the last one>', or '' (nothing logged, or not received)."""
+        return f": {self.lines[-1]}" if self.lines and self.lines[-1] else ""
+
+
 def cmd_nodes(args) -> int:
     with Session(args.spin_time) as session:
         for node in _lifecycle_nodes(session):
@@ -70,6 +90,7 @@ def cmd_set(args) -> int:
 
     node = absolute_name(args.node_name)
     with Session(args.spin_time) as session:
+        reasons = _NodeWarnings(session, node)   # matched while the transitions are asked for
         transitions = _transitions(session, node, args.spin_time)
         wanted = [t for t in transitions
                   if t.transition.label == args.transition or str(t.transition.id) == args.transition]
@@ -94,5 +115,8 @@ def cmd_set(args) -> int:
             ok = state == goal and state != start
             if not ok:
                 print(f"{error}; {node} is {lc.STATE_LABELS.get(state, state)}")
-    print("Transitioning successful" if ok else "Transitioning failed")
+        if not ok:
+            session.spin_for(0.2)   # the node logs why before it answers: let it arrive
+    # ChangeState answers only success: a failure's reason is what the node logged meanwhile
+    print("Transitioning successful" if ok else f"Transitioning failed{reasons.latest()}")
     return 0 if ok else 1

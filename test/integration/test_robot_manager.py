@@ -238,6 +238,10 @@ def test_the_emergency_stop_holds_the_arm_until_reset_and_reset_moves_nothing(ri
     rig.graph.spin_until(lambda: rig.state() == "inactive", 30, "inactive after the stop")
     assert rig.controllers()["forward_position_controller"] == "inactive"
     assert not rig.transition("activate"), "activate must be refused while the stop is latched"
+    refused = rig.launcher.run([executable("ros2py"), "lifecycle", "set", "/robot_manager", "activate",
+                                "--spin-time", "30"], timeout=180)
+    assert refused.returncode == 1 and refused.stdout.startswith("Transitioning failed: ") and \
+        "the emergency stop is latched" in refused.stdout, refused.stdout   # the reason the node logged
     held = positions(rig.states[-1])
     response = rig.trigger("/robot_manager/reset_emergency_stop")
     assert response.success, response.message
