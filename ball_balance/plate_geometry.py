@@ -15,6 +15,9 @@ PLATE_THICKNESS_M = 0.006
 # (config/ur5e_ball_balance.urdf, joint tool0-plate_center) carries the same number.
 PLATE_MOUNT_OFFSET_M = 0.013
 PLATE_MASS_KG = 1.0            # 6 mm acrylic
+# where a reference may take the ball's centre: |x|, |y| within this, the ball (BALL_RADIUS_M)
+# then stays 8 mm inside the plate's edge
+USABLE_HALF_WIDTH_M = 0.2
 
 ARUCO_DICTIONARY = "DICT_4X4_50"
 MARKER_SIDE_M = 0.040          # black border included

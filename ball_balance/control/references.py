@@ -15,8 +15,11 @@ from typing import Sequence, Tuple
 
 import numpy as np
 
+from ball_balance.plate_geometry import USABLE_HALF_WIDTH_M
 from controller_manager_py.text_files import TextFileError, read_text_file
 
+PATH_CHECK_POINTS = 721     # a parametric path checked at 0.5 degree steps of its period
+CSV_MAX_BYTES = 50_000_000  # a path at 1 kHz for an hour is about 40 MB of rows
 KINDS = ("stationary", "circle", "figure_eight", "square", "step", "csv")
 
 
@@ -244,7 +247,7 @@ def step_sequence(amplitude_m: float, dwell_s: float, centre=(0.0, 0.0)) -> Wayp
     return Waypoints([dwell_s * i for i in range(len(pts))], pts, dwell_s * len(pts), hold=True)
 
 
-def load_csv_path(path: str | Path, loop: bool = True, max_abs_m: float = 0.2) -> Waypoints:
+def load_csv_path(path: str | Path, loop: bool = True, max_abs_m: float = USABLE_HALF_WIDTH_M) -> Waypoints:
     """Path from a CSV file with rows `t_s,x_m,y_m` (a header line is allowed; '#' comments).
 
     Times must increase strictly; coordinates must be finite and within +-max_abs_m.
@@ -252,6 +255,11 @@ def load_csv_path(path: str | Path, loop: bool = True, max_abs_m: float = 0.2) -
     times, smoothed at each one as Waypoints states.
     """
     path = Path(path)
+    if path.exists() and not path.is_file():  # a pipe would block the node that reads it
+        raise ReferenceError(f"reference CSV {path}: not a regular file")
+    if path.is_file() and path.stat().st_size > CSV_MAX_BYTES:
+        raise ReferenceError(f"reference CSV {path}: {path.stat().st_size / 1e6:.0f} MB, more than a path "
+                             f"needs (at most {CSV_MAX_BYTES / 1e6:.0f} MB)")
     try:
         text = read_text_file(path, "reference CSV")
     except TextFileError as error:
@@ -290,7 +298,24 @@ def load_csv_path(path: str | Path, loop: bool = True, max_abs_m: float = 0.2) -
 
 def make_reference(kind: str, radius_m: float = 0.10, period_s: float = 10.0,
                    centre: Tuple[float, float] = (0.0, 0.0), csv_path: str = "") -> Reference:
-    """The reference of one kind from KINDS, with the shared size/period/centre parameters."""
+    """The reference of one kind from KINDS, with the shared size/period/centre parameters.
+    A path that leaves the usable plate anywhere is a ReferenceError (a CSV's rows are checked
+    as they are read)."""
+    if kind == "csv":
+        if not csv_path:
+            raise ReferenceError("reference 'csv' needs a file: set reference_csv_path")
+        return load_csv_path(csv_path)
+    reference = _shape(kind, radius_m, period_s, centre)
+    points = reference.path_points(PATH_CHECK_POINTS)
+    off = np.flatnonzero(~np.all(np.isfinite(points) & (np.abs(points) <= USABLE_HALF_WIDTH_M + 1e-9), axis=1))
+    if off.size:
+        x, y = points[off[0]]
+        raise ReferenceError(f"reference {kind} leaves the usable plate: it reaches ({x:.3f}, {y:.3f}) m, where "
+                             f"|x| and |y| must stay within {USABLE_HALF_WIDTH_M} m")
+    return reference
+
+
+def _shape(kind: str, radius_m: float, period_s: float, centre: Tuple[float, float]) -> Reference:
     if kind == "stationary":
         return Stationary(centre)
     if kind == "circle":
@@ -301,10 +326,6 @@ def make_reference(kind: str, radius_m: float = 0.10, period_s: float = 10.0,
         return square(radius_m, period_s, centre)
     if kind == "step":
         return step_sequence(radius_m, period_s / 5.0, centre)
-    if kind == "csv":
-        if not csv_path:
-            raise ReferenceError("reference 'csv' needs a file: set reference_csv_path")
-        return load_csv_path(csv_path)
     raise ReferenceError(f"unknown reference kind {kind!r}; one of {', '.join(KINDS)}")
 
 

@@ -1,4 +1,5 @@
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -217,8 +218,24 @@ def test_a_csv_it_cannot_read_is_a_reference_error(tmp_path):
         load_csv_path(binary)
     with pytest.raises(ReferenceError, match="No such file"):
         load_csv_path(tmp_path / "missing.csv")
-    with pytest.raises(ReferenceError, match="Is a directory"):
+    with pytest.raises(ReferenceError, match="not a regular file"):
         load_csv_path(tmp_path)
+    fifo = tmp_path / "path.fifo"
+    os.mkfifo(fifo)
+    with pytest.raises(ReferenceError, match="not a regular file"):   # reading it would block the node
+        load_csv_path(fifo)
+
+
+@pytest.mark.parametrize("kind, radius_m, centre", [
+    ("stationary", 0.1, (5.0, -5.0)),
+    ("stationary", 0.1, (math.nan, 0.0)),
+    ("circle", 0.2, (0.2285, 0.2285)),     # the centre and the radius each within their limits
+    ("figure_eight", 0.15, (0.1, 0.0)),
+])
+def test_a_path_off_the_usable_plate_is_a_reference_error(kind, radius_m, centre):
+    with pytest.raises(ReferenceError, match="leaves the usable plate"):
+        make_reference(kind, radius_m, 10.0, centre)
+    assert make_reference(kind, 0.05, 10.0, (0.1, -0.1)) is not None
 
 
 def test_make_reference_rejects_unknown_kind_and_bad_radius():
