@@ -256,6 +256,11 @@ def _scalar(field_type: str, value: Any, where: str) -> Any:
             raise bad("true or false")
         return value
     if base in _PRIMITIVE_FLOATS:
+        if isinstance(value, str):  # YAML 1.1 reads 1e308 (no dot) as a string; YAML 1.2 and ros2 as a number
+            try:
+                return float(value)
+            except ValueError:
+                raise bad("a number") from None
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise bad("a number")
         return float(value)

@@ -218,6 +218,8 @@ def cmd_pub(args) -> int:
         def ready() -> bool:
             return graph_type_conflict() or publisher.get_subscription_count() >= wait_count
 
+        if wait_count and not session.spin_until(ready, 0.5):   # as ros2 topic pub says it
+            print(f"Waiting for at least {wait_count} matching subscription(s)...", flush=True)
         session.spin_until(ready, args.max_wait_time_secs if wait_count else 0.5)
         if not wait_count:
             session.spin_until(graph_type_conflict, 0.3)

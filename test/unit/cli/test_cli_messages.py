@@ -101,6 +101,14 @@ def test_wrong_values_name_the_field(type_name, values, error):
         set_message_fields(get_interface(type_name)(), parse_yaml_values(values))
 
 
+def test_a_number_yaml_reads_as_a_string_fills_a_float_field():
+    # YAML 1.1 reads 1e308 (no dot) as a string; ros2 topic pub takes it as a number
+    message = set_message_fields(get_interface("std_msgs/msg/Float64")(), parse_yaml_values("{data: 1e308}"))
+    assert message.data == 1e308
+    with pytest.raises(CliError, match=r"field 'data' \(double\): expected a number, got 'abc'"):
+        set_message_fields(get_interface("std_msgs/msg/Float64")(), parse_yaml_values("{data: abc}"))
+
+
 def test_bad_yaml_and_unknown_types_are_one_line_errors():
     with pytest.raises(CliError, match=r"not valid YAML: expected .* at line 1, column 14") as bad_yaml:
         parse_yaml_values("{data: [hello")
