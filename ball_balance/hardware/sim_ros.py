@@ -37,6 +37,7 @@ from ball_balance.sim.config import camera_intrinsics
 from ball_balance.sim.lockstep import REPORT_PERIOD_S, PaceReport
 from ball_balance.tf.ros import StaticTransformBroadcaster, stamp_to_ns, transform_to_msg
 from ball_balance.tf.transform import Transform
+from controller_manager_py.manager.throttle import Throttle
 from controller_manager_py.parameters import ParameterError
 
 # Images: sensor-data QoS (docs/design.md section 4), keep-last 1 (a best-effort frame is never resent, older
@@ -50,6 +51,10 @@ LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, relia
 REQUEST_WAIT_S = 5.0
 FORCE_CHANGES = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                            reliability=ReliabilityPolicy.RELIABLE)
+# The largest /sim/push_ball accepted (m/s): the fastest push a domain may be given (SimConfig
+# push_speed_m_s <= 2.0); the evaluation domains push at 0.15-0.3 m/s, and at 2 m/s the ball
+# crosses the 0.457 m plate in a quarter of a second. A larger push only throws the ball away.
+MAX_PUSH_M_S = 2.0
 
 
 def camera_info_msg(camera, frame_id: str) -> CameraInfo:
@@ -115,6 +120,14 @@ class SimRosIo:
         self._commands_seen = False
         self._pace = None            # lock-step's pace report (follow_answers)
         self.refused_force_requests = 0   # /sim/set_ball_force requests refused
+        self.refused_disturbances = 0     # /sim/push_ball and /sim/ball_wrench messages refused
+        self.throttle = Throttle(self.logger)
+        # a /sim/ball_wrench acts for wrench_duration (one physics step at least): its force may
+        # change the ball's speed by MAX_PUSH_M_S at most, as a push; its torque, that force's at
+        # the ball's rim
+        acts_s = max(params["wrench_duration"], world.physics_dt_s)
+        self.max_wrench_force_n = world.knobs.ball_mass_kg * MAX_PUSH_M_S / acts_s
+        self.max_wrench_torque_n_m = self.max_wrench_force_n * world.config.ball_radius_m
         # stamps = sim time + this offset: 0 with sim_time (the component owns /clock), else
         # the wall-clock time at start, so stamps compare with wall-clock nodes
         self.stamp_offset_s = 0.0
@@ -343,21 +356,29 @@ class SimRosIo:
         self.logger.info(f"/sim/set_ball_force: {response.message}")
         return response
 
+    def _refuse(self, topic: str, why: str) -> None:
+        """A disturbance message refused: counted, and said at most every few seconds per topic."""
+        self.refused_disturbances += 1
+        self.throttle.warn(topic, f"{topic}: {why}; ignored ({self.refused_disturbances} refused so far)")
+
     def _plate_axes(self, frame_id: str, what: str):
-        """True for the plate's axes, False for the world's; None (logged) for another frame."""
+        """True for the plate's axes, False for the world's; None (refused) for another frame."""
         if frame_id in ("", PLATE_FRAME):
             return True
         if frame_id in (BASE_FRAME, "world"):
             return False
-        self.logger.warning(f"{what}: frame_id '{frame_id}' not supported (use '{PLATE_FRAME}' or "
-                            f"'{BASE_FRAME}'); ignored")
+        self._refuse(what, f"frame_id '{frame_id}' not supported (use '{PLATE_FRAME}' or '{BASE_FRAME}')")
         return None
 
     def _on_wrench(self, msg: WrenchStamped) -> None:
         f, t = msg.wrench.force, msg.wrench.torque
         values = (f.x, f.y, f.z, t.x, t.y, t.z)
         if not all(math.isfinite(v) for v in values):
-            self.logger.warning(f"/sim/ball_wrench: non-finite wrench {values}; ignored")
+            self._refuse("/sim/ball_wrench", f"non-finite wrench {values}")
+            return
+        if math.hypot(*values[:3]) > self.max_wrench_force_n or math.hypot(*values[3:]) > self.max_wrench_torque_n_m:
+            self._refuse("/sim/ball_wrench", f"wrench {values} beyond {self.max_wrench_force_n:.3g} N, "
+                         f"{self.max_wrench_torque_n_m:.3g} N m (a push of {MAX_PUSH_M_S:g} m/s at most)")
             return
         axes = self._plate_axes(msg.header.frame_id, "/sim/ball_wrench")
         if axes is not None:
@@ -367,7 +388,10 @@ class SimRosIo:
         v = msg.vector
         values = (v.x, v.y, v.z)
         if not all(math.isfinite(x) for x in values):
-            self.logger.warning(f"/sim/push_ball: non-finite velocity {values}; ignored")
+            self._refuse("/sim/push_ball", f"non-finite velocity {values}")
+            return
+        if math.hypot(*values) > MAX_PUSH_M_S:
+            self._refuse("/sim/push_ball", f"velocity {values} faster than {MAX_PUSH_M_S:g} m/s")
             return
         axes = self._plate_axes(msg.header.frame_id, "/sim/push_ball")
         if axes is not None:

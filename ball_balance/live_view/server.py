@@ -22,12 +22,18 @@ server or the page.
 
 WebSocket connections are accepted only from the page's own origin (a page of another site
 open in the same browser must not press the emergency stop or activate the arm).
+
+Bad input costs one line at most: a page's request that is not JSON, and a malformed HTTP
+request (a request line or header too long, not HTTP), go to `on_refused(kind, why)` for the
+ROS side to count and log throttled; aiohttp's own traceback for the latter is not logged. A
+connection that sends no complete request for IDLE_TIMEOUT_S is closed (slow or idle clients).
 """
 from __future__ import annotations
 
 import asyncio
 import concurrent.futures
 import json
+import logging
 import math
 import threading
 from pathlib import Path
@@ -35,10 +41,16 @@ from typing import Callable, Optional, Set
 from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
+from aiohttp.http_exceptions import HttpProcessingError
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 START_TIMEOUT_S = 10.0
 MAX_MESSAGE_BYTES = 4096    # a page's request is small; anything bigger closes its connection
+# A connection is closed when no complete request arrived for this long (aiohttp's keep-alive
+# timeout, which also runs from the connection's start): a request's header comes in one packet
+# from a browser or a script, and a browser opens a new connection when it needs one, so only a
+# client that holds connections open without asking (slowloris) notices.
+IDLE_TIMEOUT_S = 15.0
 
 
 def state_json(snapshot: dict) -> str:
@@ -83,14 +95,32 @@ class _Page:
                 await self.ws.send_bytes(frame)
 
 
+class _ProtocolErrors(logging.Handler):
+    """aiohttp's server log: a malformed request (its exception an HttpProcessingError) becomes one
+    line to `on_refused`, without the traceback; anything else goes on to aiohttp's own logger."""
+
+    def __init__(self, on_refused: Callable[[str, str], None]):
+        super().__init__()
+        self.on_refused = on_refused
+
+    def emit(self, record: logging.LogRecord) -> None:
+        error = record.exc_info[1] if record.exc_info else None
+        if isinstance(error, HttpProcessingError):
+            self.on_refused("http", f"malformed HTTP request: {type(error).__name__}: {error.message}")
+        else:
+            logging.getLogger("aiohttp.server").handle(record)
+
+
 class LiveViewServer:
     def __init__(self, host: str, port: int, handle: Callable[[dict], concurrent.futures.Future],
                  on_pages: Callable[[int], None] = lambda count: None, reply_timeout_s: float = 5.0,
                  log: Callable[[str], None] = print,
-                 state: Optional[Callable[[], concurrent.futures.Future]] = None):
+                 state: Optional[Callable[[], concurrent.futures.Future]] = None,
+                 on_refused: Callable[[str, str], None] = lambda kind, why: print(why),
+                 idle_timeout_s: float = IDLE_TIMEOUT_S):
         self.host, self.requested_port = host, port
         self.handle, self.on_pages, self.reply_timeout_s, self.log = handle, on_pages, reply_timeout_s, log
-        self.state = state
+        self.state, self.on_refused, self.idle_timeout_s = state, on_refused, idle_timeout_s
         self.port: Optional[int] = None
         self.pages: Set[_Page] = set()
         self.latest_state: Optional[str] = None    # JSON, once the ROS side has pushed a state
@@ -137,7 +167,11 @@ class LiveViewServer:
         app.router.add_get("/api/state", self._state)
         app.router.add_get("/ws", self._websocket)
         app.router.add_static("/static/", STATIC_DIR)
-        self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
+        # this server's own logger for aiohttp's (Logger(): not aiohttp.server's, shared by every server)
+        errors = logging.Logger(f"{__name__}.http", logging.WARNING)
+        errors.addHandler(_ProtocolErrors(self.on_refused))
+        self._runner = web.AppRunner(app, access_log=None, handle_signals=False, logger=errors,
+                                     keepalive_timeout=self.idle_timeout_s)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.host, self.requested_port)
         await site.start()
@@ -219,7 +253,10 @@ class LiveViewServer:
             ok, message = await asyncio.wait_for(asyncio.wrap_future(self.handle(request)), self.reply_timeout_s)
         except TimeoutError:
             ok, message = False, f"no answer within {self.reply_timeout_s:g} s"
-        except ValueError as error:  # bad JSON, a refused command (CommandError)
+        except json.JSONDecodeError as error:  # not JSON: the ROS side counts it
+            ok, message = False, str(error)
+            self.on_refused("json", f"a page's request is not JSON: {error}")
+        except ValueError as error:  # a refused command (CommandError)
             ok, message = False, str(error)
         except Exception as error:  # noqa: BLE001 - the page gets the reason, the server goes on
             ok, message = False, f"{type(error).__name__}: {error}"

@@ -22,7 +22,8 @@ Inputs
   source=camera / file: cv2.VideoCapture in a capture thread (`camera_device`, `video_file`).
   `camera_info_topic` (sensor data QoS): intrinsics when no `calibration_file` is given.
   /plate_cmd geometry_msgs/Vector3Stamped (x = u_x, y = u_y, rad): known acceleration for the
-                 Kalman prediction when `use_plate_cmd` is true.
+                 Kalman prediction when `use_plate_cmd` is true. A non-finite command, or one
+                 beyond MAX_PLATE_CMD_RAD, is ignored, counted (`bad_plate_cmd`) and logged throttled.
 Outputs
   /ball_state ball_tracker_msgs/BallState, sensor data QoS (best effort, keep last 5), one per
                  frame (also when nothing is found; the flags say so), stamped with the frame's
@@ -110,6 +111,11 @@ SCHEMA = SOURCE_SCHEMA + TRACKER_SCHEMA + NODE_SCHEMA
 BAD_FRAME_WARN_PERIOD_S = 5.0
 IMAGE_QOS_CHECK_PERIOD_S = 1.0
 CAMERA_FRAME_ID = "camera"          # frame_id of /plate_pose when the image carries none
+# The largest /plate_cmd per axis (rad) a controller sends: its tilt clip (max_tilt_cmd_rad, at most
+# 0.35 rad, control/config.py; not imported: it would load the MPC's solver here) less the
+# disturbance's level offset asin(d / k g), at most pi/2 in size. Anything larger is no tilt at
+# all, and fed forward would throw the estimate off the plate.
+MAX_PLATE_CMD_RAD = 0.35 + math.pi / 2
 
 
 class BallTrackerNode(Node):
@@ -331,7 +337,14 @@ class BallTrackerNode(Node):
         u_x, u_y = msg.vector.x, msg.vector.y
         if not (math.isfinite(u_x) and math.isfinite(u_y)):
             self.bad_plate_cmd += 1
-            self.get_logger().warn("non-finite /plate_cmd ignored", throttle_duration_sec=5.0)
+            self.get_logger().warn(f"non-finite /plate_cmd ignored ({self.bad_plate_cmd} bad so far)",
+                                   throttle_duration_sec=5.0)
+            return
+        if max(abs(u_x), abs(u_y)) > MAX_PLATE_CMD_RAD:
+            self.bad_plate_cmd += 1
+            self.get_logger().warn(f"out-of-limit /plate_cmd ({u_x:g}, {u_y:g}) rad ignored (beyond "
+                                   f"{MAX_PLATE_CMD_RAD:.3g} rad; {self.bad_plate_cmd} bad so far)",
+                                   throttle_duration_sec=5.0)
             return
         now_s = self.get_clock().now().nanoseconds * 1e-9
         self.tracker.set_plate_cmd(u_x, u_y, now_s)

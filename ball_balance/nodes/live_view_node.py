@@ -50,6 +50,7 @@ from ball_balance.live_view.frames import FrameEncoder
 from ball_balance.live_view.model import Ball, LiveModel
 from ball_balance.live_view.server import LiveViewServer
 from ball_balance.ros.images import decode_image, image_from_cdr
+from controller_manager_py.manager.throttle import Throttle
 from controller_manager_py.parameters import Param, declare_parameters
 from controller_manager_py.ros.node_main import StartupError, main_for
 
@@ -90,6 +91,7 @@ TAKE_LIMIT = 100            # messages taken from one topic per update at most
 FRESH_S = 1.0               # a topic silent (wall clock) this long is shown as stale
 API_FOLLOW_S = 10.0         # after a GET /api/state the ball, reference and arm are followed this long
 FIRST_STATE_WAIT_S = 2.0    # a GET /api/state that starts following waits this long at most for a ball state
+LOG_PERIOD_S = 5.0          # a page's requests and refused input: one line per kind this often at most
 
 
 def _stamp_s(header) -> float:
@@ -173,13 +175,15 @@ class LiveViewNode(Node):
         self.state_waiting: List[concurrent.futures.Future] = []
         self.wall = {"ball": -math.inf, "joints": -math.inf}
         self.pages = 0
-        self.refused_requests = 0
+        self.refused_requests = 0               # a page's request refused, not JSON, a malformed HTTP request
+        self.throttle = Throttle(self.get_logger(), LOG_PERIOD_S)
         self.requests: queue.SimpleQueue = queue.SimpleQueue()
         self.wake = self.create_guard_condition(self.on_wake)
         self.encoder = FrameEncoder(self.take_frame, self.decode_frame, self.on_jpeg, p["image_rate_hz"],
                                     p["jpeg_quality"], p["image_scale"], self.on_frame_error)
         self.server = LiveViewServer(p["host"], p["port"], self.on_request, self.on_pages, p["call_timeout_s"] + 2.0,
-                                     log=self.get_logger().info, state=self.on_state_request)
+                                     log=self.get_logger().info, state=self.on_state_request,
+                                     on_refused=self.on_refused)
         try:
             self.server.start()
         except OSError as error:
@@ -204,14 +208,17 @@ class LiveViewNode(Node):
         try:
             command = commands.parse(request, self.allowed + REFERENCE_PARAMS)
         except commands.CommandError as error:   # refused at once: counted, logged, the page told why
-            self.refused_requests += 1
-            self.get_logger().warning(f"refused a page's request ({self.refused_requests} so far): {error}",
-                                      throttle_duration_sec=5.0)
+            self.on_refused("request", f"refused a page's request: {error}")
             raise
         answer: concurrent.futures.Future = concurrent.futures.Future()
         self.requests.put((command, answer))
         self.wake.trigger()
         return answer
+
+    def on_refused(self, kind: str, why: str) -> None:
+        """Bad input (web thread): counted, one line per kind every LOG_PERIOD_S at most."""
+        self.refused_requests += 1
+        self.throttle.warn(kind, f"{why} ({self.refused_requests} refused so far)")
 
     def on_state_request(self) -> concurrent.futures.Future:
         """GET /api/state (web thread): the newest state, built on the executor's thread."""
@@ -237,7 +244,9 @@ class LiveViewNode(Node):
                 command, answer = self.requests.get_nowait()
             except queue.Empty:
                 return
-            self.get_logger().info(f"page: {command.describe()}")
+            key = f"page {command.op} {command.name}"    # not the values: a line per kind of request
+            if self.throttle.due(key):
+                self.get_logger().info(f"page: {command.describe()}{self.throttle.suffix(key)}")
             self.carry_out(command, answer)
 
     def watch(self) -> None:

@@ -204,8 +204,15 @@ def test_bad_frames_are_dropped_counted_and_the_node_keeps_running(launcher, gra
     assert tracker.running
 
 
-def test_debug_overlay_and_non_finite_plate_cmd(launcher, graph, scene):
+def test_debug_overlay_and_non_finite_or_out_of_limit_plate_cmd(launcher, graph, scene):
     from geometry_msgs.msg import Vector3Stamped
+
+    from ball_balance.control.config import COMMON_SCHEMA
+    from ball_balance.nodes.ball_tracker_node import MAX_PLATE_CMD_RAD
+
+    # the bound is the largest command a controller sends: its tilt clip's bound plus a level offset
+    (clip,) = [p.max for p in COMMON_SCHEMA if p.name == "max_tilt_cmd_rad"]
+    assert MAX_PLATE_CMD_RAD == pytest.approx(clip + math.pi / 2)
 
     tracker = launcher.start(tracker_cmd("publish_debug_image:=true", "use_plate_cmd:=true"), name="ball_tracker")
     image, _ = scene.render(BALL_XY)
@@ -214,15 +221,27 @@ def test_debug_overlay_and_non_finite_plate_cmd(launcher, graph, scene):
     cmd_pub = graph.node.create_publisher(Vector3Stamped, "/plate_cmd", 10)
     bad = Vector3Stamped()
     bad.vector.x = float("nan")
+    absurd = Vector3Stamped()                  # finite, far beyond any tilt: would throw the estimate away
+    absurd.vector.x, absurd.vector.y = 1.0e6, -3.0
     good = Vector3Stamped()
     good.vector.x, good.vector.y = 0.01, -0.01
-    graph.node.create_timer(0.1, lambda: (cmd_pub.publish(bad), cmd_pub.publish(good)))
+    graph.node.create_timer(0.1, lambda: (cmd_pub.publish(bad), cmd_pub.publish(absurd), cmd_pub.publish(good)))
+    start = time.monotonic()
     (overlay,) = graph.collect(Image, "/ball_tracker/debug_image", qos=qos_profile_sensor_data, timeout=30)
     assert (overlay.encoding, overlay.width, overlay.height) == ("bgr8", 640, 480)
     (msg,) = graph.collect(BallState, "/ball_state", qos=qos_profile_sensor_data, timeout=30,
                            predicate=lambda m: m.ball_found)
     assert math.hypot(msg.x - BALL_XY[0], msg.y - BALL_XY[1]) < 0.003   # a small tilt fed forward
-    graph.spin_until(lambda: "non-finite /plate_cmd" in tracker.output(), 10, "the bad /plate_cmd warning")
+    graph.spin_until(lambda: "non-finite /plate_cmd" in tracker.output() and "out-of-limit /plate_cmd (1e+06, -3)"
+                     in tracker.output(), 10, "the bad /plate_cmd warnings")
+    names = graph.collect(StatisticsNames, "/ball_tracker/statistics/names", timeout=10,
+                          qos=QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                         durability=DurabilityPolicy.TRANSIENT_LOCAL))[0]
+    bad_plate_cmd = names.names.index("bad_plate_cmd")
+    graph.collect(StatisticsValues, "/ball_tracker/statistics/values", timeout=10,
+                  predicate=lambda m: m.names_version == names.names_version and m.values[bad_plate_cmd] >= 4)
+    # counted every time (10 a second), said once per kind every 5 s while they keep coming (throttled)
+    assert tracker.output().count("out-of-limit /plate_cmd") <= 1 + (time.monotonic() - start) / 5.0
     assert tracker.running
 
 

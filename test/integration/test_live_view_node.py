@@ -87,8 +87,34 @@ def test_lifecycle_and_emergency_stop_requests_reach_the_robot_manager(launcher,
     assert replies[0]["message"] == "emergency stop: emergency_stop done"
     assert "unknown transition" in replies[2]["message"]
     assert calls[-3:] == [("change_state", 3, "activate"), ("emergency_stop",), ("reset_emergency_stop",)]
-    graph.spin_until(lambda: "refused a page's request (1 so far): unknown transition 'reboot'" in node.output(),
+    graph.spin_until(lambda: "refused a page's request: unknown transition 'reboot'" in node.output(),
                      30.0, "the refused request in the node's log")
+    assert "(1 refused so far)" in node.output()
+    # a flood of one request is carried out every time and logged once per few seconds (10: the
+    # depth of this test's service queue)
+    replies = run_while_spinning(graph, ask(url, [{"op": "lifecycle", "transition": "configure"}] * 10))
+    assert all(r["ok"] for r in replies) and calls.count(("change_state", 1, "configure")) == 10
+    assert node.output().count("page: configure") <= 2
+    # bad input, a page's request that is not JSON and a malformed HTTP request: counted, one
+    # line each, no traceback
+    assert asyncio.run(bad_input(url)) == (400, False)
+    graph.spin_until(lambda: "a page's request is not JSON" in node.output()
+                     and "malformed HTTP request: LineTooLong" in node.output(), 30.0, "the bad input in the log")
+    assert "(3 refused so far)" in node.output() and "Traceback" not in node.output()
+
+
+async def bad_input(url: str) -> tuple:
+    """A GET whose request line is too long (its status), and a page's request that is not JSON
+    (its reply's ok)."""
+    async with aiohttp.ClientSession() as session:
+        async with session.get(url + "api/state?q=" + "x" * 9000) as response:
+            status = response.status
+        async with session.ws_connect(url + "ws") as ws:
+            await ws.send_str("{not json")
+            while True:
+                message = json.loads((await asyncio.wait_for(ws.receive(), 30.0)).data)
+                if message["type"] == "reply":
+                    return status, message["ok"]
 
 
 def test_a_robot_manager_that_does_not_answer_is_reported_at_the_deadline(launcher, graph):

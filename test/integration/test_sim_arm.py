@@ -190,10 +190,10 @@ def test_trajectory_moves_the_arm(launcher, graph, tmp_path):
 
 
 def test_pause_step_reset_and_push_services(launcher, graph, tmp_path):
-    from geometry_msgs.msg import Vector3Stamped
+    from geometry_msgs.msg import Vector3, Vector3Stamped, WrenchStamped
     from std_srvs.srv import SetBool
 
-    start_sim(launcher, tmp_path, camera_enabled=False, step_simulation_steps=10)
+    sim = start_sim(launcher, tmp_path, camera_enabled=False, step_simulation_steps=10)
     clocks = []
     graph.node.create_subscription(Clock, "/clock", lambda m: clocks.append(m.clock.sec + m.clock.nanosec * 1e-9),
                                    QoSProfile(depth=10))
@@ -225,6 +225,27 @@ def test_pause_step_reset_and_push_services(launcher, graph, tmp_path):
 
     pub = graph.node.create_publisher(Vector3Stamped, "/sim/push_ball", 10)
     graph.wait_for_topic("/sim/push_ball")
+    # bad pushes and wrenches (absurd, not finite, an unknown frame) are refused, counted and said
+    # once per topic while they keep coming; none reaches the ball (the first push applied is
+    # the good one below)
+    wrench_pub = graph.node.create_publisher(WrenchStamped, "/sim/ball_wrench", 10)
+    graph.wait_for_topic("/sim/ball_wrench")
+    bad_pushes = [Vector3Stamped(vector=Vector3(x=1.0e4, z=1.0e4)), Vector3Stamped(vector=Vector3(x=float("nan"))),
+                  Vector3Stamped(vector=Vector3(x=0.1))]
+    bad_pushes[2].header.frame_id = "camera"
+    bad_wrenches = [WrenchStamped(), WrenchStamped()]
+    bad_wrenches[0].wrench.force.x, bad_wrenches[1].wrench.torque.z = 1.0e4, float("inf")
+    for _ in range(40):
+        for msg in bad_pushes:
+            pub.publish(msg)
+        for msg in bad_wrenches:
+            wrench_pub.publish(msg)
+        graph.spin_for(0.005)
+    graph.spin_until(lambda: "/sim/push_ball: velocity (10000.0" in sim.output()
+                     and "/sim/ball_wrench: wrench (10000.0" in sim.output(), 10, "the refusals said")
+    graph.spin_for(0.5)
+    assert sim.output().count("/sim/push_ball: ") <= 2 and sim.output().count("/sim/ball_wrench: ") <= 2
+    assert not pushed
     push = Vector3Stamped()
     push.header.frame_id = "plate_center"
     push.vector.x = 0.1

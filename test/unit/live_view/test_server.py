@@ -4,6 +4,7 @@ to a WebSocket, requests answered (or refused, or timed out) without holding the
 import asyncio
 import concurrent.futures
 import json
+import socket
 import time
 import urllib.request
 
@@ -27,10 +28,11 @@ def server():
             future.set_result((True, "done"))
         return future     # "never": nobody answers
 
-    pages = []
-    srv = LiveViewServer("127.0.0.1", 0, handle, pages.append, reply_timeout_s=0.5)
+    pages, refused = [], []
+    srv = LiveViewServer("127.0.0.1", 0, handle, pages.append, reply_timeout_s=0.5, idle_timeout_s=0.5,
+                         on_refused=lambda kind, why: refused.append((kind, why)))
     srv.start()
-    srv.pages_seen = pages
+    srv.pages_seen, srv.refused = pages, refused
     yield srv
     srv.stop()
 
@@ -83,6 +85,44 @@ def test_a_page_gets_state_and_frames_and_answers_to_its_requests(server):
     assert replies[2]["ok"] is False and "no answer within 0.5 s" in replies[2]["message"]
     assert replies[3]["ok"] is False and replies[3]["id"] is None
     assert server.pages_seen[0] == 1 and server.pages_seen[-1] in (0, 1)
+    # the request that is not JSON is handed to the ROS side to count and log (a refused
+    # command, "bad", is the ROS side's own to count)
+    assert [kind for kind, _ in server.refused] == ["json"] and "not JSON" in server.refused[0][1]
+
+
+def test_a_malformed_http_request_is_one_line_to_count_not_a_traceback(server, capfd, caplog):
+    async def get():
+        async with aiohttp.ClientSession() as session:
+            statuses = []
+            for _ in range(3):
+                async with session.get(server.url + "api/state?q=" + "x" * 9000) as response:
+                    statuses.append(response.status)
+            async with session.get(server.url + "api/state") as response:   # the server goes on
+                statuses.append(response.status)
+            return statuses
+    assert run(get()) == [400, 400, 400, 200]
+    assert [kind for kind, _ in server.refused] == ["http"] * 3
+    assert "LineTooLong" in server.refused[0][1] and "\n" not in server.refused[0][1]
+    assert "Traceback" not in capfd.readouterr().err and not caplog.records
+
+
+def test_a_connection_without_a_whole_request_is_closed_and_a_page_is_not(server):
+    with socket.create_connection(("127.0.0.1", server.port), timeout=10.0) as slow:
+        slow.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n")     # never finished (slowloris)
+        started = time.monotonic()
+        assert slow.recv(1024) == b""                                  # closed by the server
+        assert time.monotonic() - started < 5.0
+
+    async def page_stays():
+        async with aiohttp.ClientSession() as session:
+            async with session.ws_connect(server.url + "ws") as ws:
+                await asyncio.sleep(1.0)                                # twice the idle timeout
+                await ws.send_str(json.dumps({"id": 1, "op": "ok"}))
+                while True:
+                    message = json.loads((await ws.receive()).data)
+                    if message["type"] == "reply":
+                        return message
+    assert run(page_stays())["ok"] is True
 
 
 def test_a_websocket_from_another_origin_is_refused(server):
