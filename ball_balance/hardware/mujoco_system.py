@@ -336,6 +336,9 @@ class MujocoSystem(SystemInterface):
             self.register_introspection("pacing_overruns", lambda: float(self.overruns))
             self.register_introspection("lockstep_frames_given_up",
                                         lambda: float(self.answers.frames_given_up if self.answers else 0))
+            # /sim/push_ball, /sim/ball_wrench and /sim/set_ball_force refused (bad or beyond limits)
+            self.register_introspection("disturbances_refused", lambda: float(
+                self.ros.refused_disturbances + self.ros.refused_force_requests if self.ros else 0))
         return CallbackReturn.SUCCESS
 
     def on_activate(self, previous_state: State) -> CallbackReturn:

@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import pytest
 from ball_tracker_msgs.msg import BallState
+from pal_statistics_msgs.msg import StatisticsNames, StatisticsValues
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -246,6 +247,17 @@ def test_pause_step_reset_and_push_services(launcher, graph, tmp_path):
     graph.spin_for(0.5)
     assert sim.output().count("/sim/push_ball: ") <= 2 and sim.output().count("/sim/ball_wrench: ") <= 2
     assert not pushed
+    # ... and counted in the manager's introspection
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    (names,) = graph.collect(StatisticsNames, "/controller_manager/introspection_data/names", qos=latched)
+    (refused,) = [i for i, name in enumerate(names.names) if name.endswith(".disturbances_refused")]
+
+    def counted():
+        (values,) = graph.collect(StatisticsValues, "/controller_manager/introspection_data/values")
+        # (each one that arrived: a loaded machine may drop some of the 200 from the topic's queue)
+        return values.names_version == names.names_version and 0 < values.values[refused] <= 40 * 5
+
+    graph.spin_until(counted, 30, "the refusals in the introspection")
     push = Vector3Stamped()
     push.header.frame_id = "plate_center"
     push.vector.x = 0.1
