@@ -304,8 +304,7 @@ class ControllerManagerNode(Node):
         self._unattached = []
         if not self.cm.rm.components or self.loop is not None or not self.context.ok():
             return  # (a Ctrl-C during start-up: nothing to start)
-        activate = [n for n in self.params["activate_controllers"] if n]
-        inactive = [n for n in self.params["inactive_controllers"] if n]
+        activate, inactive = self._controllers_at_start()
         for name in [*activate, *inactive]:
             try:
                 self.spawn(name)
@@ -350,6 +349,11 @@ class ControllerManagerNode(Node):
         self.get_logger().info(f"update loop running at {self.cm.update_rate} Hz; active controllers: "
                                f"{[s.name for s in self.cm.ordered]}")
 
+    def _controllers_at_start(self) -> tuple:
+        """(activate_controllers, inactive_controllers) without the empty placeholder."""
+        return ([n for n in self.params["activate_controllers"] if n],
+                [n for n in self.params["inactive_controllers"] if n])
+
     def spawn(self, name: str) -> None:
         self.cm.load_controller(name, self.controller_type(name))
         self.cm.configure_controller(name)
@@ -361,7 +365,7 @@ class ControllerManagerNode(Node):
         are checked. Raises StartupError with the first controller's reason. What a controller
         logs below a warning (its start-up line) is not shown: nothing runs."""
         self._checking = True
-        for name in [n for n in (*self.params["activate_controllers"], *self.params["inactive_controllers"]) if n]:
+        for name in [n for names in self._controllers_at_start() for n in names]:
             try:
                 if self.cm.rm.components:
                     self.spawn(name)
